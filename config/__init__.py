@@ -1,0 +1,1 @@
+"""Built-in machine configurations (YAML), installed as controller.machine_configs."""

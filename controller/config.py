@@ -1,0 +1,301 @@
+"""Machine configuration: strict YAML reading into typed, frozen objects (klippy style)."""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from controller.errors import ConfigError
+
+DEFAULT_CONFIG_NAME = "xy_table"
+CONFIG_ENV_VAR = "CNC_CONFIG"
+_REQUIRED = object()
+
+
+@dataclass(frozen=True, slots=True)
+class ServoParams:
+    """Closed-loop position model of one axis (paper eq. 27, Table II)."""
+
+    a0: float
+    a1: float
+    a2: float
+    a3: float
+    a4: float
+    b0: float
+    b1: float
+    b2: float
+
+
+@dataclass(frozen=True, slots=True)
+class AxisConfig:
+    name: str
+    servo: ServoParams
+    travel_mm: tuple[float, float]
+    pulse_mm: float
+    max_velocity_mm_s: float
+    ferror_mm: float  # following-error limit at full speed (LinuxCNC FERROR)
+    min_ferror_mm: float  # following-error floor (LinuxCNC MIN_FERROR)
+
+    def ferror_limit_mm(self, v_mm_s: float) -> float:
+        """LinuxCNC rule: max(MIN_FERROR, FERROR * |v| / Vmax)."""
+        return max(self.min_ferror_mm, self.ferror_mm * abs(v_mm_s) / self.max_velocity_mm_s)
+
+
+@dataclass(frozen=True, slots=True)
+class InterpolatorConfig:
+    """The interpolator parameters of Table III plus the rapid feed."""
+
+    max_feed_mm_s: float
+    max_accel_mm_s2: float
+    chord_tolerance_mm: float
+    reference_curvature_per_mm: float
+    contour_error_limit_mm: float
+    ph_error_limit_mm: float
+    rapid_feed_mm_s: float
+    max_dynamics_rounds: int
+
+    @property
+    def kappa_threshold_per_mm(self) -> float:
+        """Sharp-corner curvature threshold (eq. 15): Amax / Vmax**2."""
+        return self.max_accel_mm_s2 / self.max_feed_mm_s**2
+
+
+@dataclass(frozen=True, slots=True)
+class DriveConfig:
+    backend: str
+    options: tuple[tuple[str, Any], ...] = ()
+
+    def option(self, key: str, default: Any = None) -> Any:
+        return dict(self.options).get(key, default)
+
+
+@dataclass(frozen=True, slots=True)
+class RuntimeConfig:
+    nc_fifo_blocks: int
+    card_fifo_low_water_ms: float
+    card_fifo_high_water_ms: float
+
+
+@dataclass(frozen=True, slots=True)
+class MachineConfig:
+    name: str
+    path: str
+    sample_period_s: float
+    axes: tuple[AxisConfig, ...]
+    interpolator: InterpolatorConfig
+    drive: DriveConfig
+    runtime: RuntimeConfig = field(default_factory=lambda: RuntimeConfig(64, 20.0, 100.0))
+
+    @property
+    def axis_names(self) -> tuple[str, ...]:
+        return tuple(a.name for a in self.axes)
+
+    def axis(self, name: str) -> AxisConfig:
+        for a in self.axes:
+            if a.name == name:
+                return a
+        raise KeyError(name)
+
+    def has_axis(self, name: str) -> bool:
+        return name in self.axis_names
+
+
+class _Section:
+    """Reads one mapping; every key must be consumed, so unknown keys are errors."""
+
+    def __init__(self, data: Any, path: str, prefix: str) -> None:
+        if not isinstance(data, dict):
+            raise ConfigError(path, prefix or "<top>", "must be a mapping")
+        self.data = data
+        self.path = path
+        self.prefix = prefix
+        self.used: set[str] = set()
+
+    def _key(self, key: str) -> str:
+        return f"{self.prefix}.{key}" if self.prefix else key
+
+    def _raw(self, key: str, default: Any) -> Any:
+        self.used.add(key)
+        if key not in self.data:
+            if default is _REQUIRED:
+                raise ConfigError(self.path, self._key(key), "is required")
+            return default
+        return self.data[key]
+
+    def float(self, key: str, default: Any = _REQUIRED, *, above: float | None = None,
+              minval: float | None = None, maxval: float | None = None) -> float:
+        value = self._raw(key, default)
+        return self._check_float(key, value, above, minval, maxval)
+
+    def _check_float(self, key: str, value: Any, above: float | None, minval: float | None,
+                     maxval: float | None) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(self.path, self._key(key), f"must be a number, got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise ConfigError(self.path, self._key(key), "must be finite")
+        if above is not None and value <= above:
+            raise ConfigError(self.path, self._key(key), f"must be > {above}, got {value}")
+        if minval is not None and value < minval:
+            raise ConfigError(self.path, self._key(key), f"must be >= {minval}, got {value}")
+        if maxval is not None and value > maxval:
+            raise ConfigError(self.path, self._key(key), f"must be <= {maxval}, got {value}")
+        return value
+
+    def int(self, key: str, default: Any = _REQUIRED, *, minval: int, maxval: int) -> int:
+        value = self._raw(key, default)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(self.path, self._key(key), f"must be an integer, got {value!r}")
+        if not minval <= value <= maxval:
+            raise ConfigError(self.path, self._key(key), f"must be in [{minval}, {maxval}]")
+        return value
+
+    def str(self, key: str, default: Any = _REQUIRED, *, choices: tuple[str, ...] = ()) -> str:
+        value = self._raw(key, default)
+        if not isinstance(value, str):
+            raise ConfigError(self.path, self._key(key), f"must be a string, got {value!r}")
+        if choices and value not in choices:
+            raise ConfigError(self.path, self._key(key), f"must be one of {', '.join(choices)}")
+        return value
+
+    def range(self, key: str) -> tuple[float, float]:
+        value = self._raw(key, _REQUIRED)
+        if not isinstance(value, list) or len(value) != 2:
+            raise ConfigError(self.path, self._key(key), "must be a list [min, max]")
+        lo = self._check_float(key, value[0], None, None, None)
+        hi = self._check_float(key, value[1], None, None, None)
+        if lo >= hi:
+            raise ConfigError(self.path, self._key(key), "min must be below max")
+        return lo, hi
+
+    def section(self, key: str, default: Any = _REQUIRED) -> _Section:
+        return _Section(self._raw(key, default), self.path, self._key(key))
+
+    def mapping(self, key: str, default: Any = _REQUIRED) -> dict[str, Any]:
+        value = self._raw(key, default)
+        if not isinstance(value, dict):
+            raise ConfigError(self.path, self._key(key), "must be a mapping")
+        return value
+
+    def finish(self) -> None:
+        unknown = [k for k in self.data if k not in self.used]
+        if unknown:
+            raise ConfigError(self.path, self._key(str(unknown[0])), "unknown key")
+
+
+def _read_servo(sec: _Section) -> ServoParams:
+    values = {k: sec.float(k, above=0.0) for k in ("a0", "a1", "a2", "a3", "a4", "b0", "b1", "b2")}
+    sec.finish()
+    return ServoParams(**values)
+
+
+def _read_axis(sec: _Section, name: str) -> AxisConfig:
+    axis = AxisConfig(
+        name=name,
+        servo=_read_servo(sec.section("servo")),
+        travel_mm=sec.range("travel_mm"),
+        pulse_mm=sec.float("pulse_mm", above=0.0, maxval=1.0),
+        max_velocity_mm_s=sec.float("max_velocity_mm_s", above=0.0, maxval=10000.0),
+        ferror_mm=sec.float("ferror_mm", above=0.0, maxval=100.0),
+        min_ferror_mm=sec.float("min_ferror_mm", above=0.0, maxval=100.0),
+    )
+    sec.finish()
+    return axis
+
+
+def _read_interpolator(sec: _Section) -> InterpolatorConfig:
+    cfg = InterpolatorConfig(
+        max_feed_mm_s=sec.float("max_feed_mm_min", above=0.0, maxval=600000.0) / 60.0,
+        max_accel_mm_s2=sec.float("max_accel_mm_s2", above=0.0, maxval=1e6),
+        chord_tolerance_mm=sec.float("chord_tolerance_mm", above=0.0, maxval=1.0),
+        reference_curvature_per_mm=sec.float("reference_curvature_per_mm", above=0.0),
+        contour_error_limit_mm=sec.float("contour_error_limit_mm", above=0.0, maxval=10.0),
+        ph_error_limit_mm=sec.float("ph_error_limit_mm", above=0.0, maxval=1.0),
+        rapid_feed_mm_s=sec.float("rapid_feed_mm_min", above=0.0, maxval=600000.0) / 60.0,
+        max_dynamics_rounds=sec.int("max_dynamics_rounds", 20, minval=1, maxval=1000),
+    )
+    sec.finish()
+    return cfg
+
+
+def _read_drive(sec: _Section) -> DriveConfig:
+    backend = sec.str("backend", choices=("sim", "canopen", "serial"))
+    options = sec.mapping("options", {})
+    sec.finish()
+    return DriveConfig(backend=backend, options=tuple(sorted(options.items())))
+
+
+def _read_runtime(sec: _Section) -> RuntimeConfig:
+    cfg = RuntimeConfig(
+        nc_fifo_blocks=sec.int("nc_fifo_blocks", 64, minval=2, maxval=100000),
+        card_fifo_low_water_ms=sec.float("card_fifo_low_water_ms", 20.0, above=0.0),
+        card_fifo_high_water_ms=sec.float("card_fifo_high_water_ms", 100.0, above=0.0),
+    )
+    if cfg.card_fifo_low_water_ms >= cfg.card_fifo_high_water_ms:
+        raise ConfigError(sec.path, "runtime.card_fifo_low_water_ms", "must be below high water")
+    sec.finish()
+    return cfg
+
+
+def parse_config(data: Any, path: str) -> MachineConfig:
+    """Build a MachineConfig from parsed YAML; any mistake is a ConfigError naming the key."""
+    top = _Section(data, path, "")
+    name = top.str("name")
+    period = top.float("sample_period_s", above=0.0, maxval=0.1)
+    axes_sec = top.mapping("axes")
+    for axis_name in axes_sec:
+        if axis_name not in ("x", "y", "z"):
+            raise ConfigError(path, f"axes.{axis_name}", "unknown axis (x, y, z)")
+    for needed in ("x", "y"):
+        if needed not in axes_sec:
+            raise ConfigError(path, f"axes.{needed}", "is required")
+    axes = tuple(_read_axis(_Section(axes_sec[a], path, f"axes.{a}"), a)
+                 for a in ("x", "y", "z") if a in axes_sec)
+    cfg = MachineConfig(
+        name=name,
+        path=path,
+        sample_period_s=period,
+        axes=axes,
+        interpolator=_read_interpolator(top.section("interpolator")),
+        drive=_read_drive(top.section("drive")),
+        runtime=_read_runtime(top.section("runtime", {})),
+    )
+    top.finish()
+    return cfg
+
+
+def builtin_config_path(name: str) -> Path | None:
+    """The installed copy of a built-in config (`xy_table`, `xyz_mill`), if there is one."""
+    candidate = resources.files("controller.machine_configs").joinpath(f"{name}.yaml")
+    return Path(str(candidate)) if candidate.is_file() else None
+
+
+def resolve_config_path(explicit: str | None = None) -> Path:
+    """--config FILE, else $CNC_CONFIG, else the built-in xy_table; a bare name is a built-in."""
+    chosen = explicit or os.environ.get(CONFIG_ENV_VAR) or DEFAULT_CONFIG_NAME
+    path = Path(chosen)
+    if path.is_file():
+        return path
+    builtin = builtin_config_path(chosen.removesuffix(".yaml"))
+    if builtin is not None and os.sep not in chosen:
+        return builtin
+    raise ConfigError(chosen, "<file>", "no such configuration file")
+
+
+def load_config(explicit: str | None = None) -> MachineConfig:
+    """Load and check a machine configuration (see resolve_config_path for which one)."""
+    path = resolve_config_path(explicit)
+    try:
+        text = path.read_text(encoding="utf-8")
+        data = yaml.safe_load(text)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(str(path), "<file>", f"cannot read: {exc}") from exc
+    except yaml.YAMLError as exc:
+        raise ConfigError(str(path), "<file>", f"not valid YAML: {exc}") from exc
+    return parse_config(data, str(path))
