@@ -1,0 +1,39 @@
+"""`cncctl`: the operator command (check, inspect, simulate, run)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from controller import __version__
+
+# (sub-command, module providing add_arguments(parser) and run(args) -> exit code, help)
+COMMANDS: tuple[tuple[str, str, str], ...] = (
+    ("check", "controller.check_cmd", "check a program without moving anything"),
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="cncctl", description="phcnc CNC controller")
+    parser.add_argument("--version", action="version", version=f"cncctl {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name, module_name, help_text in COMMANDS:
+        module = importlib.import_module(module_name)
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args._run(args))
+    except KeyboardInterrupt:
+        print("cncctl: interrupted", file=sys.stderr)
+        return 4
+
+
+if __name__ == "__main__":
+    sys.exit(main())
