@@ -1,0 +1,140 @@
+"""Sharp corner detection (paper eqs. 13-15): curvature peaks above kappa_th and their zones."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import brentq
+
+from controller.curves import Curve
+
+_XTOL = 1e-13
+
+
+@dataclass(frozen=True)
+class CornerZone:
+    """Parameter interval [u_start, u_end] around the curvature peak u_peak (Figure 1's AB, CD)."""
+
+    u_start: float
+    u_end: float
+    u_peak: float
+    kappa_peak_per_mm: float
+
+
+def sample_grid(curve: Curve, samples_per_span: int = 64) -> np.ndarray:
+    """Parameters to scan: samples_per_span per knot span (NURBS) or a uniform grid otherwise."""
+    knots = getattr(curve, "knots", None)
+    if knots is None:
+        return np.linspace(curve.u_start, curve.u_end, 8 * samples_per_span + 1)
+    inner = np.unique(knots[(knots >= curve.u_start) & (knots <= curve.u_end)])
+    frac = np.arange(samples_per_span) / samples_per_span
+    grid = (inner[:-1, None] + np.diff(inner)[:, None] * frac[None, :]).ravel()
+    return np.append(grid, inner[-1])
+
+
+def _kappa(curve: Curve, u: float) -> float:
+    return float(curve.curvature(u)[0])
+
+
+def _dkappa(curve: Curve, u: float) -> float:
+    return float(curve.curvature_derivative(u)[0])
+
+
+def _peaks(curve: Curve, grid: np.ndarray, dk: np.ndarray) -> list[float]:
+    """Local maxima of kappa: dkappa/du = 0 going + to - (eq. 13), or at an end."""
+    peaks = [brentq(lambda u: _dkappa(curve, u), grid[i], grid[i + 1], xtol=_XTOL)
+             for i in np.nonzero((dk[:-1] > 0) & (dk[1:] <= 0))[0]]
+    if dk[0] < 0:
+        peaks.insert(0, float(grid[0]))
+    if dk[-1] > 0:
+        peaks.append(float(grid[-1]))
+    return peaks
+
+
+def _boundary(curve: Curve, grid: np.ndarray, kappa: np.ndarray, u_peak: float, level: float,
+              direction: int) -> float:
+    """Where kappa first falls to level going from u_peak in direction (-1 left, +1 right)."""
+    if direction < 0:
+        idx = np.nonzero((grid < u_peak) & (kappa <= level))[0]
+        if idx.size == 0:
+            return float(grid[0])
+        lo, hi = float(grid[idx[-1]]), min(float(grid[idx[-1] + 1]), u_peak)
+    else:
+        idx = np.nonzero((grid > u_peak) & (kappa <= level))[0]
+        if idx.size == 0:
+            return float(grid[-1])
+        lo, hi = max(float(grid[idx[0] - 1]), u_peak), float(grid[idx[0]])
+    f = lambda u: _kappa(curve, u) - level  # noqa: E731
+    if f(lo) * f(hi) > 0:
+        return lo if direction < 0 else hi
+    return float(brentq(f, lo, hi, xtol=_XTOL))
+
+
+def _merge(zones: list[CornerZone]) -> list[CornerZone]:
+    """Peaks sharing one above-threshold region give one zone, keeping the highest peak."""
+    merged: list[CornerZone] = []
+    for z in sorted(zones, key=lambda z: z.u_start):
+        if merged and z.u_start <= merged[-1].u_end:
+            last = merged.pop()
+            top = z if z.kappa_peak_per_mm > last.kappa_peak_per_mm else last
+            z = CornerZone(min(last.u_start, z.u_start), max(last.u_end, z.u_end),
+                           top.u_peak, top.kappa_peak_per_mm)
+        merged.append(z)
+    return merged
+
+
+def detect_sharp_corners(curve: Curve, kappa_th_per_mm: float,
+                         samples_per_span: int = 64) -> list[CornerZone]:
+    """Curvature maxima above kappa_th (eqs. 13, 15), each with its zone where kappa > kappa_th."""
+    grid = sample_grid(curve, samples_per_span)
+    kappa = curve.curvature(grid)
+    dk = curve.curvature_derivative(grid)
+    zones = []
+    for u_peak in _peaks(curve, grid, dk):
+        k_peak = _kappa(curve, u_peak)
+        if k_peak <= kappa_th_per_mm:
+            continue
+        u0 = _boundary(curve, grid, kappa, u_peak, kappa_th_per_mm, -1)
+        u1 = _boundary(curve, grid, kappa, u_peak, kappa_th_per_mm, +1)
+        zones.append(CornerZone(u0, u1, u_peak, k_peak))
+    return _merge(zones)
+
+
+def _widen_side(curve: Curve, grid: np.ndarray, kappa: np.ndarray, dk: np.ndarray,
+                u_from: float, level: float, direction: int) -> float:
+    """Walk outwards from u_from; stop where kappa < level or at a kappa minimum."""
+    rising_back = dk <= 0 if direction < 0 else dk >= 0  # kappa grows again: past a minimum
+    side = grid < u_from if direction < 0 else grid > u_from
+    stop = np.nonzero(side & ((kappa < level) | rising_back))[0]
+    if stop.size == 0:
+        return float(grid[0] if direction < 0 else grid[-1])
+    i = stop[-1] if direction < 0 else stop[0]
+    lo, hi = sorted((float(grid[i]), float(grid[i - direction])))
+    lo, hi = (lo, min(hi, u_from)) if direction < 0 else (max(lo, u_from), hi)
+    if kappa[i] < level:
+        f = lambda u: _kappa(curve, u) - level  # noqa: E731
+    else:
+        f = lambda u: _dkappa(curve, u)  # noqa: E731
+    if lo >= hi or f(lo) * f(hi) > 0:
+        return float(grid[i])
+    return float(brentq(f, lo, hi, xtol=_XTOL))
+
+
+def widen_zone(curve: Curve, zone: CornerZone, kappa_level: float,
+               samples_per_span: int = 64) -> CornerZone:
+    """The interval around u_peak where kappa > kappa_level, never past a kappa local minimum."""
+    grid = sample_grid(curve, samples_per_span)
+    kappa, dk = curve.curvature(grid), curve.curvature_derivative(grid)
+    u0 = _widen_side(curve, grid, kappa, dk, zone.u_start, kappa_level, -1)
+    u1 = _widen_side(curve, grid, kappa, dk, zone.u_end, kappa_level, +1)
+    return CornerZone(min(u0, zone.u_start), max(u1, zone.u_end), zone.u_peak,
+                      zone.kappa_peak_per_mm)
+
+
+def joint_angle_rad(tangent_in: np.ndarray, tangent_out: np.ndarray) -> float:
+    """Turning angle in [0, pi] between the incoming and outgoing tangents at a block joint."""
+    cross = tangent_in[0] * tangent_out[1] - tangent_in[1] * tangent_out[0]
+    dot = tangent_in[0] * tangent_out[0] + tangent_in[1] * tangent_out[1]
+    return math.atan2(abs(cross), dot)

@@ -1,0 +1,163 @@
+"""Planar NURBS: vectorised homogeneous de Boor, derivatives, curvature, arc length."""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass
+from functools import cached_property
+from math import comb, factorial
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from controller.arclength import ArcLengthTable
+from controller.blocks import NurbsBlock
+from controller.curves import curvature_derivative_from_derivatives, curvature_from_derivatives
+
+
+def _derivative_points(knots: np.ndarray, pts: np.ndarray, p: int) -> np.ndarray:
+    """Control points of the derivative B-spline (degree p-1, knots[1:-1]); 0 over empty spans."""
+    gap = knots[p + 1 : p + pts.shape[0]] - knots[1 : pts.shape[0]]
+    scale = np.divide(p, gap, out=np.zeros_like(gap), where=gap > 0)
+    return scale[:, None] * np.diff(pts, axis=0)
+
+
+def _de_boor(knots: np.ndarray, pts: np.ndarray, p: int, span: np.ndarray, u: np.ndarray,
+             shift: int) -> np.ndarray:
+    """Triangular de Boor scheme on arrays; span indexes the original knots, shift = derivative."""
+    k = span - shift  # span in the derivative's knot vector knots[shift:len-shift]
+    t = knots[shift : knots.size - shift] if shift else knots
+    d = pts[k[:, None] - p + np.arange(p + 1)[None, :]]  # (N, p+1, dim)
+    for r in range(1, p + 1):
+        for j in range(p, r - 1, -1):
+            lo = t[j + k - p]
+            hi = t[j + 1 + k - r]
+            alpha = ((u - lo) / (hi - lo))[:, None]
+            d[:, j] = (1.0 - alpha) * d[:, j - 1] + alpha * d[:, j]
+    return d[:, p]
+
+
+@dataclass(frozen=True, eq=False)
+class Nurbs:
+    """Clamped planar NURBS of any degree; parameter range [knots[p], knots[-p-1]]."""
+
+    degree: int
+    knots: np.ndarray  # (n + degree + 1,)
+    control_points: np.ndarray  # (n, 2)
+    weights: np.ndarray  # (n,)
+
+    def __post_init__(self) -> None:
+        n, p = self.control_points.shape[0], self.degree
+        if p < 1 or self.knots.size != n + p + 1 or self.weights.size != n:
+            raise ValueError(f"inconsistent NURBS: degree {p}, {n} points, {self.knots.size} knots")
+        if np.any(np.diff(self.knots) < 0) or np.any(self.weights <= 0):
+            raise ValueError("NURBS knots must be non-decreasing and weights positive")
+
+    @classmethod
+    def from_block(cls, block: NurbsBlock) -> Nurbs:
+        return cls(block.degree, np.asarray(block.knots, float),
+                   np.asarray(block.control_points, float), np.asarray(block.weights, float))
+
+    @property
+    def u_start(self) -> float:
+        return float(self.knots[self.degree])
+
+    @property
+    def u_end(self) -> float:
+        return float(self.knots[-self.degree - 1])
+
+    @cached_property
+    def _homogeneous(self) -> list[np.ndarray]:
+        """Homogeneous control points (w x, w y, w) and those of each derivative curve."""
+        pw = np.column_stack((self.control_points * self.weights[:, None], self.weights))
+        out = [pw]
+        for j in range(1, self.degree + 1):
+            out.append(_derivative_points(self.knots[j - 1 : self.knots.size - j + 1],
+                                          out[-1], self.degree - j + 1))
+        return out
+
+    def _spans(self, u: np.ndarray) -> np.ndarray:
+        n, p = self.control_points.shape[0], self.degree
+        return np.clip(np.searchsorted(self.knots, u, side="right") - 1, p, n - 1)
+
+    def homogeneous_derivatives(self, u: ArrayLike, order: int = 2) -> np.ndarray:
+        """[A, A', ..., A^(order)] of the homogeneous curve, shape (order+1, N, 3)."""
+        uu = np.atleast_1d(np.asarray(u, dtype=float))
+        span = self._spans(uu)
+        out = np.zeros((order + 1, uu.size, 3))
+        for j in range(min(order, self.degree) + 1):
+            out[j] = _de_boor(self.knots, self._homogeneous[j], self.degree - j, span, uu, j)
+        return out
+
+    def evaluate(self, u: ArrayLike, order: int = 2) -> np.ndarray:
+        """[C, C', ..., C^(order)] of shape (order+1, N, 2), by Leibniz on A = w C."""
+        a = self.homogeneous_derivatives(u, order)
+        w = a[:, :, 2:3]
+        c = np.empty((order + 1, a.shape[1], 2))
+        for k in range(order + 1):
+            acc = a[k, :, :2].copy()
+            for i in range(1, k + 1):
+                acc -= comb(k, i) * w[i] * c[k - i]
+            c[k] = acc / w[0]
+        return c
+
+    def curvature(self, u: ArrayLike) -> np.ndarray:
+        """Eq. 14 (unsigned), 1/mm."""
+        return curvature_from_derivatives(self.evaluate(u, 2))
+
+    def curvature_derivative(self, u: ArrayLike) -> np.ndarray:
+        """d kappa / du from C', C'', C'''."""
+        return curvature_derivative_from_derivatives(self.evaluate(u, 3))
+
+    def speed(self, u: np.ndarray) -> np.ndarray:
+        d1 = self.evaluate(u, 1)[1]
+        return np.hypot(d1[:, 0], d1[:, 1])
+
+    @cached_property
+    def arc_length_table(self) -> ArcLengthTable:
+        inner = self.knots[self.degree : self.knots.size - self.degree]
+        return ArcLengthTable.build(self.speed, inner)
+
+    @property
+    def length_mm(self) -> float:
+        return self.arc_length_table.total_length_mm
+
+    def s_of_u(self, u: ArrayLike) -> np.ndarray:
+        return self.arc_length_table.s_of_u(u)
+
+    def u_of_s(self, s_mm: ArrayLike) -> np.ndarray:
+        return self.arc_length_table.u_of_s(s_mm)
+
+    @cached_property
+    def _power_form(self) -> tuple[list[float], list[list[tuple[float, ...]]]]:
+        """Per-span Taylor coefficients A^(k)(u_i)/k! of the homogeneous curve, as Python floats."""
+        p = self.degree
+        left = self.knots[p : self.knots.size - p - 1]
+        a = self.homogeneous_derivatives(left, p)  # span of u = knots[i] is i for non-empty spans
+        coeffs = [[tuple(float(v) / factorial(k) for v in a[k, i]) for k in range(p, -1, -1)]
+                  for i in range(left.size)]
+        return [float(x) for x in left], coeffs
+
+    def derivatives_scalar(self, u: float) -> tuple[float, float, float, float]:
+        """(x', y', x'', y'') at one u without numpy: Horner on the span's power form."""
+        breaks, coeffs = self._power_form
+        i = min(max(bisect.bisect_right(breaks, u) - 1, 0), len(breaks) - 1)
+        h = u - breaks[i]
+        a0 = [0.0, 0.0, 0.0]
+        a1 = [0.0, 0.0, 0.0]
+        a2 = [0.0, 0.0, 0.0]
+        for c in coeffs[i]:  # highest power first
+            for j in range(3):
+                a2[j] = a2[j] * h + 2.0 * a1[j]
+                a1[j] = a1[j] * h + a0[j]
+                a0[j] = a0[j] * h + c[j]
+        w, w1, w2 = a0[2], a1[2], a2[2]
+        x, y = a0[0] / w, a0[1] / w
+        dx, dy = (a1[0] - w1 * x) / w, (a1[1] - w1 * y) / w
+        ddx = (a2[0] - 2.0 * w1 * dx - w2 * x) / w
+        ddy = (a2[1] - 2.0 * w1 * dy - w2 * y) / w
+        return dx, dy, ddx, ddy
+
+    def point_scalar(self, u: float) -> tuple[float, float]:
+        p = self.evaluate(u, 0)[0, 0]
+        return float(p[0]), float(p[1])

@@ -1,0 +1,213 @@
+"""Planar PH quintic in complex form (eqs. 16-21): Hermite construction, closed-form arc length."""
+
+from __future__ import annotations
+
+import cmath
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from controller.curves import curvature_derivative_from_derivatives
+
+_BINOM5 = np.array([1.0, 5.0, 10.0, 10.0, 5.0, 1.0])
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
+_REAL_ROOT_TOL = 1e-12
+
+
+def _xi(xi: ArrayLike) -> np.ndarray:
+    return np.atleast_1d(np.asarray(xi, dtype=float))
+
+
+def bernstein_to_power(b: np.ndarray) -> np.ndarray:
+    """Power-basis coefficients (lowest first) of sum_k b_k B_k^n(x)."""
+    n = b.size - 1
+    out = np.zeros(n + 1, dtype=b.dtype)
+    for k in range(n + 1):
+        for j in range(k, n + 1):  # B_k^n = C(n,k) sum_j C(n-k, j-k) (-1)^(j-k) x^j
+            out[j] += b[k] * math.comb(n, k) * math.comb(n - k, j - k) * (-1) ** (j - k)
+    return out
+
+
+def _horner(coeffs_low_first: np.ndarray, x: np.ndarray) -> np.ndarray:
+    acc = np.full(x.shape, coeffs_low_first[-1], dtype=np.result_type(coeffs_low_first, x))
+    for c in coeffs_low_first[-2::-1]:
+        acc = acc * x + c
+    return acc
+
+
+@dataclass(frozen=True)
+class PhQuintic:
+    """r(xi) = p0 + integral of w(xi)^2, w quadratic Bernstein with coefficients w0, w1, w2."""
+
+    p0: complex
+    w0: complex
+    w1: complex
+    w2: complex
+
+    u_start = 0.0
+    u_end = 1.0
+
+    @classmethod
+    def hermite(cls, p0: complex, p5: complex, d0: complex, d1: complex) -> PhQuintic:
+        """The best of the 4 Hermite interpolants (ALGORITHMS.md 1.2): canonical frame, minimum
+        absolute rotation index, bending energy as tie-break, (+,+) first on full ties."""
+        dp = p5 - p0
+        if dp == 0:
+            raise ValueError("PH Hermite data with coincident end points")
+        return min(_candidates(complex(p0), complex(dp), complex(d0), complex(d1)), key=_rank)
+
+    # --- Bernstein data -------------------------------------------------------------------------
+    @cached_property
+    def _w(self) -> np.ndarray:
+        return np.array([self.w0, self.w1, self.w2], dtype=complex)
+
+    def control_points(self) -> np.ndarray:
+        """The 6 Bezier control points (complex)."""
+        w0, w1, w2 = self.w0, self.w1, self.w2
+        steps = [w0 * w0 / 5, w0 * w1 / 5, (2 * w1 * w1 + w0 * w2) / 15, w1 * w2 / 5, w2 * w2 / 5]
+        return self.p0 + np.concatenate(([0j], np.cumsum(steps)))
+
+    @cached_property
+    def sigma_bernstein(self) -> np.ndarray:
+        """Bernstein coefficients of the parametric speed sigma = |w|^2 (quartic)."""
+        w0, w1, w2 = self.w0, self.w1, self.w2
+        re = lambda z: z.real  # noqa: E731
+        return np.array([abs(w0) ** 2, re(w0 * w1.conjugate()),
+                         (2 * abs(w1) ** 2 + re(w0 * w2.conjugate())) / 3,
+                         re(w1 * w2.conjugate()), abs(w2) ** 2])
+
+    @cached_property
+    def arc_length_bernstein(self) -> np.ndarray:
+        """Bernstein coefficients of s(xi) (quintic): s_0 = 0, s_k = sum_{j<k} sigma_j / 5."""
+        return np.concatenate(([0.0], np.cumsum(self.sigma_bernstein) / 5.0))
+
+    @cached_property
+    def _s_power(self) -> np.ndarray:
+        return bernstein_to_power(self.arc_length_bernstein)
+
+    @cached_property
+    def _sigma_power(self) -> np.ndarray:
+        return bernstein_to_power(self.sigma_bernstein)
+
+    @cached_property
+    def _r_power(self) -> np.ndarray:
+        return bernstein_to_power(self.control_points())
+
+    @property
+    def length_mm(self) -> float:
+        return float(self.sigma_bernstein.sum() / 5.0)
+
+    # --- evaluation (all vectorised over xi) -----------------------------------------------------
+    def point(self, xi: ArrayLike) -> np.ndarray:
+        return _horner(self._r_power, _xi(xi))
+
+    def w(self, xi: ArrayLike) -> np.ndarray:
+        x = _xi(xi)
+        return self.w0 * (1 - x) ** 2 + 2 * self.w1 * (1 - x) * x + self.w2 * x * x
+
+    def w_prime(self, xi: ArrayLike) -> np.ndarray:
+        x = _xi(xi)
+        return 2 * ((self.w1 - self.w0) * (1 - x) + (self.w2 - self.w1) * x)
+
+    def hodograph(self, xi: ArrayLike) -> np.ndarray:
+        return self.w(xi) ** 2
+
+    def second_derivative(self, xi: ArrayLike) -> np.ndarray:
+        return 2 * self.w(xi) * self.w_prime(xi)
+
+    def third_derivative(self, xi: ArrayLike) -> np.ndarray:
+        w2nd = 2 * (self.w0 - 2 * self.w1 + self.w2)
+        return 2 * (self.w_prime(xi) ** 2 + self.w(xi) * w2nd)
+
+    def sigma(self, xi: ArrayLike) -> np.ndarray:
+        return _horner(self._sigma_power, _xi(xi))
+
+    def arc_length(self, xi: ArrayLike) -> np.ndarray:
+        return _horner(self._s_power, _xi(xi))
+
+    def signed_curvature(self, xi: ArrayLike) -> np.ndarray:
+        """kappa = 2 Im(conj(w) w') / |w|^4 (positive = turning left)."""
+        w = self.w(xi)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return 2 * (w.conjugate() * self.w_prime(xi)).imag / np.abs(w) ** 4
+
+    def curvature(self, xi: ArrayLike) -> np.ndarray:
+        return np.abs(self.signed_curvature(xi))
+
+    # --- the shared Curve interface --------------------------------------------------------------
+    def evaluate(self, xi: ArrayLike, order: int = 2) -> np.ndarray:
+        funcs = (self.point, self.hodograph, self.second_derivative, self.third_derivative)
+        if order > 3:
+            raise ValueError("PH quintic derivatives beyond the third are not provided")
+        z = np.stack([f(xi) for f in funcs[: order + 1]])
+        return np.stack((z.real, z.imag), axis=-1)
+
+    def curvature_derivative(self, xi: ArrayLike) -> np.ndarray:
+        return curvature_derivative_from_derivatives(self.evaluate(xi, 3))
+
+    def s_of_u(self, xi: ArrayLike) -> np.ndarray:
+        return self.arc_length(xi)
+
+    def u_of_s(self, s_mm: ArrayLike) -> np.ndarray:
+        from controller.interpolators import ph_interpolate  # late: interpolators imports us
+
+        return ph_interpolate(self, np.atleast_1d(np.asarray(s_mm, dtype=float)))[0]
+
+    def derivatives_scalar(self, xi: float) -> tuple[float, float, float, float]:
+        w = self.w0 * (1 - xi) ** 2 + 2 * self.w1 * (1 - xi) * xi + self.w2 * xi * xi
+        dw = 2 * ((self.w1 - self.w0) * (1 - xi) + (self.w2 - self.w1) * xi)
+        d1, d2 = w * w, 2 * w * dw
+        return d1.real, d1.imag, d2.real, d2.imag
+
+    # --- shape measures used to choose among the 4 interpolants ----------------------------------
+    def absolute_rotation_index(self) -> float:
+        """(1/2pi) * integral of |d theta|, theta = 2 arg w, split at inflections (exact)."""
+        return _abs_rotation_index(self.w0, self.w1, self.w2)
+
+    def bending_energy(self) -> float:
+        """Integral of kappa^2 ds by 64-point Gauss-Legendre (inf at a zero-speed point)."""
+        x = 0.5 * (_GL_X + 1.0)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            f = self.curvature(x) ** 2 * self.sigma(x)
+        value = 0.5 * float(f @ _GL_W)
+        return value if math.isfinite(value) else math.inf
+
+
+def _candidates(p0: complex, dp: complex, d0: complex, d1: complex) -> list[PhQuintic]:
+    """The 4 interpolants built in the canonical frame (p0 -> 0, p5 -> 1), mapped back."""
+    d0c, d1c = d0 / dp, d1 / dp
+    scale = cmath.sqrt(dp)
+    out = []
+    for e0, e2 in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+        w0, w2 = e0 * cmath.sqrt(d0c), e2 * cmath.sqrt(d1c)
+        w1 = -0.75 * (w0 + w2) + 0.25 * cmath.sqrt(120 - 15 * (w0 * w0 + w2 * w2) + 10 * w0 * w2)
+        out.append(PhQuintic(p0, w0 * scale, w1 * scale, w2 * scale))
+    return out
+
+
+def _rank(ph: PhQuintic) -> tuple[float, float]:
+    # Rounded so that equal rotation indices fall through to the energy, then to list order.
+    return (round(ph.absolute_rotation_index(), 9), round(ph.bending_energy(), 9))
+
+
+def _abs_rotation_index(w0: complex, w1: complex, w2: complex) -> float:
+    """w = c (xi - z1)(xi - z2): d arg w / d xi = sum -Im z / |xi - z|^2, integrated piecewise."""
+    lead, mid = w0 - 2 * w1 + w2, 2 * (w1 - w0)
+    scale = max(abs(w0), abs(w1), abs(w2))
+    if abs(lead) <= 1e-14 * scale:
+        roots = [] if abs(mid) <= 1e-14 * scale else [-w0 / mid]
+    else:
+        roots = list(np.roots([lead, mid, w0]))
+    # A real root of w is a double root of r' = w^2: zero speed but no turning, so it drops out.
+    roots = [z for z in roots if abs(z.imag) > _REAL_ROOT_TOL]
+    cuts = [0.0, 1.0]
+    if len(roots) == 2:  # inflections: b1((x-a2)^2+b2^2) + b2((x-a1)^2+b1^2) = 0
+        (a1, b1), (a2, b2) = [(z.real, z.imag) for z in roots]
+        quad = [b1 + b2, -2 * (b1 * a2 + b2 * a1), b1 * (a2**2 + b2**2) + b2 * (a1**2 + b1**2)]
+        cuts += [r.real for r in np.roots(quad) if abs(r.imag) < 1e-12 and 0 < r.real < 1]
+    cuts = np.sort(cuts)
+    theta = sum(2 * np.arctan2(-z.imag, cuts - z.real) for z in roots)
+    return float(np.abs(np.diff(theta)).sum() / (2 * np.pi)) if roots else 0.0
