@@ -1,0 +1,75 @@
+"""Inputs and outputs of the motion controller: settings, progress reports, the final result."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from controller.config import MachineConfig
+
+
+class Outcome(enum.Enum):
+    DONE = "done"
+    FAULT = "fault"
+    ABORTED = "aborted"
+
+
+class MotionState(enum.Enum):
+    WAITING = "waiting"  # priming: no frame sent yet
+    RUNNING = "running"
+    STOPPING = "stopping"  # controlled stop queued (fault, abort, starved reference)
+    SETTLING = "settling"  # all frames executed, waiting for the servo to settle
+    FINISHED = "finished"
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    cycle_frames: int = 2  # motion-loop period in card frames
+    low_water_ms: float = 20.0
+    high_water_ms: float = 100.0
+    holdback_ms: float = 60.0  # reference kept back so that a stop can follow the path
+    settle_s: float = 0.3
+    progress_every_s: float = 0.1
+
+    @classmethod
+    def from_config(cls, config: MachineConfig, **overrides: Any) -> MotionSettings:
+        ip = config.interpolator
+        # Enough path for a quintic stop from the fastest feed: 15 V / (8 A), plus margin.
+        stop_ms = 1e3 * 15.0 * max(ip.max_feed_mm_s, ip.rapid_feed_mm_s) / (8 * ip.max_accel_mm_s2)
+        base = cls(low_water_ms=config.runtime.card_fifo_low_water_ms,
+                   high_water_ms=config.runtime.card_fifo_high_water_ms,
+                   holdback_ms=stop_ms + 10.0)
+        return replace(base, **overrides)
+
+
+@dataclass(frozen=True)
+class MotionProgress:
+    state: MotionState
+    line: int
+    feed_mm_s: float
+    ferror_um: float
+    fifo_ms: float
+    elapsed_s: float
+    executed_s: float
+    planned_s: float | None  # known once the generator has finished
+
+
+@dataclass(frozen=True)
+class MotionResult:
+    outcome: Outcome
+    message: str
+    line: int
+    motion_time_s: float
+    planned_time_s: float
+    contour_error_um: dict[str, float]
+    following_error_um_max: float
+    underruns: int
+    late_cycles: int
+    min_fifo_ms: float
+    commanded_counts: dict[str, int]
+    executed_counts: dict[str, int]
+    final_position_mm: dict[str, float]
+    position_known: bool
+    time_to_first_motion_s: float | None
+    extra: dict[str, Any] = field(default_factory=dict)

@@ -1,0 +1,60 @@
+"""Motion-loop pacing: wall-clock cycles (counting late wake-ups) or virtual time for tests."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+
+class WallPacer:
+    """Absolute-deadline cycles on CLOCK_MONOTONIC; a wake-up a whole cycle late is counted.
+
+    A late cycle is not made up by running twice: the card FIFO absorbs it, and the refill
+    after it simply writes more frames.
+    """
+
+    def __init__(self, cycle_s: float) -> None:
+        self.cycle_s = cycle_s
+        self.late_cycles = 0
+        self.max_late_s = 0.0
+        self._deadline_s = time.monotonic()
+        self._start_s = self._deadline_s
+
+    def wait(self) -> None:
+        self._deadline_s += self.cycle_s
+        delay_s = self._deadline_s - time.monotonic()
+        if delay_s > 0:
+            time.sleep(delay_s)
+        late_s = time.monotonic() - self._deadline_s
+        self.max_late_s = max(self.max_late_s, late_s)
+        if late_s > self.cycle_s:
+            self.late_cycles += 1
+            self._deadline_s = time.monotonic()  # re-anchor instead of bursting to catch up
+
+    def elapsed_s(self) -> float:
+        return time.monotonic() - self._start_s
+
+
+class VirtualPacer:
+    """Each wait() advances simulated time by one cycle by calling `advance(frames)`."""
+
+    def __init__(self, cycle_frames: int, period_s: float,
+                 advance: Callable[[int], None]) -> None:
+        self.cycle_s = cycle_frames * period_s
+        self.cycle_frames = cycle_frames
+        self.late_cycles = 0
+        self.max_late_s = 0.0
+        self._advance = advance
+        self._cycles = 0
+        self.stall_cycles = 0  # test hook: the next n cycles are "late" (host stalled)
+
+    def wait(self) -> None:
+        steps = 1 + self.stall_cycles
+        if self.stall_cycles:
+            self.late_cycles += 1
+            self.stall_cycles = 0
+        self._advance(self.cycle_frames * steps)
+        self._cycles += steps
+
+    def elapsed_s(self) -> float:
+        return self._cycles * self.cycle_s

@@ -1,0 +1,84 @@
+"""Where the motion controller reads reference points from: protocol plus an in-memory source."""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Iterable, Iterator
+from typing import Protocol
+
+import numpy as np
+
+from controller.refpoints import RefChunk
+
+
+class SourceState(enum.Enum):
+    STREAMING = "streaming"  # more rows may come
+    FINISHED = "finished"  # the producer wrote its final row (rows may still be unread)
+    FAILED = "failed"  # the producer died or raised: no more rows will come
+
+
+class RefSource(Protocol):
+    """Rows are [pos_mm (n_axes)..., feed_mm_s, line] float64, one per sample period."""
+
+    def read(self, max_rows: int) -> np.ndarray: ...
+
+    def state(self) -> tuple[SourceState, str]: ...
+
+    def total_rows(self) -> int | None: ...
+
+
+def chunk_rows(chunk: RefChunk) -> np.ndarray:
+    """A RefChunk as ring rows."""
+    return np.column_stack([chunk.pos_mm, chunk.feed_mm_s, chunk.line.astype(float)])
+
+
+class ChunkSource:
+    """In-process source over an iterable of RefChunks (tests, `--virtual-time` single process).
+
+    Test hooks: starve_after_rows (then STREAMING with no rows, a late generator) and
+    fail_after_rows (then FAILED, a dead generator).
+    """
+
+    def __init__(self, chunks: Iterable[RefChunk], starve_after_rows: int | None = None,
+                 fail_after_rows: int | None = None) -> None:
+        self._chunks: Iterator[RefChunk] = iter(chunks)
+        self._pending = np.zeros((0, 0))
+        self._done = False
+        self._read = 0
+        self._starve = starve_after_rows
+        self._fail = fail_after_rows
+        self._error = ""
+
+    def read(self, max_rows: int) -> np.ndarray:
+        limit = min(x for x in (self._starve, self._fail, 1 << 62) if x is not None)
+        max_rows = max(0, min(max_rows, limit - self._read))
+        while len(self._pending) < max_rows and not self._done and not self._error:
+            self._pull()
+        rows, self._pending = self._pending[:max_rows], self._pending[max_rows:]
+        self._read += len(rows)
+        return rows
+
+    def _pull(self) -> None:
+        try:
+            chunk = next(self._chunks)
+        except StopIteration:
+            self._done = True
+            return
+        except Exception as exc:  # noqa: BLE001  (a producer failure becomes FAILED, reported)
+            self._error = f"reference generator failed: {exc}"
+            return
+        rows = chunk_rows(chunk)
+        self._pending = rows if not len(self._pending) else np.vstack([self._pending, rows])
+        self._done = self._done or chunk.final
+
+    def state(self) -> tuple[SourceState, str]:
+        if self._error:
+            return SourceState.FAILED, self._error
+        if self._fail is not None and self._read >= self._fail:
+            return SourceState.FAILED, "reference generator process died"
+        if self._done and not len(self._pending):
+            return SourceState.FINISHED, ""
+        return SourceState.STREAMING, ""
+
+    def total_rows(self) -> int | None:
+        return self._read + len(self._pending) if self._done else None

@@ -1,0 +1,184 @@
+"""The drive interface (python-can style): public methods over small private backend hooks."""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controller.config import MachineConfig
+from controller.errors import DriveError
+
+
+class CardStatus(enum.Flag):
+    """Latched card flags (hostmot2 style: they stay set until reset())."""
+
+    OK = 0
+    UNDERRUN = enum.auto()
+    FAULT = enum.auto()
+    FOLLOWING_ERROR = enum.auto()
+    LOST_COMM = enum.auto()
+    BAD_FRAME = enum.auto()
+
+    @property
+    def halted(self) -> bool:
+        """True when the card stopped clocking frames and needs a reset."""
+        return self != CardStatus.OK
+
+
+@dataclass(frozen=True, eq=False)
+class Feedback:
+    """Frames clocked since the previous feedback() call, one row per frame.
+
+    seq: stream index of each frame (as counted by write_frames since open);
+    commanded_counts: accumulated pulses after the frame (the card's step counter);
+    encoder_counts: encoder reading after the frame, quantised to the pulse resolution.
+    """
+
+    seq: np.ndarray  # (n,) int64
+    commanded_counts: np.ndarray  # (n, n_axes) int64
+    encoder_counts: np.ndarray  # (n, n_axes) int64
+
+    def __len__(self) -> int:
+        return int(self.seq.shape[0])
+
+
+class Drive:
+    """Base class of every backend; subclasses implement the `_hooks` only."""
+
+    def __init__(self, config: MachineConfig, **options: Any) -> None:
+        self.config = config
+        self.options = options
+        self.n_axes = len(config.axes)
+        self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
+        self._is_open = False
+
+    # -- public API -----------------------------------------------------------------------
+    def open(self) -> None:
+        self._open()
+        self._is_open = True
+
+    def write_frames(self, counts: np.ndarray, end_of_stream: bool = False) -> None:
+        """Queue (N, n_axes) integer pulse counts, one row per sample; EOS marks program end."""
+        frames = np.asarray(counts)
+        if frames.ndim != 2 or frames.shape[1] != self.n_axes:
+            raise DriveError(f"frames must have shape (N, {self.n_axes}), got {frames.shape}")
+        if not np.issubdtype(frames.dtype, np.integer):
+            raise DriveError("frames must be integer pulse counts")
+        self._require_open()
+        self._send_frames(frames.astype(np.int64), end_of_stream)
+
+    def fifo_level(self) -> int:
+        """Frames waiting in the card FIFO."""
+        self._require_open()
+        return self._fifo_level()
+
+    def fifo_capacity(self) -> int:
+        return self._fifo_capacity()
+
+    def feedback(self) -> Feedback:
+        self._require_open()
+        return self._read_feedback()
+
+    def position_counts(self) -> tuple[np.ndarray, np.ndarray]:
+        """(commanded step counter, encoder counts) now, per axis."""
+        self._require_open()
+        return self._read_position()
+
+    def status(self) -> CardStatus:
+        self._require_open()
+        return self._read_status()
+
+    def fault_message(self) -> str:
+        """Human text naming the latched condition(s); empty when status is OK."""
+        return self._fault_message()
+
+    def reset(self) -> None:
+        """Clear latched flags and discard queued frames (a rising-edge reset)."""
+        self._require_open()
+        self._reset()
+
+    def close(self) -> None:
+        if self._is_open:
+            self._close()
+        self._is_open = False
+
+    def __enter__(self) -> Drive:
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _require_open(self) -> None:
+        if not self._is_open:
+            raise DriveError(f"{type(self).__name__}: drive is not open")
+
+    # -- backend hooks --------------------------------------------------------------------
+    def _open(self) -> None:
+        raise NotImplementedError
+
+    def _send_frames(self, frames: np.ndarray, end_of_stream: bool) -> None:
+        raise NotImplementedError
+
+    def _fifo_level(self) -> int:
+        raise NotImplementedError
+
+    def _fifo_capacity(self) -> int:
+        raise NotImplementedError
+
+    def _read_feedback(self) -> Feedback:
+        raise NotImplementedError
+
+    def _read_position(self) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def _read_status(self) -> CardStatus:
+        raise NotImplementedError
+
+    def _fault_message(self) -> str:
+        return ""
+
+    def _reset(self) -> None:
+        raise NotImplementedError
+
+    def _close(self) -> None:
+        pass
+
+
+_BACKENDS: dict[str, Callable[..., Drive]] = {}
+
+
+def register_backend(name: str, factory: Callable[..., Drive]) -> None:
+    """Make a backend available to open_drive() under `name` (config drive.backend)."""
+    _BACKENDS[name] = factory
+
+
+def backend_names() -> tuple[str, ...]:
+    _load_builtin_backends()
+    return tuple(sorted(_BACKENDS))
+
+
+def make_drive(config: MachineConfig, **overrides: Any) -> Drive:
+    """Construct (not open) the configured backend; overrides beat config drive.options."""
+    _load_builtin_backends()
+    name = config.drive.backend
+    if name not in _BACKENDS:
+        raise DriveError(f"drive backend {name!r} is not available "
+                         f"(have: {', '.join(sorted(_BACKENDS))})")
+    options = dict(config.drive.options) | overrides
+    return _BACKENDS[name](config, **options)
+
+
+def open_drive(config: MachineConfig, **overrides: Any) -> Drive:
+    drive = make_drive(config, **overrides)
+    drive.open()
+    return drive
+
+
+def _load_builtin_backends() -> None:
+    # Imported lazily so that drivers.base does not depend on its backends.
+    import drivers.sim  # noqa: F401

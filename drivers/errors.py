@@ -1,0 +1,25 @@
+"""Drive-side exceptions: one DriveError subclass per latched card condition."""
+
+from __future__ import annotations
+
+from controller.errors import DriveError
+
+
+class UnderrunError(DriveError):
+    """The card's frame FIFO ran empty mid-program; the card stopped and latched UNDERRUN."""
+
+
+class DriveFaultError(DriveError):
+    """An axis amplifier reported a fault (e.g. 0x2310 over-current); the card stopped."""
+
+
+class LostCommunicationError(DriveError):
+    """The card stopped answering the host."""
+
+
+class FollowingErrorTrip(DriveError):
+    """Commanded minus encoder position exceeded the LinuxCNC limit on one axis."""
+
+
+class BadFrameError(DriveError):
+    """The host sent a frame the card cannot execute (too many pulses, FIFO overflow, shape)."""

@@ -1,0 +1,53 @@
+"""The simulated card's frame FIFO: a fixed-size numpy ring of pulse-count frames."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from drivers.errors import BadFrameError
+
+
+class FrameFifo:
+    """Single-producer single-consumer ring; each frame carries its stream sequence number."""
+
+    def __init__(self, capacity_frames: int, n_axes: int) -> None:
+        self.capacity = capacity_frames
+        self._frames = np.zeros((capacity_frames, n_axes), dtype=np.int64)
+        self._seq = np.zeros(capacity_frames, dtype=np.int64)
+        self._eos = np.zeros(capacity_frames, dtype=bool)
+        self._head = 0  # total frames ever popped or discarded
+        self._tail = 0  # total frames ever pushed
+
+    def __len__(self) -> int:
+        return self._tail - self._head
+
+    def push(self, frames: np.ndarray, first_seq: int, end_of_stream: bool) -> None:
+        n = frames.shape[0]
+        if len(self) + n > self.capacity:
+            raise BadFrameError(f"card FIFO overflow: {len(self)} + {n} > {self.capacity} frames")
+        idx = np.arange(self._tail, self._tail + n) % self.capacity
+        self._frames[idx] = frames
+        self._seq[idx] = np.arange(first_seq, first_seq + n)
+        self._eos[idx] = False
+        if end_of_stream and n:
+            self._eos[idx[-1]] = True
+        self._tail += n
+
+    def mark_end(self) -> bool:
+        """Flag the last queued frame as end of stream; False when nothing is queued."""
+        if not len(self):
+            return False
+        self._eos[(self._tail - 1) % self.capacity] = True
+        return True
+
+    def pop(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Up to n frames from the head: (frames, seq, eos flags)."""
+        n = min(n, len(self))
+        idx = np.arange(self._head, self._head + n) % self.capacity
+        self._head += n
+        return self._frames[idx].copy(), self._seq[idx].copy(), self._eos[idx].copy()
+
+    def clear(self) -> np.ndarray:
+        """Discard everything queued; returns the discarded pulse sums per axis."""
+        frames, _, _ = self.pop(len(self))
+        return frames.sum(axis=0)
