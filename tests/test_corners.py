@@ -1,0 +1,80 @@
+"""Sharp corner detection (eqs. 13-15) on the NACA 2415 and butterfly programs, zone widening."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from g62_reader import program, read_g62
+
+from controller.corners import detect_sharp_corners, joint_angle_rad, widen_zone
+from controller.curves import ArcCurve, LineCurve
+
+KAPPA_TH = 2450.0 / (3500.0 / 60.0) ** 2  # eq. 15 with Table III: 0.720 /mm
+
+
+@pytest.fixture(scope="module")
+def naca():  # type: ignore[no-untyped-def]
+    return read_g62(program("naca2415.nc"))
+
+
+@pytest.fixture(scope="module")
+def butterfly():  # type: ignore[no-untyped-def]
+    return read_g62(program("butterfly.nc"))
+
+
+def test_naca_leading_edge_is_the_only_corner(naca) -> None:  # type: ignore[no-untyped-def]
+    zones = detect_sharp_corners(naca, KAPPA_TH)
+    assert len(zones) == 1
+    z = zones[0]
+    assert z.kappa_peak_per_mm == pytest.approx(1.30, abs=0.01)
+    assert z.u_start == pytest.approx(0.48365, abs=2e-5)
+    assert z.u_end == pytest.approx(0.52019, abs=2e-5)
+    assert naca.curvature([z.u_start, z.u_end]) == pytest.approx([KAPPA_TH] * 2, abs=1e-9)
+    assert abs(naca.curvature_derivative(z.u_peak)[0]) < 1e-6
+    x, _ = naca.evaluate(z.u_peak, 0)[0, 0]
+    assert x == pytest.approx(-30.0, abs=0.1)  # leading edge of the 30 mm chord
+
+
+def test_butterfly_cusps_found(butterfly) -> None:  # type: ignore[no-untyped-def]
+    zones = detect_sharp_corners(butterfly, KAPPA_TH)
+    peaks = {round(z.u_peak, 3): z.kappa_peak_per_mm for z in zones}
+    for u, kappa in ((0.256, 42.5), (0.744, 42.5), (0.450, 18.3), (0.550, 18.3)):
+        assert peaks[u] == pytest.approx(kappa, rel=0.02)
+    grid = np.linspace(0, 1, 200001)
+    kappa = butterfly.curvature(grid)
+    for z in zones:  # the zone is exactly where kappa > kappa_th around the peak
+        inside = (grid > z.u_start) & (grid < z.u_end)
+        assert kappa[inside].min() > KAPPA_TH - 1e-9
+        assert kappa[inside].max() <= z.kappa_peak_per_mm + 1e-9
+    above = kappa > KAPPA_TH
+    covered = np.zeros_like(above)
+    for z in zones:
+        covered |= (grid >= z.u_start) & (grid <= z.u_end)
+    assert not np.any(above & ~covered)
+
+
+def test_widen_zone(naca, butterfly) -> None:  # type: ignore[no-untyped-def]
+    z = detect_sharp_corners(naca, KAPPA_TH)[0]
+    wide = widen_zone(naca, z, 0.5)
+    assert wide.u_start < z.u_start and wide.u_end > z.u_end
+    assert naca.curvature([wide.u_start, wide.u_end]) == pytest.approx([0.5, 0.5], abs=1e-9)
+    # Two butterfly cusps close together: widening to a tiny level stops at the kappa minimum
+    zones = detect_sharp_corners(butterfly, KAPPA_TH)
+    left, right = zones[3], zones[4]  # peaks near u = 0.336 and 0.355
+    w = widen_zone(butterfly, left, 1e-3)
+    assert w.u_end < right.u_peak
+    assert abs(butterfly.curvature_derivative(w.u_end)[0]) < 1e-3 * left.kappa_peak_per_mm
+    assert widen_zone(butterfly, zones[0], 1e-3).u_start == 0.0  # clamped at the curve start
+
+
+def test_line_and_arc_have_no_curvature_peak() -> None:
+    assert detect_sharp_corners(LineCurve((0, 0), (1, 1)), KAPPA_TH) == []
+    assert detect_sharp_corners(ArcCurve((0, 0), 0.5, 0.0, 1.0), KAPPA_TH) == []
+
+
+def test_joint_angle() -> None:
+    assert joint_angle_rad(np.array([1.0, 0]), np.array([0, 2.0])) == pytest.approx(math.pi / 2)
+    assert joint_angle_rad(np.array([1.0, 0]), np.array([3.0, 0])) == 0.0
+    assert joint_angle_rad(np.array([1.0, 1]), np.array([-1.0, -1])) == pytest.approx(math.pi)
