@@ -1,0 +1,70 @@
+"""Parser benchmark: lines per second and peak RSS for a generated 1,000,000-line G1/G2/G3 program.
+
+Usage: python bench/parse.py [--lines N] [--config NAME]   (target: >= 100,000 lines/s, < 150 MB)
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import resource
+import sys
+import tempfile
+import time
+
+from controller.config import load_config
+from controller.interpreter import read_program
+
+
+def write_program(path: str, n_lines: int) -> None:
+    """A stream of G1 segments and G2/G3 arcs (I J and R forms) around a 100 mm circle."""
+    with open(path, "w", encoding="ascii") as f:
+        f.write("G17 G21 G90 G64 P0.01\nF3000\nG0 X50 Y0\n")
+        r = 50.0
+        step = 2 * math.pi / 3600
+        for i in range(n_lines - 4):
+            a = (i + 1) * step
+            x, y = r * math.cos(a), r * math.sin(a)
+            kind = i % 4
+            if kind == 0:
+                f.write(f"G1 X{x:.4f} Y{y:.4f}\n")
+            elif kind == 1:  # counter-clockwise arc about the origin, centre as I J offsets
+                pa = i * step
+                f.write(f"G3 X{x:.4f} Y{y:.4f} I{-r * math.cos(pa):.4f} J{-r * math.sin(pa):.4f}\n")
+            elif kind == 2:
+                f.write(f"G3 X{x:.4f} Y{y:.4f} R{r:.4f}\n")
+            else:
+                f.write(f"N{i} G1 X{x:.4f} Y{y:.4f} F{3000 + (i % 7)}\n")
+        f.write("M2\n")
+
+
+def peak_rss_mb() -> float:
+    """Peak resident set size of this process (ru_maxrss is kB on Linux, bytes on macOS)."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / (1024 * 1024) if sys.platform == "darwin" else peak / 1024
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--lines", type=int, default=1_000_000)
+    parser.add_argument("--config", default="xy_table")
+    args = parser.parse_args(argv)
+    config = load_config(args.config)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "bench.nc")
+        write_program(path, args.lines)
+        rss_before_mb = peak_rss_mb()
+        t0 = time.perf_counter()
+        blocks = sum(1 for _ in read_program(path, config))
+        elapsed_s = time.perf_counter() - t0
+    rate = args.lines / elapsed_s
+    print(f"lines: {args.lines}  blocks: {blocks}  time: {elapsed_s:.2f} s")
+    print(f"rate: {rate:,.0f} lines/s  (target >= 100,000)")
+    print(f"peak RSS: {peak_rss_mb():.1f} MB  (before parsing {rss_before_mb:.1f} MB; "
+          f"target < 150 MB)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,94 @@
+"""G and M code tables: modal groups of the supported codes and why the others are refused."""
+
+from __future__ import annotations
+
+# G codes are keyed by ten times their number (G61.1 -> 611) so that lookups are exact integers.
+G_GROUP: dict[int, str] = {
+    0: "motion", 10: "motion", 20: "motion", 30: "motion", 52: "motion", 53: "motion",
+    62: "motion", 800: "motion",
+    40: "non-modal",
+    170: "plane",
+    900: "distance", 910: "distance",
+    901: "arc distance", 911: "arc distance",
+    940: "feed mode",
+    200: "units", 210: "units",
+    400: "cutter compensation",
+    430: "tool length", 490: "tool length",
+    540: "coordinate system",
+    610: "path control", 611: "path control", 640: "path control",
+    960: "spindle mode", 970: "spindle mode",
+    980: "canned return", 990: "canned return",
+}
+
+_CANNED = "canned cycles are not supported"
+G_UNSUPPORTED: dict[int, str] = {
+    50: "cubic splines (G5) are not supported; use G5.2 NURBS",
+    51: "quadratic splines (G5.1) are not supported; use G5.2 NURBS",
+    70: "lathe diameter mode is not supported", 80: "lathe radius mode is not supported",
+    100: "G10 (tool and offset tables) is not supported",
+    150: "polar coordinates are not supported", 160: "polar coordinates are not supported",
+    171: "only the XY plane (G17) is supported",
+    180: "only the XY plane (G17) is supported", 181: "only the XY plane (G17) is supported",
+    190: "only the XY plane (G17) is supported", 191: "only the XY plane (G17) is supported",
+    280: "home positions (G28) are not supported", 281: "home positions are not supported",
+    300: "home positions (G30) are not supported", 301: "home positions are not supported",
+    330: "spindle-synchronized motion is not supported",
+    331: "rigid tapping is not supported",
+    382: "probing is not supported", 383: "probing is not supported",
+    384: "probing is not supported", 385: "probing is not supported",
+    410: "cutter radius compensation is not supported",
+    411: "cutter radius compensation is not supported",
+    420: "cutter radius compensation is not supported",
+    421: "cutter radius compensation is not supported",
+    431: "dynamic tool length offsets are not supported",
+    432: "additional tool length offsets are not supported",
+    520: "G52 local offsets are not supported",
+    530: "machine coordinates (G53) are not supported",
+    550: "work offsets other than G54 are not supported",
+    560: "work offsets other than G54 are not supported",
+    570: "work offsets other than G54 are not supported",
+    580: "work offsets other than G54 are not supported",
+    590: "work offsets other than G54 are not supported",
+    591: "work offsets other than G54 are not supported",
+    592: "work offsets other than G54 are not supported",
+    593: "work offsets other than G54 are not supported",
+    730: _CANNED, 740: _CANNED, 760: _CANNED, 810: _CANNED, 820: _CANNED, 830: _CANNED,
+    840: _CANNED, 850: _CANNED, 860: _CANNED, 870: _CANNED, 880: _CANNED, 890: _CANNED,
+    920: "coordinate offsets (G92) are not supported",
+    921: "coordinate offsets (G92) are not supported",
+    922: "coordinate offsets (G92) are not supported",
+    923: "coordinate offsets (G92) are not supported",
+    930: "inverse-time feed (G93) is not supported; use G94",
+    950: "feed per revolution (G95) is not supported; use G94",
+}
+
+M_GROUP: dict[int, str] = {
+    0: "stopping", 1: "stopping", 2: "stopping", 30: "stopping",
+    6: "tool change",
+    3: "spindle", 4: "spindle", 5: "spindle",
+    7: "coolant", 8: "coolant", 9: "coolant",
+}
+
+
+def g_name(code10: int) -> str:
+    """G61.1 for 611, G1 for 10."""
+    whole, tenth = divmod(code10, 10)
+    return f"G{whole}.{tenth}" if tenth else f"G{whole}"
+
+
+def g_code10(number: float) -> int | None:
+    """Ten times a G number when it has at most one decimal (G61.1), else None."""
+    scaled = number * 10.0
+    code = round(scaled)
+    return code if abs(scaled - code) < 1e-6 and 0 <= code < 10000 else None
+
+
+class WordError(Exception):
+    """Raised by the helpers of the interpreter: the word (letter or "G5.2") at fault, a message.
+
+    The interpreter turns it into an NcError with the file, line and column of that word."""
+
+    def __init__(self, word: str, message: str) -> None:
+        super().__init__(message)
+        self.word = word
+        self.message = message
