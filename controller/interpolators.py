@@ -12,8 +12,7 @@ from controller.curves import Curve
 from controller.ph_quintic import PhQuintic
 
 NEWTON_TOL_MM = 1e-9
-_TABLE_POINTS = 33  # coarse s(xi) table for the Newton start
-_NEWTON_SWEEPS = 3
+_NEWTON_SWEEPS = 3  # from the 33-node table start: ~1e-4 L -> ~1e-8 L -> ~1e-12 -> round-off
 _MAX_EXTRA_SWEEPS = 20
 
 
@@ -31,8 +30,8 @@ def ph_interpolate(ph: PhQuintic, s_targets_mm: ArrayLike) -> tuple[np.ndarray, 
     vectorised Newton sweeps; extra sweeps only if some residual is still above 1e-9 mm.
     """
     s = np.clip(np.asarray(s_targets_mm, dtype=float), 0.0, ph.length_mm)
-    table_xi = np.linspace(0.0, 1.0, _TABLE_POINTS)
-    xi = np.interp(s, ph.arc_length(table_xi), table_xi)
+    table_xi, table_s = ph.arc_length_table
+    xi = np.interp(s, table_s, table_xi)
     for _ in range(_NEWTON_SWEEPS):
         xi = _newton_sweep(ph, xi, s)
     residual = np.abs(ph.arc_length(xi) - s)

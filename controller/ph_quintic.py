@@ -31,10 +31,12 @@ def bernstein_to_power(b: np.ndarray) -> np.ndarray:
     return out
 
 
-def _horner(coeffs_low_first: np.ndarray, x: np.ndarray) -> np.ndarray:
-    acc = np.full(x.shape, coeffs_low_first[-1], dtype=np.result_type(coeffs_low_first, x))
-    for c in coeffs_low_first[-2::-1]:
-        acc = acc * x + c
+def _horner(coeffs_low_first: tuple[float, ...] | tuple[complex, ...],
+            x: np.ndarray) -> np.ndarray:
+    acc = coeffs_low_first[-1] * x + coeffs_low_first[-2]
+    for c in coeffs_low_first[-3::-1]:
+        acc *= x
+        acc += c
     return acc
 
 
@@ -84,21 +86,29 @@ class PhQuintic:
         """Bernstein coefficients of s(xi) (quintic): s_0 = 0, s_k = sum_{j<k} sigma_j / 5."""
         return np.concatenate(([0.0], np.cumsum(self.sigma_bernstein) / 5.0))
 
+    # Power-basis coefficients as Python scalars: Horner on [0, 1] is well conditioned at degree 5
+    # and Python scalars avoid numpy-scalar overhead in the interpolator's hot loop.
     @cached_property
-    def _s_power(self) -> np.ndarray:
-        return bernstein_to_power(self.arc_length_bernstein)
+    def _s_power(self) -> tuple[float, ...]:
+        return tuple(float(c) for c in bernstein_to_power(self.arc_length_bernstein))
 
     @cached_property
-    def _sigma_power(self) -> np.ndarray:
-        return bernstein_to_power(self.sigma_bernstein)
+    def _sigma_power(self) -> tuple[float, ...]:
+        return tuple(float(c) for c in bernstein_to_power(self.sigma_bernstein))
 
     @cached_property
-    def _r_power(self) -> np.ndarray:
-        return bernstein_to_power(self.control_points())
+    def _r_power(self) -> tuple[complex, ...]:
+        return tuple(complex(c) for c in bernstein_to_power(self.control_points()))
 
-    @property
+    @cached_property
     def length_mm(self) -> float:
         return float(self.sigma_bernstein.sum() / 5.0)
+
+    @cached_property
+    def arc_length_table(self) -> tuple[np.ndarray, np.ndarray]:
+        """(xi, s(xi)) on 33 even nodes: the Newton starting guess of the interpolator."""
+        xi = np.linspace(0.0, 1.0, 33)
+        return xi, self.arc_length(xi)
 
     # --- evaluation (all vectorised over xi) -----------------------------------------------------
     def point(self, xi: ArrayLike) -> np.ndarray:
