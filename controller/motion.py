@@ -49,6 +49,10 @@ class MotionController:
         """Operator stop (SIGINT handler safe: only sets a flag read by the loop)."""
         self._abort_message = message
 
+    @property
+    def abort_requested(self) -> bool:
+        return self._abort_message is not None
+
     def _frames(self, ms: float) -> int:
         return max(1, math.ceil(ms * 1e-3 / self.period_s - 1e-9))
 

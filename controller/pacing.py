@@ -38,17 +38,22 @@ class WallPacer:
 class VirtualPacer:
     """Each wait() advances simulated time by one cycle by calling `advance(frames)`."""
 
-    def __init__(self, cycle_frames: int, period_s: float,
-                 advance: Callable[[int], None]) -> None:
+    def __init__(self, cycle_frames: int, period_s: float, advance: Callable[[int], None],
+                 ready: Callable[[], bool] | None = None) -> None:
         self.cycle_s = cycle_frames * period_s
         self.cycle_frames = cycle_frames
         self.late_cycles = 0
         self.max_late_s = 0.0
         self._advance = advance
+        # Virtual time stands still until the producers are ahead (or finished, or dead):
+        # a slow generator never looks like a starved one here.
+        self._ready = ready
         self._cycles = 0
         self.stall_cycles = 0  # test hook: the next n cycles are "late" (host stalled)
 
     def wait(self) -> None:
+        while self._ready is not None and not self._ready():
+            time.sleep(0.0002)
         steps = 1 + self.stall_cycles
         if self.stall_cycles:
             self.late_cycles += 1

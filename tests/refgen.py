@@ -66,3 +66,23 @@ def line_chunks(end_mm: tuple, v_mm_s: float = 50.0, accel_mm_s2: float = 2450.0
     s = quintic_distance_mm(length, v_mm_s, accel_mm_s2, period_s)
     pos = p0 + np.outer(s / length, p1 - p0)
     return _chunks(pos, np.gradient(s, period_s), period_s, size, line)
+
+
+def fake_blocks(path: str, config: object) -> Iterator[int]:
+    """Interpreter stand-in for runtime tests: three dummy blocks (the generator ignores them)."""
+    yield from (1, 2, 3)
+
+
+def fake_generate(blocks: object, config: object) -> Iterator[RefChunk]:
+    """Generator stand-in: drains the NC FIFO, then streams a circle."""
+    list(blocks)  # type: ignore[call-overload]
+    yield from circle_chunks(radius_mm=5.0)
+
+
+def slow_generate(blocks: object, config: object) -> Iterator[RefChunk]:
+    """Generator stand-in that is slower than a virtual clock: 50 rows per 5 ms of wall time."""
+    import time
+    list(blocks)  # type: ignore[call-overload]
+    for chunk in circle_chunks(radius_mm=5.0):
+        time.sleep(0.005)
+        yield chunk

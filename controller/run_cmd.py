@@ -1,0 +1,76 @@
+"""`cncctl run PROGRAM`: check the whole program, then run it through the three-process runtime."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from pathlib import Path
+from typing import Any
+
+from controller.config import load_config
+from controller.errors import CncError, ConfigError, NcError
+from controller.motion_types import Outcome
+from controller.run_view import JsonView, PlainView, RichView
+from controller.runtime import Runtime, RuntimeOptions
+
+EXIT_CODES = {Outcome.DONE: 0, Outcome.FAULT: 3, Outcome.ABORTED: 4}
+EXIT_REJECTED = 2
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("program", help="G-code program to run")
+    parser.add_argument("--config", help="machine configuration (file or built-in name)")
+    parser.add_argument("--json", action="store_true", help="one JSON object per line")
+    parser.add_argument("--virtual-time", action="store_true",
+                        help="clock the simulated card as fast as possible (no wall clock)")
+
+
+def check_program(path: str, config: Any) -> None:
+    """The whole program through the interpreter, no motion: raises NcError at the first error."""
+    from controller.interpreter import read_program
+    for _ in read_program(path, config):
+        pass
+
+
+def _view(args: argparse.Namespace, lines: list[str]) -> Any:
+    if args.json:
+        return JsonView()
+    return RichView(lines) if sys.stdout.isatty() else PlainView(lines)
+
+
+def _program_lines(path: str) -> list[str]:
+    try:
+        return Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return []
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        config = load_config(args.config)
+        check_program(args.program, config)
+    except (NcError, ConfigError) as exc:
+        print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
+        return EXIT_REJECTED
+    view = _view(args, _program_lines(args.program))
+    runtime = Runtime(args.program, config, RuntimeOptions(virtual_time=args.virtual_time,
+                                                           on_progress=view.progress))
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        # Never a silent kill: decelerate along the path, then exit 4.
+        runtime.request_abort("aborted by operator (SIGINT)")
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        view.event("start", program=args.program, config=config.name,
+                   drive=config.drive.backend, virtual_time=args.virtual_time)
+        result = runtime.run()
+    except CncError as exc:
+        view.close()
+        print(f"cncctl: {exc}", file=sys.stderr)
+        return 3
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    view.close()
+    view.final(result)
+    return EXIT_CODES[result.outcome]

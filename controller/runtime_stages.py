@@ -1,0 +1,108 @@
+"""The two producer processes of the runtime: NC interpreter stage and reference generator stage."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import queue
+import resource
+import signal
+from collections.abc import Callable, Iterable, Iterator
+from multiprocessing.queues import Queue
+from typing import Any
+
+from controller.config import MachineConfig
+from controller.refpoints import RefChunk
+from controller.refring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
+from controller.refsource import chunk_rows
+
+END = "__end__"  # last item on the NC FIFO after the final block
+FAILED = "__failed__"  # the interpreter raised; its message is on the error queue
+POLL_S = 0.02  # how often a blocked producer looks for an abort or a dead parent
+
+BlocksFn = Callable[[str, MachineConfig], Iterable[Any]]
+GenerateFn = Callable[[Iterable[Any], MachineConfig], Iterable[RefChunk]]
+
+
+def blocks_source(path: str, config: MachineConfig) -> Iterator[Any]:
+    """The interpreter stage (helper A's read_program; the lead wires nc_fifo in here)."""
+    from controller.interpreter import read_program
+    yield from read_program(path, config)
+
+
+def reference_source(blocks: Iterable[Any], config: MachineConfig) -> Iterator[RefChunk]:
+    """The generator stage: the lead's look-ahead reference-point generator."""
+    from controller.generator import generate_reference
+    yield from generate_reference(blocks, config)
+
+
+def _child_setup() -> int:
+    # Ctrl-C goes to the whole process group: only the motion process decides how to stop.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return os.getppid()
+
+
+def _should_stop(ring: RefRing, parent_pid: int) -> bool:
+    return bool(ring.flags & FLAG_ABORT) or os.getppid() != parent_pid
+
+
+def _report_rss(info: Queue, name: str) -> None:
+    info.put(("rss_kb", name, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+
+
+def interpreter_main(path: str, config: MachineConfig, blocks_fn: BlocksFn, nc_fifo: Queue,
+                     ring: RefRing, info: Queue) -> None:
+    """Process 1: NC blocks onto the bounded NC FIFO (put blocks when full: back-pressure)."""
+    parent = _child_setup()
+    try:
+        items = _iter_safe(blocks_fn(path, config), info, "interpreter")
+        for item in itertools.chain(items, [END]):
+            while True:
+                if _should_stop(ring, parent):
+                    return
+                try:
+                    nc_fifo.put(item, timeout=POLL_S)
+                    break
+                except queue.Full:
+                    continue
+    finally:
+        _report_rss(info, "interpreter")
+
+
+def _iter_safe(items: Iterable[Any], info: Queue, stage: str) -> Iterator[Any]:
+    try:
+        yield from items
+    except Exception as exc:  # noqa: BLE001  (any failure is reported, then the stage ends)
+        info.put(("error", stage, str(exc) or type(exc).__name__))
+        yield FAILED
+
+
+def _blocks_from_fifo(nc_fifo: Queue, ring: RefRing, parent: int) -> Iterator[Any]:
+    while True:
+        try:
+            item = nc_fifo.get(timeout=POLL_S)
+        except queue.Empty:
+            if _should_stop(ring, parent):
+                raise SystemExit(0) from None
+            continue
+        if isinstance(item, str) and item == END:
+            return
+        if isinstance(item, str) and item == FAILED:
+            raise RuntimeError("NC interpreter failed")
+        yield item
+
+
+def generator_main(config: MachineConfig, generate_fn: GenerateFn, nc_fifo: Queue,
+                   ring: RefRing, info: Queue) -> None:
+    """Process 2: NC blocks -> reference points into the shared-memory ring."""
+    parent = _child_setup()
+    try:
+        for chunk in generate_fn(_blocks_from_fifo(nc_fifo, ring, parent), config):
+            if not ring.write(chunk_rows(chunk)) or os.getppid() != parent:
+                return
+        ring.set_flag(FLAG_FINAL)
+    except Exception as exc:  # noqa: BLE001  (reported on the queue, flagged in the ring)
+        info.put(("error", "generator", f"{type(exc).__name__}: {exc}"))
+        ring.set_flag(FLAG_FAILED)
+    finally:
+        _report_rss(info, "generator")
