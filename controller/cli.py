@@ -11,6 +11,8 @@ from controller import __version__
 # (sub-command, module providing add_arguments(parser) and run(args) -> exit code, help)
 COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("check", "controller.check_cmd", "check a program without moving anything"),
+    ("inspect", "controller.inspect_cmd", "show NURBS blocks, sharp corners and PH segments"),
+    ("run", "controller.run_cmd", "run a program on the configured drive (sim card by default)"),
 )
 
 
