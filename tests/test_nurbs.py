@@ -138,3 +138,16 @@ def test_line_and_arc_curves() -> None:
     np.testing.assert_allclose(arc.curvature(u), 0.5)
     np.testing.assert_allclose(arc.derivatives_scalar(0.4), d[1:3, 4].ravel(), atol=1e-14)
     assert arc.length_mm == pytest.approx(5.0)
+
+
+def test_all_curves_offer_the_curve_protocol() -> None:
+    from controller.curves import Curve
+    from controller.ph_quintic import PhQuintic
+
+    for c in (quarter_circle(1.0), LineCurve((0, 0), (1, 0)), ArcCurve((0, 0), 1, 0, 1),
+              PhQuintic.hermite(0, 1, 1, 1)):
+        assert isinstance(c, Curve)
+        u = np.array([0.25, 0.75])
+        assert c.evaluate(u, 3).shape == (4, 2, 2)
+        np.testing.assert_allclose(c.u_of_s(c.s_of_u(u)), u, atol=1e-12)
+        assert c.s_of_u(np.array([c.u_end]))[0] == pytest.approx(c.length_mm, rel=1e-12)
