@@ -109,6 +109,8 @@ def _lex_value(text: str, pos: int) -> re.Match[str] | None:
 def _lex_word(text: str, pos: int, path: str, lineno: int, words: list[tuple[str, str]],
               cols: list[int]) -> int:
     letter = text[pos]
+    if letter == "O":
+        raise NcError(path, lineno, pos + 1, "O", "O-words (subroutines, loops) are not supported")
     m = _lex_value(text, pos + 1)
     if m is None:
         bad = text[pos + 1 : pos + 2].strip() or "end of line"

@@ -16,6 +16,7 @@ else:
 
 SAME_POINT_MM = 1e-6  # G6.2's first control point must be the current position within this
 _G6_LETTERS = frozenset("XYZRK")
+_AXES = frozenset("XYZ")
 
 
 class MotionMixin(_Base):
@@ -25,6 +26,8 @@ class MotionMixin(_Base):
         if motion is not None:
             self.motion = None if motion in (800, 53) else motion
         mode = self.motion if motion is None else motion
+        if mode == 800 and not _AXES.intersection(vals):
+            return  # G80 alone cancels the motion mode
         if mode is None or mode == 800:
             raise WordError("X" if "X" in vals else ("Y" if "Y" in vals else "Z"),
                             "axis word with no motion mode (G0, G1, G2, G3) in force")
@@ -188,6 +191,8 @@ class MotionMixin(_Base):
         if gs == [53] and not ms and not vals:
             self.end_nurbs(lineno)
             return
+        if "Z" in vals:
+            raise WordError("Z", "NURBS must stay at constant Z (no Z motion)")
         if gs or ms or not {"X", "Y", "P"}.issuperset(vals):
             word = g_name(gs[0]) if gs else (f"M{ms[0]}" if ms else
                                              min(vals.keys() - {"X", "Y", "P"}))

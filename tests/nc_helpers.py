@@ -1,0 +1,24 @@
+"""Helpers for the interpreter tests: write a program to a temp file and read its blocks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from controller.blocks import NcBlock
+from controller.config import MachineConfig, load_config
+from controller.interpreter import read_program
+
+XY_TABLE = load_config("xy_table")
+XYZ_MILL = load_config("xyz_mill")
+
+
+def blocks_of(tmp_path: Path, text: str, config: MachineConfig = XY_TABLE,
+              name: str = "prog.nc") -> list[NcBlock]:
+    """All blocks of a program given as text."""
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return list(read_program(str(path), config))
+
+
+def motion(blocks: list[NcBlock]) -> list[NcBlock]:
+    return [b for b in blocks if hasattr(b, "feed_mm_s")]
