@@ -1,0 +1,172 @@
+"""Vectorised checks of a chain of quintic feed phases against a sampled feed-limit curve."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.feed_profile import bernstein6_distance, quintic_speed
+
+
+@dataclass(frozen=True, eq=False)
+class LimitCurve:
+    """vlim(s), linear between samples on an increasing grid s (mm, mm/s)."""
+
+    s_mm: np.ndarray
+    vlim_mm_s: np.ndarray
+
+    @property
+    def spacing_mm(self) -> float:
+        """Smallest grid step (floored so a degenerate grid cannot explode the sample count)."""
+        ds = np.diff(self.s_mm)
+        return float(max(ds.min(), 1e-7 * (self.s_mm[-1] - self.s_mm[0])))
+
+    def at(self, s_mm: np.ndarray) -> np.ndarray:
+        return np.interp(s_mm, self.s_mm, self.vlim_mm_s)
+
+    def span_min(self, a_mm: np.ndarray, b_mm: np.ndarray) -> np.ndarray:
+        """min vlim over each [a, b]: the two interpolated ends and every grid sample inside."""
+        inner = _range_reduce(np.minimum, self.vlim_mm_s, np.inf, *self._inside(a_mm, b_mm))
+        return np.minimum(inner, np.minimum(self.at(a_mm), self.at(b_mm)))
+
+    def span_max(self, a_mm: np.ndarray, b_mm: np.ndarray) -> np.ndarray:
+        inner = _range_reduce(np.maximum, self.vlim_mm_s, -np.inf, *self._inside(a_mm, b_mm))
+        return np.maximum(inner, np.maximum(self.at(a_mm), self.at(b_mm)))
+
+    def _inside(self, a_mm: np.ndarray, b_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        lo = np.searchsorted(self.s_mm, a_mm, side="right")
+        hi = np.searchsorted(self.s_mm, b_mm, side="left")
+        return lo, np.maximum(hi, lo)
+
+
+def _range_reduce(op: np.ufunc, vals: np.ndarray, empty: float, lo: np.ndarray,
+                  hi: np.ndarray) -> np.ndarray:
+    """op over vals[lo:hi] for every pair at once (reduceat on interleaved bounds)."""
+    if len(lo) == 0:
+        return np.empty(0)
+    ext = np.append(vals, empty)  # index len(vals) becomes valid and neutral
+    idx = np.empty(2 * len(lo), dtype=np.intp)
+    idx[0::2], idx[1::2] = lo, hi
+    out = op.reduceat(ext, idx)[0::2]
+    return np.where(hi > lo, out, empty)
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseArrays:
+    """Phases of a planned chain as arrays; seg maps each phase to its planning segment."""
+
+    duration_s: np.ndarray
+    s0_mm: np.ndarray
+    vs_mm_s: np.ndarray
+    ve_mm_s: np.ndarray
+    seg: np.ndarray
+
+    @property
+    def length_mm(self) -> np.ndarray:
+        return 0.5 * self.duration_s * (self.vs_mm_s + self.ve_mm_s)
+
+
+@dataclass(frozen=True, eq=False)
+class Violations:
+    """Per planning segment: worst excess of v over vlim (mm/s, <= 0 when fine), where, and the
+    length of the phase in which it happens."""
+
+    excess_mm_s: np.ndarray
+    s_mm: np.ndarray
+    phase_len_mm: np.ndarray
+
+
+def check_phases(ph: PhaseArrays, curve: LimitCurve, n_seg: int, tol: float) -> Violations:
+    """Worst violation of v <= vlim in each segment: cruises by range minimum, transitions by
+    dense samples (close enough that v between them is within tol/2 of linear) plus the exact
+    speed at the grid samples inside them."""
+    exc = np.full(n_seg, -np.inf)
+    loc = np.zeros(n_seg)
+    plen = np.zeros(n_seg)
+    lengths = ph.length_mm
+    cruise = ph.vs_mm_s == ph.ve_mm_s
+    _merge(exc, loc, plen, *_cruise_excess(ph, lengths, cruise, curve))
+    _merge(exc, loc, plen, *_transition_excess(ph, lengths, ~cruise, curve, tol))
+    return Violations(exc, loc, plen)
+
+
+def _merge(exc: np.ndarray, loc: np.ndarray, plen: np.ndarray, seg: np.ndarray, e: np.ndarray,
+           s: np.ndarray, ln: np.ndarray) -> None:
+    """Keep, per segment, the largest excess among the candidates (one pass, vectorised)."""
+    if len(seg) == 0:
+        return
+    order = np.lexsort((e, seg))  # by segment, then excess ascending: last one per segment wins
+    seg, e, s, ln = seg[order], e[order], s[order], ln[order]
+    last = np.r_[seg[1:] != seg[:-1], True]
+    seg, e, s, ln = seg[last], e[last], s[last], ln[last]
+    better = e > exc[seg]
+    seg, e, s, ln = seg[better], e[better], s[better], ln[better]
+    exc[seg], loc[seg], plen[seg] = e, s, ln
+
+
+def _cruise_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
+                   curve: LimitCurve) -> tuple[np.ndarray, ...]:
+    a, ln = ph.s0_mm[mask], lengths[mask]
+    lo, hi = curve._inside(a, a + ln)
+    inner = _range_reduce(np.minimum, curve.vlim_mm_s, np.inf, lo, hi)
+    ends = np.minimum(curve.at(a), curve.at(a + ln))
+    # Where the minimum sits: an end or the argmin inside (only needed for the violating ones).
+    s_min = np.where(curve.at(a) <= curve.at(a + ln), a, a + ln)
+    exc = ph.vs_mm_s[mask] - np.minimum(inner, ends)
+    for i in np.flatnonzero((inner < ends) & (exc > 0.0)):
+        s_min[i] = curve.s_mm[lo[i] + np.argmin(curve.vlim_mm_s[lo[i]:hi[i]])]
+    return ph.seg[mask], exc, s_min, ln
+
+
+def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
+                       curve: LimitCurve, tol: float) -> tuple[np.ndarray, ...]:
+    dur, s0, vs, ve = ph.duration_s[mask], ph.s0_mm[mask], ph.vs_mm_s[mask], ph.ve_mm_s[mask]
+    if len(dur) == 0:
+        return (np.empty(0, np.intp),) + (np.empty(0),) * 3
+    n = _sample_counts(dur, vs, ve, lengths[mask], curve.spacing_mm, tol)
+    k = np.repeat(np.arange(len(dur)), n)
+    j = np.arange(len(k)) - np.repeat(np.cumsum(n) - n, n)
+    tau = j / (n[k] - 1.0)
+    s = s0[k] + bernstein6_distance(tau, dur[k], vs[k], ve[k])
+    v = quintic_speed(tau, vs[k], ve[k])
+    e = v - curve.at(s)
+    # Grid samples inside transitions (where vlim may kink): exact v, by Newton on s(tau) from
+    # the interpolated tau.
+    g = _grid_inside(curve, s0, s0 + lengths[mask])
+    gk = np.clip(np.searchsorted(s0, curve.s_mm[g], side="right") - 1, 0, len(s0) - 1)
+    tg = np.interp(curve.s_mm[g], s, tau)
+    for _ in range(3):
+        sg = s0[gk] + bernstein6_distance(tg, dur[gk], vs[gk], ve[gk])
+        vg = np.maximum(quintic_speed(tg, vs[gk], ve[gk]), 1e-12) * dur[gk]
+        tg = np.clip(tg - (sg - curve.s_mm[g]) / vg, 0.0, 1.0)
+    ge = quintic_speed(tg, vs[gk], ve[gk]) - curve.vlim_mm_s[g]
+    seg = ph.seg[mask]
+    ln = lengths[mask]
+    return (np.r_[seg[k], seg[gk]], np.r_[e, ge], np.r_[s, curve.s_mm[g]], np.r_[ln[k], ln[gk]])
+
+
+def _sample_counts(dur: np.ndarray, vs: np.ndarray, ve: np.ndarray, length: np.ndarray,
+                   h: float, tol: float) -> np.ndarray:
+    """Samples per transition so that v(s) between two check points deviates from its chord by
+    at most tol/2: spacing sqrt(4 tol / |v''|), with |v''| = |j v - a^2| / v^3 <= (J vmax +
+    A^2) / vmin^3 (peak jerk J = 10/sqrt(3) dV/T^2, peak a = 15 dV / (8T)); at least half a grid
+    step; capped where a transition starts from (near) rest, where vlim is not the binding limit.
+    """
+    dv = np.abs(ve - vs)
+    vmax, vmin = np.maximum(vs, ve), np.minimum(vs, ve)
+    vmin = np.maximum(vmin, 0.05 * vmax)
+    jerk = 10.0 / np.sqrt(3.0) * dv / dur ** 2
+    acc = 15.0 * dv / (8.0 * dur)
+    curv = (jerk * vmax + acc * acc) / vmin ** 3
+    step = np.minimum(0.5 * h, np.sqrt(4.0 * tol / np.maximum(curv, 1e-300)))
+    n = np.ceil(length / step) + 2
+    return np.minimum(n, 4.0 * length / h + 2000).astype(np.intp)
+
+
+def _grid_inside(curve: LimitCurve, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Indices of grid samples inside any of the sorted, disjoint spans [a_i, b_i]."""
+    lo = np.searchsorted(curve.s_mm, a, side="left")
+    hi = np.searchsorted(curve.s_mm, b, side="right")
+    cnt = np.maximum(hi - lo, 0)
+    return np.repeat(lo, cnt) + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)

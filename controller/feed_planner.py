@@ -1,0 +1,160 @@
+"""Feed planning along a path: quintic transitions and cruises under a feed-limit curve vlim(s)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from controller.feed_check import LimitCurve, PhaseArrays, Violations, check_phases
+from controller.feed_profile import FeedProfile
+from controller.feed_segments import SegmentWindows, plan_segments, segment_phases
+from controller.time_bound import fb_pass_speed_mm_s
+
+# A quintic transition changes v^2 by 16 A d / 15 over a distance d: an "effective" constant
+# acceleration of 8A/15 in the v^2 passes between nodes.
+EFFECTIVE_ACCEL_FACTOR = 8.0 / 15.0
+MAX_SPLIT_DEPTH = 8  # a segment split this often is flattened instead (always safe)
+LIMIT_TOLERANCE = 1e-7  # relative to max vlim: v <= vlim + tol on the whole profile
+
+
+class PlanResult(Enum):
+    OK = "ok"
+    START_TOO_FAST = "start speed above the limit or too fast to slow down in time"
+    END_TOO_FAST = "end speed above the limit at the end of the path"
+    END_UNREACHABLE = "end speed cannot be reached within the path length"
+    INVALID_INPUT = "feed-limit curve is not a positive curve on an increasing grid"
+    LIMIT_VIOLATED = "no profile under the feed limit was found"
+
+
+@dataclass(frozen=True)
+class FeedPlan:
+    profile: FeedProfile
+    result: PlanResult
+    rounds: int = 0
+
+
+@dataclass
+class _Nodes:
+    """Planning nodes: the profile passes node k at s[k] with zero acceleration."""
+
+    s: np.ndarray
+    cap: np.ndarray  # speed ceiling at the node
+    depth: np.ndarray  # per segment (node k to k+1): how often it was split
+    flat: np.ndarray  # per segment: no overshoot above the end speeds
+
+
+def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
+              v_start_mm_s: float = 0.0, v_end_mm_s: float = 0.0) -> FeedPlan:
+    """Plan v(t) from s=0 at v_start to s=L at v_end, with v <= vlim(s) and |a| <= accel.
+
+    Nodes start at the local minima of vlim. Each round: v^2 passes on the nodes; between nodes
+    accelerate to the highest cruise that fits under vlim, cruise, decelerate; then every segment
+    whose transitions still cross vlim gets a node at its worst point (below vlim there), or, once
+    split MAX_SPLIT_DEPTH times, is flattened (node speeds <= min vlim over it: safe by
+    construction). So the loop ends after a bounded number of rounds.
+    """
+    s = np.asarray(s_mm, float)
+    vlim = np.asarray(vlim_mm_s, float)
+    bad = _input_error(s, vlim, v_start_mm_s, v_end_mm_s)
+    if bad is not None:
+        return FeedPlan(FeedProfile(()), bad)
+    curve = LimitCurve(s - s[0], vlim)
+    nodes = _initial_nodes(curve, v_start_mm_s, v_end_mm_s)
+    tol = LIMIT_TOLERANCE * float(vlim.max())
+    for rnd in range(1, MAX_SPLIT_DEPTH + 4):
+        v = _node_speeds(nodes, accel_mm_s2, v_start_mm_s, v_end_mm_s)
+        if isinstance(v, PlanResult):
+            return FeedPlan(FeedProfile(()), v, rnd)
+        win = SegmentWindows.build(curve, nodes.s)
+        ph = segment_phases(plan_segments(win, v[:-1], v[1:], nodes.flat, accel_mm_s2),
+                            accel_mm_s2)
+        viol = check_phases(ph, curve, len(nodes.s) - 1, tol)
+        if not np.any(viol.excess_mm_s > 0.5 * tol):
+            return FeedPlan(_to_profile(ph, s[0]), PlanResult.OK, rnd)
+        failed = _repair(nodes, viol, curve, 0.5 * tol, last=rnd >= MAX_SPLIT_DEPTH + 2)
+        if failed is not None:
+            return FeedPlan(FeedProfile(()), failed, rnd)
+    return FeedPlan(_to_profile(ph, s[0]), PlanResult.LIMIT_VIOLATED, rnd)
+
+
+def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanResult | None:
+    if s.ndim != 1 or s.shape != vlim.shape or len(s) < 2 or np.any(np.diff(s) <= 0.0):
+        return PlanResult.INVALID_INPUT
+    if np.any(~np.isfinite(vlim)) or np.any(vlim <= 0.0) or v0 < 0.0 or v1 < 0.0:
+        return PlanResult.INVALID_INPUT
+    if v0 > vlim[0]:
+        return PlanResult.START_TOO_FAST
+    if v1 > vlim[-1]:
+        return PlanResult.END_TOO_FAST
+    return None
+
+
+def _initial_nodes(curve: LimitCurve, v0: float, v1: float) -> _Nodes:
+    """The ends and every local minimum of vlim (both ends of a flat bottom, not its inside)."""
+    v = curve.vlim_mm_s
+    # Runs of equal values: a run is a bottom when both neighbouring runs are higher.
+    start = np.flatnonzero(np.r_[True, v[1:] != v[:-1]])
+    end = np.r_[start[1:] - 1, len(v) - 1]
+    rv = v[start]
+    bottom = np.flatnonzero((rv[1:-1] < rv[:-2]) & (rv[1:-1] < rv[2:])) + 1
+    idx = np.unique(np.r_[start[bottom], end[bottom]])
+    s = np.r_[0.0, curve.s_mm[idx], curve.s_mm[-1]]
+    cap = np.r_[v0, v[idx], v1]
+    n = len(s) - 1
+    return _Nodes(s, cap, np.zeros(n, np.intp), np.zeros(n, bool))
+
+
+def _node_speeds(nodes: _Nodes, accel: float, v0: float, v1: float) -> np.ndarray | PlanResult:
+    """Node speeds reachable by quintic transitions both ways (v^2 passes at 8A/15)."""
+    v = fb_pass_speed_mm_s(nodes.s, nodes.cap, EFFECTIVE_ACCEL_FACTOR * accel, v0, v1)
+    if v[0] < v0 * (1.0 - 1e-12):
+        return PlanResult.START_TOO_FAST
+    if v[-1] < v1 * (1.0 - 1e-12):
+        return PlanResult.END_UNREACHABLE
+    v[0], v[-1] = v0, v1
+    return v
+
+
+def _repair(nodes: _Nodes, viol: Violations, curve: LimitCurve, tol: float,
+            last: bool) -> PlanResult | None:
+    """Split or flatten every violating segment; a result when a pinned end speed is to blame."""
+    bad = np.flatnonzero(viol.excess_mm_s > tol)
+    h = curve.spacing_mm
+    a, b, sw = nodes.s[bad], nodes.s[bad + 1], viol.s_mm[bad]
+    split = (~nodes.flat[bad]) & (nodes.depth[bad] < MAX_SPLIT_DEPTH) & (not last)
+    split &= (sw - a > 2.0 * h) & (b - sw > 2.0 * h)
+    failed = _flatten(nodes, bad[~split], curve)
+    if failed is not None:
+        return failed
+    k = bad[split]
+    r = np.maximum(0.5 * viol.phase_len_mm[k], 2.0 * h)
+    sw = sw[split]
+    cap = curve.span_min(np.maximum(sw - r, nodes.s[k]), np.minimum(sw + r, nodes.s[k + 1]))
+    depth = nodes.depth[k] + 1
+    nodes.s = np.insert(nodes.s, k + 1, sw)
+    nodes.cap = np.insert(nodes.cap, k + 1, cap)
+    nodes.flat = np.insert(nodes.flat, k + 1, False)
+    nodes.depth[k] = depth
+    nodes.depth = np.insert(nodes.depth, k + 1, depth)
+    return None
+
+
+def _flatten(nodes: _Nodes, k: np.ndarray, curve: LimitCurve) -> PlanResult | None:
+    """Cap both ends of segment k at min vlim over it: no phase then rises above that minimum."""
+    if len(k) == 0:
+        return None
+    m = curve.span_min(nodes.s[k], nodes.s[k + 1])
+    if np.any(m[k == 0] < nodes.cap[0]):
+        return PlanResult.START_TOO_FAST  # the pinned start speed cannot stay under vlim
+    if np.any(m[k + 1 == len(nodes.s) - 1] < nodes.cap[-1]):
+        return PlanResult.END_TOO_FAST
+    np.minimum.at(nodes.cap, k, m)
+    np.minimum.at(nodes.cap, k + 1, m)
+    nodes.flat[k] = True
+    return None
+
+
+def _to_profile(ph: PhaseArrays, s_offset: float) -> FeedProfile:
+    return FeedProfile.from_arrays(ph.duration_s, ph.s0_mm + s_offset, ph.vs_mm_s, ph.ve_mm_s)

@@ -1,0 +1,125 @@
+"""Quintic Bernstein feed transitions and cruises (paper eqs. 25-26), evaluated in closed form."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# Peak |a| of the quintic transition is (15/8)|dV|/T (at tau = 1/2); T is chosen so it equals Amax.
+PEAK_ACCEL_FACTOR = 15.0 / 8.0
+
+
+def transition_duration_s(v_start_mm_s: np.ndarray | float, v_end_mm_s: np.ndarray | float,
+                          accel_mm_s2: float) -> np.ndarray:
+    """Duration T = 15|Ve-Vs|/(8 Amax): the fastest quintic transition whose peak |a| is Amax."""
+    dv = np.abs(np.asarray(v_end_mm_s, float) - np.asarray(v_start_mm_s, float))
+    return PEAK_ACCEL_FACTOR * dv / accel_mm_s2
+
+
+def transition_length_mm(v_start_mm_s: np.ndarray | float, v_end_mm_s: np.ndarray | float,
+                         accel_mm_s2: float) -> np.ndarray:
+    """Distance of that transition, T(Vs+Ve)/2 = 15|Ve^2-Vs^2|/(16 Amax)."""
+    vs, ve = np.asarray(v_start_mm_s, float), np.asarray(v_end_mm_s, float)
+    return 15.0 * np.abs(ve * ve - vs * vs) / (16.0 * accel_mm_s2)
+
+
+def bernstein6_distance(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray,
+                        ve: np.ndarray) -> np.ndarray:
+    """Distance travelled after tau*T: (T/6) sum F_k b_k^6(tau), F_k = [0,Vs,2Vs,3Vs,3Vs+Ve,..]."""
+    u = 1.0 - tau
+    t2, u2 = tau * tau, u * u
+    t3, u3 = t2 * tau, u2 * u
+    # b_0^6 has F_0 = 0, so it is omitted.
+    acc = 6.0 * u3 * u2 * tau * vs
+    acc += 15.0 * u2 * u2 * t2 * (2.0 * vs)
+    acc += 20.0 * u3 * t3 * (3.0 * vs)
+    acc += 15.0 * u2 * t2 * t2 * (3.0 * vs + ve)
+    acc += 6.0 * u * t3 * t2 * (3.0 * vs + 2.0 * ve)
+    acc += t3 * t3 * (3.0 * vs + 3.0 * ve)
+    return duration_s / 6.0 * acc
+
+
+def quintic_speed(tau: np.ndarray, vs: np.ndarray, ve: np.ndarray) -> np.ndarray:
+    """V(tau) = sum V_k b_k^5 with V0..2 = Vs, V3..5 = Ve, i.e. Vs + dV (10t^3 - 15t^4 + 6t^5)."""
+    smooth = tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau))
+    return vs + (ve - vs) * smooth
+
+
+def quintic_accel(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray,
+                  ve: np.ndarray) -> np.ndarray:
+    """a = (Ve-Vs)/T * 30 tau^2 (1-tau)^2; zero (with the jerk) at both ends."""
+    safe_t = np.where(duration_s > 0.0, duration_s, 1.0)
+    w = tau * (1.0 - tau)
+    return np.where(duration_s > 0.0, (ve - vs) / safe_t * 30.0 * w * w, 0.0)
+
+
+@dataclass(frozen=True)
+class FeedPhase:
+    """One phase of a feed profile: a quintic transition, or a cruise when the speeds are equal."""
+
+    t0_s: float
+    duration_s: float
+    s0_mm: float
+    v_start_mm_s: float
+    v_end_mm_s: float
+
+    @property
+    def length_mm(self) -> float:
+        return 0.5 * self.duration_s * (self.v_start_mm_s + self.v_end_mm_s)
+
+
+@dataclass(frozen=True)
+class FeedProfile:
+    """A chain of feed phases, contiguous in time and arc length, C2 at the joints."""
+
+    phases: tuple[FeedPhase, ...]
+    _arr: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        arr = np.array([[p.t0_s, p.duration_s, p.s0_mm, p.v_start_mm_s, p.v_end_mm_s]
+                        for p in self.phases], dtype=float).reshape(-1, 5)
+        object.__setattr__(self, "_arr", arr)
+
+    @classmethod
+    def from_arrays(cls, duration_s: np.ndarray, s0_mm: np.ndarray, v_start_mm_s: np.ndarray,
+                    v_end_mm_s: np.ndarray, t0_s: float = 0.0) -> FeedProfile:
+        """Build from per-phase arrays; start times are the running sum of durations."""
+        dur = np.asarray(duration_s, float)
+        t0 = t0_s + np.concatenate(([0.0], np.cumsum(dur)[:-1])) if dur.size else dur
+        rows = zip(t0.tolist(), dur.tolist(), np.asarray(s0_mm, float).tolist(),
+                   np.asarray(v_start_mm_s, float).tolist(),
+                   np.asarray(v_end_mm_s, float).tolist(), strict=True)
+        return cls(tuple(FeedPhase(*r) for r in rows))
+
+    @property
+    def t0_s(self) -> float:
+        return float(self._arr[0, 0]) if len(self.phases) else 0.0
+
+    @property
+    def duration_s(self) -> float:
+        if not self.phases:
+            return 0.0
+        return float(self._arr[-1, 0] + self._arr[-1, 1] - self._arr[0, 0])
+
+    @property
+    def length_mm(self) -> float:
+        if not self.phases:
+            return 0.0
+        last = self._arr[-1]
+        return float(last[2] + 0.5 * last[1] * (last[3] + last[4]) - self._arr[0, 2])
+
+    def evaluate(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(s_mm, v_mm_s, a_mm_s2) at the given times; times outside the profile are clamped."""
+        t = np.asarray(t_s, dtype=float)
+        if not self.phases:
+            z = np.zeros_like(t)
+            return z, z.copy(), z.copy()
+        arr = self._arr
+        t = np.clip(t, arr[0, 0], arr[-1, 0] + arr[-1, 1])
+        k = np.clip(np.searchsorted(arr[:, 0], t, side="right") - 1, 0, len(arr) - 1)
+        t0, dur, s0, vs, ve = (arr[k, j] for j in range(5))
+        # Zero-length phases never get selected unless at the very end; guard the division.
+        tau = np.clip((t - t0) / np.where(dur > 0.0, dur, 1.0), 0.0, 1.0)
+        s = s0 + bernstein6_distance(tau, dur, vs, ve)
+        return s, quintic_speed(tau, vs, ve), quintic_accel(tau, dur, vs, ve)

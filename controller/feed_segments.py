@@ -1,0 +1,180 @@
+"""Feed shapes between planning nodes: cruise, accelerate, cruise, decelerate, cruise."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.feed_check import LimitCurve, PhaseArrays
+from controller.feed_profile import (
+    bernstein6_distance,
+    quintic_speed,
+    transition_duration_s,
+    transition_length_mm,
+)
+
+PEAK_BISECTIONS = 16
+SHAPE_SAMPLES = 33  # samples of a transition's v(s) when fitting it under vlim
+
+
+@dataclass(frozen=True, eq=False)
+class SegmentWindows:
+    """Where vlim reaches a level inside each segment [a_k, b_k].
+
+    The running maximum of vlim from a segment's start (end) is monotone inside the segment;
+    shifted by k * big per segment it is monotone over the whole grid, so one searchsorted
+    answers all queries of all segments at once."""
+
+    curve: LimitCurve
+    a: np.ndarray
+    b: np.ndarray
+    lo: np.ndarray  # first grid index inside the segment
+    hi: np.ndarray  # last grid index inside (hi < lo: none)
+    big: float
+    fkey: np.ndarray  # running max from each segment's start, + k * big: non-decreasing
+    bkey: np.ndarray  # k * big - running max from each segment's end: non-decreasing
+
+    @classmethod
+    def build(cls, curve: LimitCurve, nodes_s: np.ndarray) -> SegmentWindows:
+        a, b = nodes_s[:-1], nodes_s[1:]
+        s, v = curve.s_mm, curve.vlim_mm_s
+        lo = np.searchsorted(s, a, side="right")
+        hi = np.searchsorted(s, b, side="left") - 1
+        seg = np.clip(np.searchsorted(nodes_s, s, side="right") - 1, 0, len(a) - 1)
+        # Offsetting each segment by k * big makes one global accumulate restart per segment.
+        big = 2.0 * float(v.max()) + 1.0
+        off = seg * big
+        fkey = np.maximum.accumulate(v + off)
+        bkey = -np.maximum.accumulate((v - off)[::-1])[::-1]
+        return cls(curve, a, b, lo, hi, big, fkey, bkey)
+
+    def first_reach(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """Smallest s in segment k with vlim(s) >= level (inf when none)."""
+        return self._reach(level, k, forward=True)
+
+    def last_reach(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """Largest s in segment k with vlim(s) >= level (-inf when none)."""
+        return self._reach(level, k, forward=False)
+
+    def _reach(self, level: np.ndarray, k: np.ndarray, forward: bool) -> np.ndarray:
+        s, v = self.curve.s_mm, self.curve.vlim_mm_s
+        near, far = (self.a[k], self.b[k]) if forward else (self.b[k], self.a[k])
+        lo, hi = self.lo[k], self.hi[k]
+        vn, vf = self.curve.at(near), self.curve.at(far)
+        n_in = np.maximum(hi - lo + 1, 0)
+        # j: grid samples, counted from the near end, before the running max reaches level.
+        if forward:
+            j = np.searchsorted(self.fkey, level + k * self.big, side="left") - lo
+        else:
+            j = hi - (np.searchsorted(self.bkey, k * self.big - level, side="right") - 1)
+        j = np.clip(j, 0, n_in)
+        hit = j < n_in
+        gi = np.clip(lo + j if forward else hi - j, 0, len(s) - 1)
+        pi = np.clip(lo + j - 1 if forward else hi - j + 1, 0, len(s) - 1)
+        # Crossing lies between the previous point (grid sample or the near end) and the hit,
+        # or between the last sample (or near end) and the far end.
+        p_s = np.where(j > 0, s[pi], near)
+        p_v = np.where(j > 0, v[pi], vn)
+        q_s = np.where(hit, s[gi], far)
+        q_v = np.where(hit, v[gi], vf)
+        frac = np.clip((level - p_v) / np.where(q_v != p_v, q_v - p_v, 1.0), 0.0, 1.0)
+        x = p_s + frac * (q_s - p_s)
+        x = np.where(vn >= level, near, x)
+        none = (vn < level) & ~hit & (vf < level)
+        return np.where(none, np.inf if forward else -np.inf, x)
+
+
+@dataclass(frozen=True, eq=False)
+class SegmentPlan:
+    """Per segment: node speeds, cruise speed, end of the acceleration, start of the braking."""
+
+    a: np.ndarray
+    b: np.ndarray
+    vi: np.ndarray
+    vj: np.ndarray
+    vp: np.ndarray
+    acc_end: np.ndarray
+    dec_start: np.ndarray
+
+
+def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.ndarray,
+                  accel: float) -> SegmentPlan:
+    """Highest cruise speed V per segment for which the acceleration vi -> V (started as early as
+    possible) and the braking V -> vj (ended as late as possible) both fit under vlim.
+
+    A transition sampled at (x_j, c_j) (distance from its start, speed) fits when started at p
+    with p + x_j >= first_reach(c_j) for all j: the earliest start is max_j(first_reach - x_j).
+    Braking mirrors this with last_reach. Feasibility is monotone in V, so a bisection over all
+    segments at once finds it. Flat segments keep V = max(vi, vj)."""
+    a, b = win.a, win.b
+    low = np.maximum(vi, vj)
+    vc = np.sqrt((16.0 * accel * (b - a) / 15.0 + vi * vi + vj * vj) / 2.0)
+    high = np.where(flat, low, np.maximum(np.minimum(vc, win.curve.span_max(a, b)), low))
+    allk = np.arange(len(a))
+    e0, d0 = _window(win, vi, vj, high, allk, accel)
+    ok = e0 <= d0
+    todo = np.flatnonzero(~ok & (high > low))
+    lo_v, hi_v = low[todo], high[todo]
+    for _ in range(PEAK_BISECTIONS if len(todo) else 0):
+        mid = 0.5 * (lo_v + hi_v)
+        m0, m1 = _window(win, vi[todo], vj[todo], mid, todo, accel)
+        good = m0 <= m1
+        lo_v, hi_v = np.where(good, mid, lo_v), np.where(good, hi_v, mid)
+    vp = high.copy()
+    vp[todo] = lo_v
+    e0[todo], d0[todo] = _window(win, vi[todo], vj[todo], lo_v, todo, accel)
+    # Still empty at V = max(vi, vj): accelerate at once and brake at the end (the check then
+    # splits or flattens the segment).
+    sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
+    bad = ~(e0 <= d0)
+    e0 = np.where(bad, a + sa, e0)
+    d0 = np.where(bad, np.maximum(b - sd, a + sa), d0)
+    return SegmentPlan(a, b, vi, vj, vp, e0, d0)
+
+
+def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray, k: np.ndarray,
+            accel: float) -> tuple[np.ndarray, np.ndarray]:
+    """(end of the acceleration, start of the braking) for cruise speed vp in segments k."""
+    a, b = win.a[k], win.b[k]
+    sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
+    tau = np.linspace(0.0, 1.0, SHAPE_SAMPLES)
+    kk = np.repeat(k, SHAPE_SAMPLES)
+    # Acceleration: earliest start so that every sample is past where vlim reaches its speed.
+    xa, ca = _shape(tau, vi, vp, accel)
+    need = win.first_reach(ca.ravel(), kk).reshape(ca.shape) - xa
+    start = np.maximum(a, need.max(axis=1))
+    start = np.where((vi <= 0.0) & (start > a), np.inf, start)  # cannot wait at rest
+    # Braking: latest end so that every sample is before where vlim falls below its speed.
+    xd, cd = _shape(tau, vp, vj, accel)
+    room = win.last_reach(cd.ravel(), kk).reshape(cd.shape) + (sd[:, None] - xd)
+    end = np.minimum(b, room.min(axis=1))
+    end = np.where((vj <= 0.0) & (end < b), -np.inf, end)
+    return start + sa, end - sd
+
+
+def _shape(tau: np.ndarray, vs: np.ndarray, ve: np.ndarray,
+           accel: float) -> tuple[np.ndarray, np.ndarray]:
+    """Samples (distance from start, speed) of the transitions vs -> ve, one row each."""
+    dur = transition_duration_s(vs, ve, accel)[:, None]
+    v0, v1 = vs[:, None], ve[:, None]
+    return bernstein6_distance(tau, dur, v0, v1), quintic_speed(tau, v0, v1)
+
+
+def segment_phases(sp: SegmentPlan, accel: float) -> PhaseArrays:
+    """Five phases per segment (cruise vi, accel, cruise V, decel, cruise vj), empty ones out."""
+    sa = transition_length_mm(sp.vi, sp.vp, accel)
+    sd = transition_length_mm(sp.vp, sp.vj, accel)
+    acc0, dec1 = sp.acc_end - sa, sp.dec_start + sd
+    s0 = np.column_stack([sp.a, acc0, sp.acc_end, sp.dec_start, dec1])
+    lengths = np.maximum(np.column_stack([acc0 - sp.a, sa, sp.dec_start - sp.acc_end, sd,
+                                          sp.b - dec1]), 0.0)
+    vs = np.column_stack([sp.vi, sp.vi, sp.vp, sp.vp, sp.vj])
+    ve = np.column_stack([sp.vi, sp.vp, sp.vp, sp.vj, sp.vj])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dur = np.where(vs == ve, lengths / vs, transition_duration_s(vs, ve, accel))
+    dur = np.where(lengths > 0.0, dur, 0.0)
+    seg = np.repeat(np.arange(len(sp.a)), 5).reshape(-1, 5)
+    keep = (dur > 0.0).ravel()
+    return PhaseArrays(dur.ravel()[keep], s0.ravel()[keep], vs.ravel()[keep], ve.ravel()[keep],
+                       seg.ravel()[keep])
