@@ -20,11 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from g62_reader import program, read_g62  # noqa: E402
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))  # run from a checkout without installing
 
 from controller.interpolators import feed_fluctuation, ph_interpolate, taylor_interpolate  # noqa: E402
 from controller.nurbs import Nurbs  # noqa: E402
+from controller.nurbs_program import program_nurbs  # noqa: E402
 from controller.ph_fit import PhSegment, fit_zone  # noqa: E402
 
 V_MM_S = 58.33
@@ -75,7 +76,7 @@ def single_segment_rate(chain: list[PhSegment], points: int = 100_000) -> float:
 
 
 def main() -> None:
-    curve = read_g62(program("butterfly.nc"))
+    curve = program_nurbs(str(REPO / "nc_programs" / "butterfly.nc"))[0]
     t0 = time.perf_counter()
     chain = ph_chain(curve)
     fit_s = time.perf_counter() - t0

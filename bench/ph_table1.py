@@ -13,10 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from g62_reader import program, read_g62  # noqa: E402
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))  # run from a checkout without installing
 
 from controller.corners import detect_sharp_corners  # noqa: E402
+from controller.nurbs_program import program_nurbs  # noqa: E402
 from controller.ph_fit import fit_zone, zone_fit_report  # noqa: E402
 
 KAPPA_TH = 2450.0 / (3500.0 / 60.0) ** 2
@@ -24,7 +25,7 @@ E_MM = 1e-3
 
 
 def main() -> None:
-    curve = read_g62(program("naca2415.nc"))
+    curve = program_nurbs(str(REPO / "nc_programs" / "naca2415.nc"))[0]
     for zone in detect_sharp_corners(curve, KAPPA_TH):
         print(f"zone u {zone.u_start:.5f}..{zone.u_end:.5f}, peak kappa "
               f"{zone.kappa_peak_per_mm:.3f} /mm")

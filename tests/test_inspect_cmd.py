@@ -3,11 +3,17 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
-from g62_reader import program
 
 from controller.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def program(name: str) -> Path:
+    return REPO / "nc_programs" / name
 
 
 def run_json(capsys: pytest.CaptureFixture[str], name: str, *extra: str) -> dict:

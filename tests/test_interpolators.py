@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
-from g62_reader import program, read_g62
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,10 +18,23 @@ from controller.interpolators import (
     taylor_interpolate,
     taylor_step,
 )
+from controller.nurbs import Nurbs
+from controller.nurbs_program import program_nurbs
 from controller.ph_quintic import PhQuintic
 
 cplx = st.complex_numbers(max_magnitude=50, min_magnitude=0.5, allow_nan=False,
                           allow_infinity=False)
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def program(name: str) -> Path:
+    return REPO / "nc_programs" / name
+
+
+def read_program_nurbs(name: str) -> Nurbs:
+    (curve,) = program_nurbs(str(program(name)))
+    return curve
 
 
 @settings(max_examples=60, deadline=None)
@@ -62,7 +75,7 @@ def test_taylor_on_an_arc_has_small_drift() -> None:
 
 def test_taylor_fluctuation_on_butterfly_matches_reference_table() -> None:
     """ALGORITHMS.md notes: 2nd-order Taylor at 58.33 mm/s: max ~110 %, RMS ~1.7e-2."""
-    c = read_g62(program("butterfly.nc"))
+    c = read_program_nurbs("butterfly.nc")
     v, period = 58.33, 1e-3
     n = int(c.length_mm / (v * period)) - 1
     u = taylor_interpolate(c, 0.0, np.full(n, v), np.zeros(n), period)

@@ -3,17 +3,29 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
-from g62_reader import program, read_g62
 
 from controller.corners import detect_sharp_corners
 from controller.nurbs import Nurbs
+from controller.nurbs_program import program_nurbs
 from controller.ph_fit import fit_single, fit_zone, foot_distances, zone_fit_report
 
 KAPPA_TH = 2450.0 / (3500.0 / 60.0) ** 2
 E_MM = 1e-3
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def program(name: str) -> Path:
+    return REPO / "nc_programs" / name
+
+
+def read_program_nurbs(name: str) -> Nurbs:
+    (curve,) = program_nurbs(str(program(name)))
+    return curve
 
 
 def circle(radius: float) -> Nurbs:
@@ -40,7 +52,7 @@ def test_quarter_circle_fit_bisects_to_the_limit() -> None:
 
 
 def test_naca_leading_edge_table_one() -> None:
-    naca = read_g62(program("naca2415.nc"))
+    naca = read_program_nurbs("naca2415.nc")
     (zone,) = detect_sharp_corners(naca, KAPPA_TH)
     one = fit_single(naca, zone.u_start, zone.u_end)
     assert one.fit_max_mm == pytest.approx(0.013, abs=0.001)  # ALGORITHMS.md 1.3: 13 um
