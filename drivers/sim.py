@@ -180,7 +180,7 @@ class SimCard(Drive):
             self._latch(CardStatus.FAULT, f"{name} axis drive fault 0x{code:04X}")
 
     def inject_lag(self, axis: int, lag_mm: float, ramp_frames: int = 20) -> None:
-        """Mechanical drag: the axis falls behind by a further lag_mm (positive)."""
+        """Mechanical drag: the encoder reads a further lag_mm below the servo model (ramped in)."""
         with self._lock:
             self._axes.add_lag(axis, abs(lag_mm), ramp_frames)
 
