@@ -86,3 +86,41 @@ def slow_generate(blocks: object, config: object) -> Iterator[RefChunk]:
     for chunk in circle_chunks(radius_mm=5.0):
         time.sleep(0.005)
         yield chunk
+
+
+def paced_generate(blocks: object, config: object) -> Iterator[RefChunk]:
+    """Generator stand-in running at twice real time (50 rows per 25 ms), a 10 mm circle."""
+    import time
+    list(blocks)  # type: ignore[call-overload]
+    for chunk in circle_chunks(radius_mm=10.0):
+        time.sleep(0.025)
+        yield chunk
+
+
+def per_block_generate(blocks: object, config: object) -> Iterator[RefChunk]:
+    """One 50-row chunk of a circle per NC block received (streams while blocks arrive)."""
+    chunks = circle_chunks(radius_mm=10.0)
+    for _ in blocks:  # type: ignore[attr-defined]
+        yield next(chunks)
+    yield from chunks
+
+
+def many_blocks(path: str, config: object) -> Iterator[int]:
+    yield from range(100)
+
+
+def crashing_blocks(path: str, config: object) -> Iterator[int]:
+    """The interpreter process dies hard after 8 blocks (a segfault stand-in)."""
+    import os
+    import time
+    yield from range(8)
+    time.sleep(0.2)
+    os._exit(9)
+
+
+def failing_generate(blocks: object, config: object) -> Iterator[RefChunk]:
+    from controller.errors import PlanningError
+    chunks = circle_chunks(radius_mm=10.0)
+    for _ in range(8):
+        yield next(chunks)
+    raise PlanningError("contour error 41 um > 30 um after 20 dynamics rounds")
