@@ -1,0 +1,132 @@
+"""Module 3 of the generator: the feed-limit curve along a path and its quintic feed plan."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import numpy as np
+
+from controller.feed_limits import chord_error_feed_mm_s, corner_feed_mm_s
+from controller.feed_planner import PlanResult, plan_feed
+from controller.feed_profile import FeedPhase, FeedProfile
+from controller.path import Path
+
+GRID_POINTS = 20000  # feed-limit samples per run (spacing clamped below)
+MIN_SPACING_MM = 0.002
+MAX_SPACING_MM = 0.02
+
+
+class LimitPolicy(StrEnum):
+    CONTINUOUS = "continuous"  # ph-lookahead: curvature feed everywhere, contour-derived
+    CORNER_PLATEAU = "corner-plateau"  # Tsai 2008: V_sp = min(V_af, V_cf) held over each zone
+
+
+@dataclass(frozen=True)
+class Reduction:
+    """Dynamics module's verdict: scale the centripetal budget by factor over [s_lo, s_hi]."""
+
+    s_lo_mm: float
+    s_hi_mm: float
+    factor: float
+
+
+@dataclass(frozen=True)
+class FeedInput:
+    """Everything module 3 needs besides the path (mm, s)."""
+
+    max_feed_mm_s: float
+    max_accel_mm_s2: float
+    sample_period_s: float
+    chord_tolerance_mm: float
+    kappa_bar_per_mm: float
+    centripetal_accel_mm_s2: float  # normal-acceleration budget (contour-error derived)
+    policy: LimitPolicy = LimitPolicy.CONTINUOUS
+    reductions: tuple[Reduction, ...] = field(default=())
+
+
+@dataclass(frozen=True, eq=False)
+class FeedOutput:
+    s_mm: np.ndarray
+    vlim_mm_s: np.ndarray
+    profile: FeedProfile
+    result: PlanResult
+
+
+def limit_samples(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(s, kappa) on a fine grid, each piece sampled in its own parameter (no inversion needed).
+
+    At a joint both sides are sampled and the larger curvature is kept (curvature may jump)."""
+    spacing = float(np.clip(path.length_mm / GRID_POINTS, MIN_SPACING_MM, MAX_SPACING_MM))
+    s_parts, k_parts = [], []
+    for p in path.pieces:
+        n = max(int(np.ceil(2.0 * p.length_mm / spacing)), 8) + 1
+        u = np.linspace(p.u0, p.u1, n)
+        s_parts.append(p.s0_mm + p.curve.s_of_u(u) - p.curve.s_of_u(np.array([p.u0]))[0])
+        k_parts.append(p.curve.curvature(u))
+    s, kappa = np.concatenate(s_parts), np.concatenate(k_parts)
+    order = np.lexsort((-kappa, s))  # by s, larger curvature first among equal s
+    s, kappa = s[order], kappa[order]
+    keep = np.r_[True, np.diff(s) > 1e-12]
+    return s[keep], kappa[keep]
+
+
+def _scale(s: np.ndarray, inp: FeedInput) -> np.ndarray:
+    """Product of the dynamics module's reductions covering each grid point."""
+    scale = np.ones(s.shape)
+    for r in inp.reductions:
+        scale[(s >= r.s_lo_mm) & (s <= r.s_hi_mm)] *= r.factor
+    return scale
+
+
+def feed_limit_mm_s(path: Path, s: np.ndarray, kappa: np.ndarray, inp: FeedInput) -> np.ndarray:
+    """vlim(s) under the chosen policy, capped by the programmed feed of each piece.
+
+    A reduction by factor f scales the normal acceleration kappa v^2, and with it the servo's
+    contour error, by f: the feed limit is scaled by sqrt(f)."""
+    cap = np.minimum(path.feed_cap(s), inp.max_feed_mm_s)
+    vlim = chord_error_feed_mm_s(kappa, inp.sample_period_s, inp.chord_tolerance_mm, cap)
+    if inp.policy == LimitPolicy.CONTINUOUS:
+        with np.errstate(divide="ignore"):
+            budget = min(inp.max_accel_mm_s2, inp.centripetal_accel_mm_s2)
+            vlim = np.minimum(vlim, np.sqrt(budget / kappa))
+    else:
+        corner_of = np.array([p.corner for p in path.pieces])[path.piece_index(s)]
+        for c in np.unique(corner_of[corner_of >= 0]):
+            mask = corner_of == c
+            v_sp = corner_feed_mm_s(kappa[mask], inp.sample_period_s, inp.chord_tolerance_mm,
+                                    inp.kappa_bar_per_mm, inp.max_feed_mm_s)
+            vlim[mask] = float(np.min(v_sp))
+    return vlim * np.sqrt(_scale(s, inp))
+
+
+def _concat(profiles: list[FeedProfile]) -> FeedProfile:
+    """Chain section profiles end to end in time and arc length."""
+    phases: list[FeedPhase] = []
+    t0 = s0 = 0.0
+    for prof in profiles:
+        for ph in prof.phases:
+            phases.append(FeedPhase(t0 + ph.t0_s - prof.t0_s, ph.duration_s,
+                                    s0 + ph.s0_mm - prof.phases[0].s0_mm,
+                                    ph.v_start_mm_s, ph.v_end_mm_s))
+        t0 += prof.duration_s
+        s0 += prof.length_mm
+    return FeedProfile(tuple(phases))
+
+
+def plan_path_feed(path: Path, inp: FeedInput) -> FeedOutput:
+    """Module 3: vlim on a fine grid, then a quintic plan from rest to rest per section.
+
+    Sections are separated by the path's stops (G1 corners brought to zero feed)."""
+    s, kappa = limit_samples(path)
+    vlim = feed_limit_mm_s(path, s, kappa, inp)
+    cuts = [0.0, *path.stops_at_mm, path.length_mm]
+    profiles: list[FeedProfile] = []
+    result = PlanResult.OK
+    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+        mask = (s >= a) & (s <= b)
+        plan = plan_feed(s[mask] - a, np.maximum(vlim[mask], 1e-6), inp.max_accel_mm_s2)
+        if plan.result != PlanResult.OK:
+            result = plan.result
+        profiles.append(plan.profile)
+    return FeedOutput(s, vlim, _concat(profiles), result)

@@ -1,0 +1,157 @@
+"""Modules 1 and 2 of the generator: sharp corner detection and PH construction for one run."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from controller.blocks import ArcBlock, LineBlock, MotionBlock, NurbsBlock
+from controller.corners import CornerZone, detect_sharp_corners, joint_angle_rad, widen_zone
+from controller.curves import ArcCurve, Curve, LineCurve
+from controller.nurbs import Nurbs
+from controller.path import Path, Piece, PieceKind, chain, make_piece
+from controller.ph_fit import fit_zone
+
+# Joints whose tangents turn by less than this are treated as smooth (CAM output jitter).
+SMOOTH_JOINT_RAD = math.radians(0.5)
+MIN_LENGTH_MM = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class BlockCurve:
+    """One motion block as a curve, with its programmed feed and source line."""
+
+    curve: Curve
+    feed_mm_s: float
+    line: int
+    nurbs: bool
+
+
+@dataclass(frozen=True)
+class CornerInfo:
+    """A sharp corner found on block `block` (eq. 13-15) and how it was replaced."""
+
+    block: int
+    zone: CornerZone
+    ph_count: int
+    fit_rms_mm: float
+    fit_max_mm: float
+    x_mm: float
+    y_mm: float
+
+
+@dataclass(frozen=True, eq=False)
+class Geometry:
+    """The output of modules 1-2: the path with PH corners, and what was done to it."""
+
+    path: Path
+    corners: tuple[CornerInfo, ...]
+    ph_pieces: tuple[Piece, ...]
+    stops_at_mm: tuple[float, ...] = field(default=())
+
+
+def block_curve(block: MotionBlock, feed_cap_mm_s: float) -> BlockCurve | None:
+    """The XY curve of a block, or None for a block that does not move in XY."""
+    feed = min(block.feed_mm_s, feed_cap_mm_s)
+    line = block.source.first_line
+    if isinstance(block, NurbsBlock):
+        return BlockCurve(Nurbs.from_block(block), feed, line, True)
+    if isinstance(block, ArcBlock):
+        c = block.center
+        a0 = math.atan2(block.start[1] - c[1], block.start[0] - c[0])
+        return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad), feed, line, False)
+    assert isinstance(block, LineBlock)
+    p0, p1 = block.start[:2], block.end[:2]
+    if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
+        return None
+    return BlockCurve(LineCurve(p0, p1), feed, line, False)
+
+
+def find_corners(curves: list[BlockCurve], kappa_th_per_mm: float) -> dict[int, list[CornerZone]]:
+    """Module 1: curvature peaks above kappa_th with their zones, for every NURBS block."""
+    return {i: detect_sharp_corners(bc.curve, kappa_th_per_mm)
+            for i, bc in enumerate(curves) if bc.nurbs}
+
+
+def widen(curves: list[BlockCurve], zones: dict[int, list[CornerZone]], block: int,
+          u: float, level_per_mm: float) -> bool:
+    """Widen the zone of `block` nearest to u down to curvature level; True if it grew."""
+    blocks_zones = zones.get(block, [])
+    if not blocks_zones:
+        return False
+    i = int(np.argmin([min(abs(u - z.u_start), abs(u - z.u_end)) for z in blocks_zones]))
+    old = blocks_zones[i]
+    new = widen_zone(curves[block].curve, old, level_per_mm)
+    # Never let two zones of one block overlap: clip at the neighbours.
+    lo = blocks_zones[i - 1].u_end if i > 0 else new.u_start
+    hi = blocks_zones[i + 1].u_start if i + 1 < len(blocks_zones) else new.u_end
+    new = CornerZone(max(new.u_start, lo), min(new.u_end, hi), new.u_peak, new.kappa_peak_per_mm)
+    grew = new.u_start < old.u_start - 1e-12 or new.u_end > old.u_end + 1e-12
+    blocks_zones[i] = new
+    return grew
+
+
+def _nurbs_pieces(bc: BlockCurve, block: int, zones: list[CornerZone], error_limit_mm: float,
+                  use_ph: bool, corner_base: int) -> tuple[list[Piece], list[CornerInfo]]:
+    """Split one NURBS into Taylor parts and PH corners (module 2)."""
+    curve = bc.curve
+    pieces: list[Piece] = []
+    infos: list[CornerInfo] = []
+    u = curve.u_start
+    for k, z in enumerate(zones):
+        if z.u_start > u + 1e-12:
+            pieces.append(make_piece(PieceKind.NURBS, curve, u, z.u_start, 0.0, bc.feed_mm_s,
+                                     bc.line))
+        peak = curve.evaluate(np.array([z.u_peak]), 0)[0, 0]
+        if use_ph:
+            segs = fit_zone(curve, z.u_start, z.u_end, error_limit_mm)
+            for seg in segs:
+                pieces.append(Piece(PieceKind.PH, seg.ph, 0.0, 1.0, 0.0, seg.ph.length_mm,
+                                    bc.feed_mm_s, bc.line, corner_base + k))
+            rms = float(np.sqrt(np.mean([s.fit_rms_mm**2 for s in segs])))
+            worst = max(s.fit_max_mm for s in segs)
+            infos.append(CornerInfo(block, z, len(segs), rms, worst, float(peak[0]),
+                                    float(peak[1])))
+        else:
+            pieces.append(make_piece(PieceKind.NURBS, curve, z.u_start, z.u_end, 0.0,
+                                     bc.feed_mm_s, bc.line, corner_base + k))
+            infos.append(CornerInfo(block, z, 0, 0.0, 0.0, float(peak[0]), float(peak[1])))
+        u = z.u_end
+    if curve.u_end > u + 1e-12:
+        pieces.append(make_piece(PieceKind.NURBS, curve, u, curve.u_end, 0.0, bc.feed_mm_s,
+                                 bc.line))
+    return pieces, infos
+
+
+def _tangent(piece: Piece, at_end: bool) -> np.ndarray:
+    d = piece.curve.evaluate(np.array([piece.u1 if at_end else piece.u0]), 1)[1, 0]
+    return d / max(float(np.hypot(d[0], d[1])), 1e-300)
+
+
+def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
+               error_limit_mm: float, use_ph: bool = True) -> Geometry:
+    """Module 2: the run's path, corner zones replaced by PH quintics within error_limit_mm.
+
+    Joints between blocks whose tangents turn by more than SMOOTH_JOINT_RAD are G1 corners:
+    the feed is brought to zero there (exact stop), which is always within any tolerance.
+    """
+    pieces: list[Piece] = []
+    infos: list[CornerInfo] = []
+    stops: list[float] = []
+    for i, bc in enumerate(curves):
+        if bc.nurbs:
+            ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph, len(infos))
+            infos += inf
+        else:
+            kind = PieceKind.ARC if isinstance(bc.curve, ArcCurve) else PieceKind.LINE
+            ps = [make_piece(kind, bc.curve, 0.0, 1.0, 0.0, bc.feed_mm_s, bc.line)]
+        if pieces and joint_angle_rad(_tangent(pieces[-1], True), _tangent(ps[0], False)) \
+                > SMOOTH_JOINT_RAD:
+            stops.append(len(pieces))
+        pieces += ps
+    chained = chain(pieces)
+    stop_s = tuple(chained[k].s0_mm for k in stops)
+    ph = tuple(p for p in chained if p.kind == PieceKind.PH)
+    return Geometry(Path(chained, stop_s), tuple(infos), ph, stop_s)

@@ -1,0 +1,137 @@
+"""One contour run through the four modules, re-planned until the predicted contour error fits."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from enum import StrEnum
+
+import numpy as np
+
+from controller.config import MachineConfig
+from controller.feed_planner import PlanResult
+from controller.gen_dynamics import (
+    LOOKBACK_S,
+    TARGET_FRACTION,
+    ServoPrediction,
+    Violation,
+    acceleration_gain_s2,
+    axis_servos,
+    find_violations,
+    predict,
+)
+from controller.gen_feed import FeedInput, LimitPolicy, Reduction, plan_path_feed
+from controller.gen_geometry import BlockCurve, CornerInfo, Geometry, build_path, find_corners, widen
+from controller.gen_sampling import Interpolation, Samples, interpolate
+from controller.path import PieceKind
+
+# The first plan keeps kappa v^2 under this share of eps_max / c2 (the steady contour error);
+# the rest of the limit is left for the transients the dynamics module then measures.
+INITIAL_BUDGET_SHARE = 0.9
+
+
+class RunStatus(StrEnum):
+    OK = "ok"
+    CONTOUR_LIMIT_NOT_MET = "contour error limit not met within the allowed dynamics rounds"
+    FEED_PLAN_FAILED = "feed planning failed"
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """Which variant of the four modules to run (ph-lookahead or Tsai's nurbs-lookahead)."""
+
+    use_ph: bool = True
+    policy: LimitPolicy = LimitPolicy.CONTINUOUS
+    interpolation: Interpolation = Interpolation.PH_AND_EXACT_ARC_LENGTH
+    widen_zones: bool = True
+
+
+PH_LOOKAHEAD = RunSettings()
+NURBS_LOOKAHEAD = RunSettings(False, LimitPolicy.CORNER_PLATEAU, Interpolation.SEQUENTIAL_TAYLOR)
+
+
+@dataclass(frozen=True, eq=False)
+class RunPlan:
+    """Reference points of one run and the report of how they were obtained."""
+
+    samples: Samples
+    start_xy_mm: np.ndarray
+    geometry: Geometry
+    prediction: ServoPrediction
+    dynamics_rounds: int
+    status: RunStatus
+    plan_result: PlanResult
+    planning_cpu_s: float
+
+    @property
+    def corners(self) -> tuple[CornerInfo, ...]:
+        return self.geometry.corners
+
+
+def _feed_input(config: MachineConfig, settings: RunSettings,
+                reductions: tuple[Reduction, ...]) -> FeedInput:
+    ip = config.interpolator
+    budget = INITIAL_BUDGET_SHARE * ip.contour_error_limit_mm / acceleration_gain_s2(config)
+    return FeedInput(ip.max_feed_mm_s, ip.max_accel_mm_s2, config.sample_period_s,
+                     ip.chord_tolerance_mm, ip.reference_curvature_per_mm, budget,
+                     settings.policy, reductions)
+
+
+def _reduction(v: Violation, samples: Samples, limit_mm: float, lookback: int) -> Reduction:
+    """Lower the feed over the stretch that led to a violation (up to LOOKBACK_S before it)."""
+    last = samples.s_mm.size - 1
+    lo = samples.s_mm[min(max(v.k_lo - lookback, 0), last)]
+    hi = samples.s_mm[min(v.k_hi, last)]
+    return Reduction(float(lo), float(hi), TARGET_FRACTION * limit_mm / v.peak_mm)
+
+
+def _widen_at(geo: Geometry, curves: list[BlockCurve], zones: dict, s_mm: float) -> None:
+    """Paper, Figure 4: widen the corner zone next to a violation on a NURBS part."""
+    path = geo.path
+    piece = path.pieces[int(path.piece_index(np.array([s_mm]))[0])]
+    if piece.kind != PieceKind.NURBS or piece.corner >= 0:
+        return
+    block = next((i for i, bc in enumerate(curves) if bc.curve is piece.curve), None)
+    if block is None:
+        return
+    u = float(piece.u_at(np.array([s_mm]))[0])
+    kappa = float(piece.curve.curvature(np.array([u]))[0])
+    widen(curves, zones, block, u, 0.9 * kappa)
+
+
+def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: MachineConfig,
+                     settings: RunSettings = PH_LOOKAHEAD) -> RunPlan:
+    """Modules 1-4 on one run of XY blocks from rest to rest (Figure 4's loop)."""
+    cpu0 = time.process_time()
+    ip = config.interpolator
+    T = config.sample_period_s  # noqa: N806
+    servos = axis_servos(config)
+    zones = find_corners(curves, ip.kappa_threshold_per_mm)
+    reductions: tuple[Reduction, ...] = ()
+    lookback = int(round(LOOKBACK_S / T))
+    status = RunStatus.CONTOUR_LIMIT_NOT_MET
+    for rounds in range(1, ip.max_dynamics_rounds + 1):
+        geo = build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph)
+        feed = plan_path_feed(geo.path, _feed_input(config, settings, reductions))
+        if feed.result != PlanResult.OK:
+            status = RunStatus.FEED_PLAN_FAILED
+            break
+        samples = interpolate(geo.path, feed.profile, T, settings.interpolation)
+        pred = predict(samples.xy_mm, samples.phi_rad, start_xy_mm, servos, T)
+        violations = find_violations(pred.contour_mm, ip.contour_error_limit_mm)
+        if not violations:
+            status = RunStatus.OK
+            break
+        if rounds == ip.max_dynamics_rounds:
+            break
+        reductions += tuple(_reduction(v, samples, ip.contour_error_limit_mm, lookback)
+                            for v in violations)
+        if settings.widen_zones:
+            for v in violations:
+                _widen_at(geo, curves, zones, float(samples.s_mm[min(v.k_peak, len(samples.s_mm) - 1)]))
+    return RunPlan(samples, start_xy_mm, geo, pred, rounds, status, feed.result,
+                   time.process_time() - cpu0)
+
+
+def with_status(plan: RunPlan, status: RunStatus) -> RunPlan:
+    return replace(plan, status=status)
