@@ -167,6 +167,7 @@ class Runtime:
         else:
             pacer = WallPacer(self.settings.cycle_frames * period_s)
         self._pacer_t0_s = time.monotonic()
+        self._pacer_t0_epoch_s = time.time()
         self.controller = MotionController(self.config, drive, source, pacer, self.settings,
                                            on_progress=self.options.on_progress,
                                            watch=watch)
@@ -192,5 +193,7 @@ class Runtime:
         extra["process_start_s"] = self._t_started_s - t0_s
         first = result.time_to_first_motion_s
         if first is not None and not self.options.virtual_time:
+            # Wall clock of the first executed frame (bench: launch-to-motion of `cncctl run`).
+            extra["first_motion_epoch_s"] = self._pacer_t0_epoch_s + first
             first = (self._pacer_t0_s - t0_s) + first
         return replace(result, time_to_first_motion_s=first, extra=extra)
