@@ -55,12 +55,13 @@ def main(argv: list[str] | None = None) -> int:
         path = os.path.join(tmp, "bench.nc")
         write_program(path, args.lines)
         rss_before_mb = peak_rss_mb()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         blocks = sum(1 for _ in read_program(path, config))
-        elapsed_s = time.perf_counter() - t0
-    rate = args.lines / elapsed_s
-    print(f"lines: {args.lines}  blocks: {blocks}  time: {elapsed_s:.2f} s")
-    print(f"rate: {rate:,.0f} lines/s  (target >= 100,000)")
+        elapsed_s, cpu_s = time.perf_counter() - t0, time.process_time() - c0
+    print(f"lines: {args.lines}  blocks: {blocks}  wall: {elapsed_s:.2f} s  cpu: {cpu_s:.2f} s")
+    # CPU time is quoted too: on a shared machine the wall-clock rate includes other jobs.
+    print(f"rate: {args.lines / elapsed_s:,.0f} lines/s wall, {args.lines / cpu_s:,.0f} lines/s "
+          f"CPU  (target >= 100,000)")
     print(f"peak RSS: {peak_rss_mb():.1f} MB  (before parsing {rss_before_mb:.1f} MB; "
           f"target < 150 MB)")
     return 0

@@ -8,9 +8,8 @@ from controller.errors import NcError
 
 MAX_LINE_CHARS = 4096  # LinuxCNC allows 256; CAM output never needs more than this
 _NUMBER = r"[-+]?(?:\d{1,20}(?:\.\d{0,20})?|\.\d{1,20})"  # no exponents (RS274), bounded size
-_WORD_RE = re.compile(r"([A-Z])\s*(" + _NUMBER + ")")
-_CLEAN_RE = re.compile(r"\s*(?:[A-Z]\s*" + _NUMBER + r"\s*)*")  # a line of plain words only
-_SPECIAL_RE = re.compile(r"[(;#/%]")
+WORD_RE = re.compile(r"([A-Z])\s*(" + _NUMBER + ")")
+CLEAN_RE = re.compile(r"\s*(?:[A-Z]\s*" + _NUMBER + r"\s*)*")  # a line of plain words only
 _NUMBER_RE = re.compile(_NUMBER)
 _PARAM_REF_RE = re.compile(r"#\s*(\d{1,5})")
 _ASSIGN_RE = re.compile(r"#\s*(\d{1,5})\s*=\s*")
@@ -37,7 +36,7 @@ class Line:
     def col(self, index: int) -> int:
         """1-based column of word `index` (0 when the line has no such word)."""
         if self.cols is None:
-            self.cols = [m.start() + 1 for m in _WORD_RE.finditer(self.text)]
+            self.cols = [m.start() + 1 for m in WORD_RE.finditer(self.text)]
         return self.cols[index] if 0 <= index < len(self.cols) else 1
 
     def word_text(self, index: int) -> str:
@@ -52,8 +51,8 @@ def lex_line(raw: str, path: str, lineno: int) -> Line | str | None:
         raise NcError(path, lineno, MAX_LINE_CHARS + 1, "",
                       f"line longer than {MAX_LINE_CHARS} characters")
     text = raw.upper()
-    if _SPECIAL_RE.search(text) is None and _CLEAN_RE.fullmatch(text) is not None:
-        return Line(_WORD_RE.findall(text), text)  # the fast path: plain words only
+    if CLEAN_RE.fullmatch(text) is not None:  # the fast path: plain words, nothing else
+        return Line(WORD_RE.findall(text), text)
     return _lex_slow(text, path, lineno)
 
 

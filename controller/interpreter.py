@@ -12,7 +12,7 @@ from typing import TextIO
 from controller.blocks import NcBlock
 from controller.config import MachineConfig
 from controller.errors import NcError
-from controller.gcode_lexer import MAX_LINE_CHARS, Line, lex_line
+from controller.gcode_lexer import CLEAN_RE, MAX_LINE_CHARS, WORD_RE, Line, lex_line
 from controller.gcodes import G_GROUP, G_UNSUPPORTED, M_GROUP, WordError, g_code10, g_name
 from controller.interp_state import InterpState
 
@@ -48,14 +48,21 @@ class Interpreter:
         lineno = 0
         for raw in _raw_lines(handle, self.path):
             lineno += 1
-            line = lex_line(raw, self.path, lineno)
-            if line is None:
-                continue
-            if line == "%":
-                if self._percent():
-                    break
-                continue
-            self._execute(line, lineno)  # type: ignore[arg-type]
+            text = raw.upper()
+            # The hot path (almost every line of a CAM program): plain words, no comment.
+            if len(text) <= MAX_LINE_CHARS and CLEAN_RE.fullmatch(text) is not None:
+                words = WORD_RE.findall(text)
+                if words:
+                    self._execute_plain(words, text, lineno)
+            else:
+                line = lex_line(raw, self.path, lineno)
+                if line is None:
+                    continue
+                if line == "%":
+                    if self._percent():
+                        break
+                    continue
+                self._execute(line, lineno)  # type: ignore[arg-type]
             if out:
                 yield from out
                 out.clear()
@@ -64,6 +71,24 @@ class Interpreter:
         self.state.finish_program(lineno)
         yield from out
         out.clear()
+
+    def _execute_plain(self, words: list[tuple[str, str]], text: str, lineno: int) -> None:
+        """A line of plain words; the usual case (each letter once, one G, no M) inline."""
+        self.words_seen = True
+        by_letter = dict(words)
+        if len(by_letter) == len(words) and "M" not in by_letter:
+            g = by_letter.pop("G", None)
+            if "N" in by_letter:
+                del by_letter["N"]
+            code = _G_CACHE.get(g) if g is not None else -1  # type: ignore[arg-type]
+            if code is not None and _VALUE_LETTERS.issuperset(by_letter):
+                vals = {k: float(v) for k, v in by_letter.items()}
+                try:
+                    self.state.execute([] if code < 0 else [code], [], vals, lineno)
+                except WordError as exc:
+                    raise self._error(Line(words, text), lineno, exc.word, exc.message) from None
+                return
+        self._execute(Line(words, text), lineno)
 
     def _percent(self) -> bool:
         """`%` before any code opens the program; any later `%` ends it."""
@@ -88,14 +113,6 @@ class Interpreter:
 
     def _classify(self, line: Line, words: list[tuple[str, str]], lineno: int
                   ) -> tuple[list[int], list[int], dict[str, float]]:
-        by_letter = dict(words)
-        if len(by_letter) == len(words) and "M" not in by_letter:
-            # The usual line: each letter once, at most one G word, no M word.
-            g = by_letter.pop("G", None)
-            by_letter.pop("N", None)
-            if _VALUE_LETTERS.issuperset(by_letter):
-                gs = [] if g is None else [self._g_code(line, words.index(("G", g)), g, lineno)]
-                return gs, [], {k: float(v) for k, v in by_letter.items()}
         gs: list[int] = []
         ms: list[int] = []
         vals: dict[str, float] = {}

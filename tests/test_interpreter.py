@@ -159,3 +159,24 @@ def test_crlf_and_no_final_newline(tmp_path: Path) -> None:
     path = tmp_path / "p.nc"
     path.write_bytes(b"F60\r\nG1 X1\r\nG1 X2")
     assert [b.end[0] for b in motion(list(read_program(str(path), XY_TABLE)))] == [1.0, 2.0]
+
+
+def _peak_bytes_reading(path: Path) -> int:
+    import tracemalloc
+
+    tracemalloc.start()
+    for _ in read_program(str(path), XY_TABLE):
+        pass
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak
+
+
+def test_memory_does_not_grow_with_program_length(tmp_path: Path) -> None:
+    peaks = []
+    for n in (10_000, 40_000):  # both longer than one 64 k read chunk
+        path = tmp_path / f"p{n}.nc"
+        path.write_text("F600\n" + "".join(f"G1 X{i % 90}.5 Y{i % 13}\nG2 X{i % 90}.5 Y{i % 13 + 2}"
+                                           f" R1.5\n" for i in range(n // 2)))
+        peaks.append(_peak_bytes_reading(path))
+    assert peaks[1] < 1.1 * peaks[0]  # four times the lines, the same peak
