@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -12,7 +13,8 @@ SpeedFn = Callable[[np.ndarray], np.ndarray]  # |C'(u)| for an array of u
 
 _GL_ORDER = 10
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(_GL_ORDER)
-_NEWTON_SWEEPS = 6
+_NEWTON_SWEEPS = 8
+_NEWTON_TOL_MM = 1e-11
 
 
 def _gauss_integrals(speed: SpeedFn, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -70,18 +72,38 @@ class ArcLengthTable:
         idx = self._interval(uu)
         return self.s_nodes[idx] + _gauss_integrals(self.speed, self.u_nodes[idx], uu)
 
+    @cached_property
+    def _node_speed(self) -> np.ndarray:
+        return self.speed(self.u_nodes)
+
     def u_of_s(self, s_mm: ArrayLike) -> np.ndarray:
-        """Inverse: table lookup, linear start, then Newton clamped to the sub-interval."""
+        """Inverse: cubic Hermite start in each sub-interval (du/ds = 1/speed at its ends), then
+        Newton on the Gauss-Legendre arc length until every residual is below 1e-11 mm."""
         s = np.clip(np.atleast_1d(np.asarray(s_mm, dtype=float)), 0.0, self.total_length_mm)
         idx = np.clip(np.searchsorted(self.s_nodes, s, side="right") - 1, 0, self.u_nodes.size - 2)
         u_lo, u_hi = self.u_nodes[idx], self.u_nodes[idx + 1]
         s_lo, s_hi = self.s_nodes[idx], self.s_nodes[idx + 1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            frac = np.where(s_hi > s_lo, (s - s_lo) / (s_hi - s_lo), 0.0)
-        u = u_lo + frac * (u_hi - u_lo)
+        u = _hermite_start(s, s_lo, s_hi, u_lo, u_hi, self._node_speed[idx],
+                           self._node_speed[idx + 1])
         for _ in range(_NEWTON_SWEEPS):
             err = s_lo + _gauss_integrals(self.speed, u_lo, u) - s
+            if not np.any(np.abs(err) > _NEWTON_TOL_MM):
+                break
             speed = self.speed(u)
             step = np.where(speed > 0, err / np.where(speed > 0, speed, 1.0), 0.0)
             u = np.clip(u - step, u_lo, u_hi)
         return u
+
+
+def _hermite_start(s: np.ndarray, s_lo: np.ndarray, s_hi: np.ndarray, u_lo: np.ndarray,
+                   u_hi: np.ndarray, v_lo: np.ndarray, v_hi: np.ndarray) -> np.ndarray:
+    """u(s) by the cubic Hermite interpolant on [s_lo, s_hi]; linear where a speed is zero."""
+    h = s_hi - s_lo
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.where(h > 0, (s - s_lo) / np.where(h > 0, h, 1.0), 0.0)
+        m0 = np.where(v_lo > 0, h / np.where(v_lo > 0, v_lo, 1.0), u_hi - u_lo)
+        m1 = np.where(v_hi > 0, h / np.where(v_hi > 0, v_hi, 1.0), u_hi - u_lo)
+    x2, x3 = x * x, x * x * x
+    u = ((2 * x3 - 3 * x2 + 1) * u_lo + (x3 - 2 * x2 + x) * m0 + (-2 * x3 + 3 * x2) * u_hi
+         + (x3 - x2) * m1)
+    return np.clip(u, u_lo, u_hi)

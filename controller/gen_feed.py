@@ -10,7 +10,7 @@ import numpy as np
 from controller.feed_limits import chord_error_feed_mm_s, corner_feed_mm_s
 from controller.feed_planner import PlanResult, plan_feed
 from controller.feed_profile import FeedPhase, FeedProfile
-from controller.path import Path
+from controller.path import Path, Piece
 
 GRID_POINTS = 20000  # feed-limit samples per run (spacing clamped below)
 MIN_SPACING_MM = 0.002
@@ -53,17 +53,40 @@ class FeedOutput:
     result: PlanResult
 
 
-def limit_samples(path: Path) -> tuple[np.ndarray, np.ndarray]:
+PieceSamples = dict[tuple[int, float, float, int], tuple[np.ndarray, np.ndarray]]
+
+
+def _piece_samples(p: Piece, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(local s, kappa) at n parameters of a piece; s by the trapezoid rule on |C'| rescaled to
+    the exact piece length (planning needs positions to ~1e-6 mm, not the table's 1e-12)."""
+    u = np.linspace(p.u0, p.u1, n)
+    d = p.curve.evaluate(u, 2)
+    speed2 = np.einsum("ni,ni->n", d[1], d[1])
+    speed = np.sqrt(speed2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kappa = np.abs(d[1, :, 0] * d[2, :, 1] - d[1, :, 1] * d[2, :, 0]) / (speed2 * speed)
+    kappa = np.nan_to_num(kappa, nan=0.0, posinf=0.0)
+    s = np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(u))))
+    if s[-1] > 0:
+        s *= p.length_mm / s[-1]
+    return s, kappa
+
+
+def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(s, kappa) on a fine grid, each piece sampled in its own parameter (no inversion needed).
 
     At a joint both sides are sampled and the larger curvature is kept (curvature may jump)."""
     spacing = float(np.clip(path.length_mm / GRID_POINTS, MIN_SPACING_MM, MAX_SPACING_MM))
+    cache = {} if cache is None else cache
     s_parts, k_parts = [], []
     for p in path.pieces:
-        n = max(int(np.ceil(2.0 * p.length_mm / spacing)), 8) + 1
-        u = np.linspace(p.u0, p.u1, n)
-        s_parts.append(p.s0_mm + p.curve.s_of_u(u) - p.curve.s_of_u(np.array([p.u0]))[0])
-        k_parts.append(p.curve.curvature(u))
+        n = max(int(np.ceil(p.length_mm / spacing)), 8) + 1
+        key = (id(p.curve), p.u0, p.u1, n)
+        if key not in cache:
+            cache[key] = _piece_samples(p, n)
+        s_local, kappa = cache[key]
+        s_parts.append(p.s0_mm + s_local)
+        k_parts.append(kappa)
     s, kappa = np.concatenate(s_parts), np.concatenate(k_parts)
     order = np.lexsort((-kappa, s))  # by s, larger curvature first among equal s
     s, kappa = s[order], kappa[order]
@@ -114,11 +137,11 @@ def _concat(profiles: list[FeedProfile]) -> FeedProfile:
     return FeedProfile(tuple(phases))
 
 
-def plan_path_feed(path: Path, inp: FeedInput) -> FeedOutput:
+def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None) -> FeedOutput:
     """Module 3: vlim on a fine grid, then a quintic plan from rest to rest per section.
 
     Sections are separated by the path's stops (G1 corners brought to zero feed)."""
-    s, kappa = limit_samples(path)
+    s, kappa = limit_samples(path, cache)
     vlim = feed_limit_mm_s(path, s, kappa, inp)
     cuts = [0.0, *path.stops_at_mm, path.length_mm]
     profiles: list[FeedProfile] = []

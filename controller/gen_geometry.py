@@ -12,7 +12,7 @@ from controller.corners import CornerZone, detect_sharp_corners, joint_angle_rad
 from controller.curves import ArcCurve, Curve, LineCurve
 from controller.nurbs import Nurbs
 from controller.path import Path, Piece, PieceKind, chain, make_piece
-from controller.ph_fit import fit_zone
+from controller.ph_fit import PhSegment, fit_zone
 
 # Joints whose tangents turn by less than this are treated as smooth (CAM output jitter).
 SMOOTH_JOINT_RAD = math.radians(0.5)
@@ -93,8 +93,19 @@ def widen(curves: list[BlockCurve], zones: dict[int, list[CornerZone]], block: i
     return grew
 
 
+FitCache = dict[tuple[int, float, float, float], list[PhSegment]]
+
+
+def _fit(curve: Curve, z: CornerZone, error_limit_mm: float, cache: FitCache) -> list[PhSegment]:
+    key = (id(curve), z.u_start, z.u_end, error_limit_mm)
+    if key not in cache:
+        cache[key] = fit_zone(curve, z.u_start, z.u_end, error_limit_mm)
+    return cache[key]
+
+
 def _nurbs_pieces(bc: BlockCurve, block: int, zones: list[CornerZone], error_limit_mm: float,
-                  use_ph: bool, corner_base: int) -> tuple[list[Piece], list[CornerInfo]]:
+                  use_ph: bool, corner_base: int,
+                  cache: FitCache) -> tuple[list[Piece], list[CornerInfo]]:
     """Split one NURBS into Taylor parts and PH corners (module 2)."""
     curve = bc.curve
     pieces: list[Piece] = []
@@ -106,7 +117,7 @@ def _nurbs_pieces(bc: BlockCurve, block: int, zones: list[CornerZone], error_lim
                                      bc.line))
         peak = curve.evaluate(np.array([z.u_peak]), 0)[0, 0]
         if use_ph:
-            segs = fit_zone(curve, z.u_start, z.u_end, error_limit_mm)
+            segs = _fit(curve, z, error_limit_mm, cache)
             for seg in segs:
                 pieces.append(Piece(PieceKind.PH, seg.ph, 0.0, 1.0, 0.0, seg.ph.length_mm,
                                     bc.feed_mm_s, bc.line, corner_base + k))
@@ -131,18 +142,21 @@ def _tangent(piece: Piece, at_end: bool) -> np.ndarray:
 
 
 def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
-               error_limit_mm: float, use_ph: bool = True) -> Geometry:
+               error_limit_mm: float, use_ph: bool = True,
+               cache: FitCache | None = None) -> Geometry:
     """Module 2: the run's path, corner zones replaced by PH quintics within error_limit_mm.
 
     Joints between blocks whose tangents turn by more than SMOOTH_JOINT_RAD are G1 corners:
     the feed is brought to zero there (exact stop), which is always within any tolerance.
     """
+    cache = {} if cache is None else cache
     pieces: list[Piece] = []
     infos: list[CornerInfo] = []
     stops: list[float] = []
     for i, bc in enumerate(curves):
         if bc.nurbs:
-            ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph, len(infos))
+            ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph,
+                                     len(infos), cache)
             infos += inf
         else:
             kind = PieceKind.ARC if isinstance(bc.curve, ArcCurve) else PieceKind.LINE

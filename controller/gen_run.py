@@ -110,9 +110,11 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
     reductions: tuple[Reduction, ...] = ()
     lookback = int(round(LOOKBACK_S / T))
     status = RunStatus.CONTOUR_LIMIT_NOT_MET
+    fit_cache: dict = {}
+    sample_cache: dict = {}
     for rounds in range(1, ip.max_dynamics_rounds + 1):
-        geo = build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph)
-        feed = plan_path_feed(geo.path, _feed_input(config, settings, reductions))
+        geo = build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph, fit_cache)
+        feed = plan_path_feed(geo.path, _feed_input(config, settings, reductions), sample_cache)
         if feed.result != PlanResult.OK:
             status = RunStatus.FEED_PLAN_FAILED
             break

@@ -44,11 +44,14 @@ def sample_profile(profile: FeedProfile, sample_period_s: float) -> tuple[np.nda
     return t, s, v, a
 
 
-def _points_exact_or_ph(piece: Piece, s: np.ndarray) -> np.ndarray:
+def _points_exact_or_ph(piece: Piece, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points and tangent angles at path arc lengths inside one piece."""
     if piece.kind == PieceKind.PH:
-        xi, _ = ph_interpolate(piece.curve, s - piece.s0_mm)  # type: ignore[arg-type]
-        return piece.curve.evaluate(xi, 0)[0]
-    return piece.curve.evaluate(piece.u_at(s), 0)[0]
+        u, _ = ph_interpolate(piece.curve, s - piece.s0_mm)  # type: ignore[arg-type]
+    else:
+        u = piece.u_at(s)
+    d = piece.curve.evaluate(u, 1)
+    return d[0], np.arctan2(d[1, :, 1], d[1, :, 0])
 
 
 def _sequential_taylor(path: Path, idx: np.ndarray, v: np.ndarray, a: np.ndarray,
@@ -75,12 +78,14 @@ def interpolate(path: Path, profile: FeedProfile, sample_period_s: float,
     t, s, v, a = sample_profile(profile, sample_period_s)
     idx = path.piece_index(s)
     xy = np.empty((s.size, 2))
+    phi = np.empty(s.size)
     for i in np.unique(idx):
         piece = path.pieces[i]
         rows = idx == i
+        xy_exact, phi[rows] = _points_exact_or_ph(piece, s[rows])
         if piece.kind != PieceKind.NURBS or method == Interpolation.PH_AND_EXACT_ARC_LENGTH:
-            xy[rows] = _points_exact_or_ph(piece, s[rows])
+            xy[rows] = xy_exact
     if method == Interpolation.SEQUENTIAL_TAYLOR:
         _sequential_taylor(path, idx, v, a, xy, sample_period_s)
     xy[-1] = path.end_xy
-    return Samples(t, s, v, a, xy, path.tangent_angle(s), path.line_at(s))
+    return Samples(t, s, v, a, xy, phi, path.line_at(s))
