@@ -15,6 +15,7 @@ from controller.motion_types import MotionProgress, MotionResult, MotionSettings
 from controller.pacing import VirtualPacer, WallPacer
 from controller.refring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
 from controller.refsource import SourceState
+from controller.rt import back_to_normal, try_realtime
 from controller.runtime_stages import (
     BlocksFn,
     GenerateFn,
@@ -39,6 +40,7 @@ class RuntimeOptions:
     drive: Drive | None = None  # an unopened drive (tests); default: the configured backend
     settings: dict[str, Any] = field(default_factory=dict)  # MotionSettings overrides
     on_progress: Callable[[MotionProgress], None] | None = None
+    rt_priority: int | None = 80  # real-time mode: try SCHED_FIFO for the motion process
 
 
 class _Messages:
@@ -107,20 +109,26 @@ class Runtime:
         n_cols = len(self.config.axes) + 2
         ring = RefRing.create(int(self.options.ring_seconds / self.config.sample_period_s), n_cols)
         messages = _Messages(_CTX.Queue())
+        rt = "off"
         try:
-            self._start(ring, messages)
+            # Built before the fork so that backend imports (scipy) are paid once, not per child.
             drive = self.options.drive or make_drive(
                 self.config, realtime=not self.options.virtual_time)
+            self._start(ring, messages)
+            if self.options.rt_priority is not None and not self.options.virtual_time:
+                rt = try_realtime(self.options.rt_priority)
             drive.open()
             try:
                 result = self._motion(drive, ring, messages)
             finally:
                 drive.close()
+                back_to_normal()
         finally:
             ring.set_flag(FLAG_ABORT)
             self._stop_children()
             messages.drain(wait_s=0.05)
             ring.close()
+        result.extra["realtime"] = rt
         return self._finish(result, messages, t0_s)
 
     def _start(self, ring: RefRing, messages: _Messages) -> None:
