@@ -12,6 +12,7 @@ from controller import __version__
 COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("check", "controller.check_cmd", "check a program without moving anything"),
     ("inspect", "controller.inspect_cmd", "show NURBS blocks, sharp corners and PH segments"),
+    ("simulate", "controller.simulate_cmd", "plan a program headless and report its errors"),
     ("run", "controller.run_cmd", "run a program on the configured drive (sim card by default)"),
 )
 
