@@ -23,6 +23,8 @@ from controller.stopping import stop_along_path
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import LostCommunicationError
 
+SETTLE_HOLD_S = 0.02  # encoder equal to the step counter for this long = settled
+
 
 class MotionController:
     """One instance runs one program: run() returns a MotionResult, never raises on faults.
@@ -87,6 +89,7 @@ class MotionController:
         self.last_motion_s = 0.0
         self.next_progress_s = 0.0
         self.settle_deadline_s = 0.0
+        self.settled_since_s: float | None = None
         self.position_known = True
 
     def _cycle(self) -> None:
@@ -215,7 +218,14 @@ class MotionController:
         if self.state is not MotionState.SETTLING:
             return
         cmd, enc = self.drive.position_counts()
-        if np.array_equal(cmd, enc) or self.pacer.elapsed_s() >= self.settle_deadline_s:
+        now_s = self.pacer.elapsed_s()
+        # Equal once is not settled: the 36 % overshoot crosses the target on its way.
+        if not np.array_equal(cmd, enc):
+            self.settled_since_s = None
+        elif self.settled_since_s is None:
+            self.settled_since_s = now_s
+        held_s = 0.0 if self.settled_since_s is None else now_s - self.settled_since_s
+        if held_s >= SETTLE_HOLD_S or now_s >= self.settle_deadline_s:
             self._finish(self.outcome or Outcome.DONE, self.message)
 
     def _finish(self, outcome: Outcome, message: str) -> None:
