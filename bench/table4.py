@@ -1,0 +1,82 @@
+"""Table IV for the benchmark programs: four algorithms, ratio to the time-optimal bound, RTF.
+
+Usage: python bench/table4.py [PROGRAM ...] [--markdown]
+The bound comes from bench/time_bound.py (independent B-spline evaluation, forward-backward pass);
+the real-time factor is trajectory seconds per CPU second of planning (all four modules).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "bench"))
+
+from time_bound import arc_length_samples  # noqa: E402
+
+from controller.config import load_config  # noqa: E402
+from controller.generator import Algorithm  # noqa: E402
+from controller.interpreter import read_program  # noqa: E402
+from controller.sim_report import report, simulate  # noqa: E402
+from controller.simulate_cmd import TABLE_ROWS, format_table  # noqa: E402
+from controller.time_bound import time_optimal_bound_s  # noqa: E402
+
+PROGRAMS = ("nc_programs/naca2415.nc", "nc_programs/butterfly.nc")
+PAPER_TABLE_IV = {  # the paper's simulated Table IV (airfoil), same row order as TABLE_ROWS
+    "adaptive": (337.66, 41.50, 84.32, 13.91, 113.89, 19.60, 7.42, 1.0295),
+    "curvature": (196.70, 27.88, 22.66, 6.26, 41.08, 8.83, 4.85, 1.1395),
+    "nurbs-lookahead": (57.97, 21.69, 26.54, 5.72, 27.12, 6.35, 3.40, 1.3615),
+    "ph-lookahead": (82.91, 23.98, 24.99, 6.24, 29.98, 8.15, 4.35, 1.2158),
+}
+
+
+def bound_s(program: str) -> float:
+    cfg = load_config().interpolator
+    s, kappa = arc_length_samples(Path(program))
+    return time_optimal_bound_s(s, kappa, cfg.max_feed_mm_s, cfg.max_accel_mm_s2, 0.001,
+                                cfg.chord_tolerance_mm)
+
+
+def markdown(program: str, results: list[dict], paper: bool) -> str:
+    names = [r["algorithm"] for r in results]
+    head = "| | " + " | ".join(f"ours: {n}" for n in names)
+    head += " | " + " | ".join(f"paper: {n}" for n in names) if paper else ""
+    sep = "|---" * (1 + len(names) * (2 if paper else 1)) + "|"
+    lines = [f"`{program}`", "", head + " |", sep]
+    for i, (label, get) in enumerate(TABLE_ROWS):
+        row = f"| {label} | " + " | ".join(f"{get(r):.2f}" if i < 7 else f"{get(r):.4f}"
+                                           for r in results)
+        if paper:
+            row += " | " + " | ".join(str(PAPER_TABLE_IV[n][i]) for n in names)
+        lines.append(row + " |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("programs", nargs="*", default=[str(p) for p in PROGRAMS])
+    ap.add_argument("--markdown", action="store_true")
+    args = ap.parse_args(argv)
+    config = load_config()
+    for program in args.programs:
+        results = [report(simulate(read_program(program, config), config, a.value), program,
+                          a.value, config) for a in Algorithm]
+        if args.markdown:
+            print(markdown(program, results, paper="naca" in program))
+        else:
+            print(format_table(program, results))
+        ph = results[-1]
+        bound = bound_s(program)
+        rtf = ph["motion_time_s"] / ph["planning_cpu_s"]
+        print(f"\nph-lookahead: {ph['motion_time_s']:.4f} s, time-optimal bound {bound:.4f} s, "
+              f"ratio {ph['motion_time_s'] / bound:.4f}; contour max "
+              f"{ph['contour_error_um']['max']:.2f} um; max feed {ph['max_feed_mm_s']:.4f} "
+              f"mm/s; max tangential accel {ph['max_tangential_accel_mm_s2']:.1f} mm/s^2; "
+              f"planning CPU {ph['planning_cpu_s']:.3f} s, real-time factor {rtf:.1f}\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
