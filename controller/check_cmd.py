@@ -12,7 +12,11 @@ from controller.blocks import ArcBlock, LineBlock, NcBlock, NurbsBlock
 from controller.config import MachineConfig, load_config
 from controller.errors import ConfigError, NcError
 from controller.interpreter import read_program
-from controller.nc_geometry import Box, arc_block_box, line_box, nurbs_length_and_box
+from controller.nc_geometry import (
+    arc_length_and_box,
+    line_length_and_box,
+    nurbs_length_and_box,
+)
 
 _AXES = ("x", "y", "z")
 
@@ -34,68 +38,63 @@ class CheckSummary:
     travel_mm: dict[str, list[float]] = field(default_factory=dict)
 
 
-def _block_geometry(block: NcBlock) -> tuple[float, Box | None]:
-    """Length and box of a motion block (NURBS: from dense samples, 64 per knot span)."""
-    if isinstance(block, LineBlock):
-        return block.length_mm, line_box(block)
-    if isinstance(block, ArcBlock):
-        return block.length_mm, arc_block_box(block)
-    if isinstance(block, NurbsBlock):
-        return nurbs_length_and_box(block)
-    return 0.0, None
+_GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
+             NurbsBlock: nurbs_length_and_box}  # NURBS: from dense samples, 64 per knot span
+Limits = list[tuple[int, str, float, float]]
 
 
-Problem = tuple[str, float, tuple[float, float]]
+def _limits(config: MachineConfig) -> Limits:
+    """(index, axis, min, max) of each axis the machine has."""
+    return [(i, name, *config.axis(name).travel_mm) for i, name in enumerate(_AXES)
+            if config.has_axis(name)]
 
 
-def _limit_problem(box: Box, config: MachineConfig) -> Problem | None:
-    """(axis, position reached, travel) of the first axis whose travel the box leaves."""
-    for i, name in enumerate(_AXES):
-        if not config.has_axis(name):
-            continue
-        lo, hi = config.axis(name).travel_mm
-        if box[0][i] < lo:
-            return name, box[0][i], (lo, hi)
-        if box[1][i] > hi:
-            return name, box[1][i], (lo, hi)
-    return None
+def _travel_error(path: str, block: NcBlock, name: str, reached: float, lo: float,
+                  hi: float) -> NcError:
+    axis = name.upper()
+    return NcError(path, block.source.first_line, 1, axis,
+                   f"{axis} travel limit exceeded: the path reaches {reached:.4f} mm, "
+                   f"travel is [{lo:g}, {hi:g}] mm")
 
 
 def check_program(path: str, config: MachineConfig) -> CheckSummary:
     """Parse and check the whole program; raise NcError at the first problem."""
     summary = CheckSummary(program=path, config=config.name)
-    kinds: Counter[str] = Counter()
+    kinds: Counter[type] = Counter()
     lo, hi = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]  # the machine starts at X0 Y0 Z0
+    limits = _limits(config)
     for block in read_program(path, config):
-        kinds[type(block).__name__] += 1
-        length, box = _block_geometry(block)
-        if box is None:
+        kind = type(block)
+        kinds[kind] += 1
+        geometry = _GEOMETRY.get(kind)
+        if geometry is None:
             continue
-        problem = _limit_problem(box, config)
-        if problem is not None:
-            axis, reached, (tlo, thi) = problem
-            raise NcError(path, block.source.first_line, 1, axis.upper(),
-                          f"{axis.upper()} travel limit exceeded: the path reaches "
-                          f"{reached:.4f} mm, travel is [{tlo:g}, {thi:g}] mm")
+        length, (blo, bhi) = geometry(block)
+        for i, name, tlo, thi in limits:
+            if blo[i] < tlo:
+                raise _travel_error(path, block, name, blo[i], tlo, thi)
+            if bhi[i] > thi:
+                raise _travel_error(path, block, name, bhi[i], tlo, thi)
+            if blo[i] < lo[i]:
+                lo[i] = blo[i]
+            if bhi[i] > hi[i]:
+                hi[i] = bhi[i]
         _add_motion(summary, block, length)
-        for i in range(3):
-            lo[i], hi[i] = min(lo[i], box[0][i]), max(hi[i], box[1][i])
-    summary.blocks = dict(sorted(kinds.items()))
-    for i, name in enumerate(_AXES):
-        if config.has_axis(name):
-            summary.extents_mm[name] = [lo[i], hi[i]]
-            summary.travel_mm[name] = list(config.axis(name).travel_mm)
+    summary.blocks = dict(sorted((k.__name__, v) for k, v in kinds.items()))
+    for i, name, tlo, thi in limits:
+        summary.extents_mm[name] = [lo[i], hi[i]]
+        summary.travel_mm[name] = [tlo, thi]
     return summary
 
 
 def _add_motion(summary: CheckSummary, block: NcBlock, length: float) -> None:
     summary.path_length_mm += length
     summary.nominal_time_s += length / block.feed_mm_s  # type: ignore[union-attr]
-    if isinstance(block, LineBlock) and block.rapid:
+    if getattr(block, "rapid", False):
         summary.rapid_length_mm += length
     else:
         summary.feed_length_mm += length
-    if isinstance(block, NurbsBlock):
+    if type(block) is NurbsBlock:
         summary.nurbs_blocks += 1
         summary.nurbs_control_points += block.control_points.shape[0]
 

@@ -64,18 +64,30 @@ def hull_box(block: NurbsBlock) -> Box:
     return (float(lo[0]), float(lo[1]), z), (float(hi[0]), float(hi[1]), z)
 
 
-def line_box(block: LineBlock) -> Box:
+def line_length_and_box(block: LineBlock) -> tuple[float, Box]:
     s, e = block.start, block.end
-    return (min(s[0], e[0]), min(s[1], e[1]), min(s[2], e[2])), \
-        (max(s[0], e[0]), max(s[1], e[1]), max(s[2], e[2]))
+    length = math.dist(s, e)
+    return length, ((min(s[0], e[0]), min(s[1], e[1]), min(s[2], e[2])),
+                    (max(s[0], e[0]), max(s[1], e[1]), max(s[2], e[2])))
 
 
-def arc_block_box(block: ArcBlock) -> Box:
+def arc_sweep_rad(block: ArcBlock) -> float:
+    """ArcBlock.sweep_rad with math instead of numpy scalars (this runs once per arc)."""
+    (sx, sy, _), (ex, ey, _) = block.start, block.end
+    cx, cy = block.center
+    a0, a1 = math.atan2(sy - cy, sx - cx), math.atan2(ey - cy, ex - cx)
+    sweep = ((a0 - a1) if block.clockwise else (a1 - a0)) % (2 * math.pi)
+    sweep = (2 * math.pi if sweep <= 1e-12 else sweep) + 2 * math.pi * block.turns
+    return -sweep if block.clockwise else sweep
+
+
+def arc_length_and_box(block: ArcBlock) -> tuple[float, Box]:
     (sx, sy, z), (ex, ey, _) = block.start, block.end
     cx, cy = block.center
-    sweep = block.sweep_rad
+    sweep = arc_sweep_rad(block)
+    r = math.hypot(sx - cx, sy - cy)
     if abs(sweep) >= 2 * math.pi:
-        r = max(block.radius_mm, math.hypot(ex - cx, ey - cy))
-        return (cx - r, cy - r, z), (cx + r, cy + r, z)
+        r_max = max(r, math.hypot(ex - cx, ey - cy))
+        return abs(sweep) * r, ((cx - r_max, cy - r_max, z), (cx + r_max, cy + r_max, z))
     x0, y0, x1, y1 = arc_box(sx, sy, ex, ey, cx, cy, sweep)
-    return (x0, y0, z), (x1, y1, z)
+    return abs(sweep) * r, ((x0, y0, z), (x1, y1, z))
