@@ -26,7 +26,7 @@ _CHUNK_CHARS = 1 << 16
 def read_program(path: str, config: MachineConfig) -> Iterator[NcBlock]:
     """Yield the NC blocks of a program one by one; raise NcError at the first mistake."""
     try:
-        handle = open(path, encoding="utf-8", errors="replace", newline=None)  # noqa: SIM115
+        handle = open(path, encoding="utf-8-sig", errors="replace", newline=None)  # noqa: SIM115
     except OSError as exc:
         raise NcError(path, 0, 0, "", f"cannot open program: {exc.strerror or exc}") from exc
     with handle:
