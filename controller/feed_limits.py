@@ -19,7 +19,7 @@ def chord_error_feed_mm_s(kappa_per_mm: np.ndarray | float, sample_period_s: flo
     of a negative number. kappa -> 0 gives an unbounded V_af, i.e. Vmax.
     """
     k = _abs_kappa(kappa_per_mm)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         rho = np.where(k > 0.0, 1.0 / np.where(k > 0.0, k, 1.0), np.inf)
         formula = np.sqrt(np.maximum(2.0 * rho * chord_tol_mm - chord_tol_mm ** 2, 0.0))
         chord = np.where(rho >= chord_tol_mm, 2.0 * formula, 2.0 * rho)
@@ -37,7 +37,7 @@ def centripetal_feed_mm_s(kappa_per_mm: np.ndarray | float, accel_mm_s2: float,
                           vmax_mm_s: float) -> np.ndarray:
     """sqrt(Amax/kappa): normal acceleration kappa v^2 at most Amax; Vmax where kappa -> 0."""
     k = _abs_kappa(kappa_per_mm)
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", over="ignore"):
         v = np.sqrt(accel_mm_s2 / k)
     return np.minimum(v, vmax_mm_s)
 

@@ -108,10 +108,13 @@ def _initial_nodes(curve: LimitCurve, v0: float, v1: float) -> _Nodes:
 
 def _node_speeds(nodes: _Nodes, accel: float, v0: float, v1: float) -> np.ndarray | PlanResult:
     """Node speeds reachable by quintic transitions both ways (v^2 passes at 8A/15)."""
-    v = fb_pass_speed_mm_s(nodes.s, nodes.cap, EFFECTIVE_ACCEL_FACTOR * accel, v0, v1)
-    if v[0] < v0 * (1.0 - 1e-12):
+    a_eff = EFFECTIVE_ACCEL_FACTOR * accel
+    v = fb_pass_speed_mm_s(nodes.s, nodes.cap, a_eff, v0, v1)
+    # The passes work on v^2 shifted by 2 a s, so they round to ~1e-16 of that scale.
+    slack = 1e-12 * (2.0 * a_eff * nodes.s[-1] + v0 * v0 + v1 * v1)
+    if v[0] ** 2 < v0 * v0 - slack:
         return PlanResult.START_TOO_FAST
-    if v[-1] < v1 * (1.0 - 1e-12):
+    if v[-1] ** 2 < v1 * v1 - slack:
         return PlanResult.END_UNREACHABLE
     v[0], v[-1] = v0, v1
     return v

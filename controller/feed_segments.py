@@ -15,6 +15,7 @@ from controller.feed_profile import (
 )
 
 PEAK_BISECTIONS = 16
+CRUISE_LEVELS = 12  # candidate cruise speeds when waiting at a node speed is involved
 SHAPE_SAMPLES = 33  # samples of a transition's v(s) when fitting it under vlim
 
 
@@ -106,31 +107,70 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     A transition sampled at (x_j, c_j) (distance from its start, speed) fits when started at p
     with p + x_j >= first_reach(c_j) for all j: the earliest start is max_j(first_reach - x_j).
     Braking mirrors this with last_reach. Feasibility is monotone in V, so a bisection over all
-    segments at once finds it. Flat segments keep V = max(vi, vj)."""
+    segments at once finds it. Flat segments cruise at min(vc, min vlim), which is safe."""
     a, b = win.a, win.b
     low = np.maximum(vi, vj)
     vc = np.sqrt((16.0 * accel * (b - a) / 15.0 + vi * vi + vj * vj) / 2.0)
-    high = np.where(flat, low, np.maximum(np.minimum(vc, win.curve.span_max(a, b)), low))
+    # Cruising at or below the segment's minimum of vlim is always safe: the fallback.
+    safe = np.maximum(np.minimum(vc, win.curve.span_min(a, b)), low)
+    high = np.maximum(np.minimum(vc, win.curve.span_max(a, b)), low)
     allk = np.arange(len(a))
     e0, d0 = _window(win, vi, vj, high, allk, accel)
-    ok = e0 <= d0
-    todo = np.flatnonzero(~ok & (high > low))
-    lo_v, hi_v = low[todo], high[todo]
+    ok = (e0 <= d0) & ~flat
+    todo = np.flatnonzero(~ok & ~flat & (high > safe))
+    lo_v, hi_v = safe[todo], high[todo]
     for _ in range(PEAK_BISECTIONS if len(todo) else 0):
         mid = 0.5 * (lo_v + hi_v)
         m0, m1 = _window(win, vi[todo], vj[todo], mid, todo, accel)
         good = m0 <= m1
         lo_v, hi_v = np.where(good, mid, lo_v), np.where(good, hi_v, mid)
-    vp = high.copy()
+    vp = np.where(ok, high, safe)
     vp[todo] = lo_v
     e0[todo], d0[todo] = _window(win, vi[todo], vj[todo], lo_v, todo, accel)
-    # Still empty at V = max(vi, vj): accelerate at once and brake at the end (the check then
-    # splits or flattens the segment).
+    _prefer_no_wait(win, vi, vj, safe, vp, e0, d0, accel, flat)
+    # Flat segments, and those whose window stays empty: accelerate at once, brake at the end
+    # (safe when the node speeds are below the segment's minimum; otherwise the check splits or
+    # flattens the segment).
     sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
-    bad = ~(e0 <= d0)
+    bad = ~(e0 <= d0) | flat
     e0 = np.where(bad, a + sa, e0)
     d0 = np.where(bad, np.maximum(b - sd, a + sa), d0)
     return SegmentPlan(a, b, vi, vj, vp, e0, d0)
+
+
+def _prefer_no_wait(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, safe: np.ndarray,
+                    vp: np.ndarray, e0: np.ndarray, d0: np.ndarray, accel: float,
+                    flat: np.ndarray) -> None:
+    """Where the highest cruise makes the profile wait at a node speed, a lower cruise may be
+    faster overall: try levels between the safe one and the highest, keep the quickest (in place).
+    """
+    sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
+    waits = (e0 - sa > win.a * (1.0 + 1e-12) + 1e-12) | (d0 + sd < win.b - 1e-12)
+    k = np.flatnonzero(waits & (e0 <= d0) & ~flat & (vp > safe))
+    if len(k) == 0:
+        return
+    frac = np.linspace(0.0, 1.0, CRUISE_LEVELS)
+    levels = (safe[k, None] + (vp[k] - safe[k])[:, None] * frac).ravel()
+    kk = np.repeat(k, CRUISE_LEVELS)
+    c0, c1 = _window(win, vi[kk], vj[kk], levels, kk, accel)
+    dur = _segment_time_s(win.a[kk], win.b[kk], vi[kk], vj[kk], levels, c0, c1, accel)
+    dur = np.where(c0 <= c1, dur, np.inf).reshape(len(k), CRUISE_LEVELS)
+    best = np.argmin(dur, axis=1)
+    pick = np.arange(len(k)) * CRUISE_LEVELS + best
+    vp[k], e0[k], d0[k] = levels[pick], c0[pick], c1[pick]
+
+
+def _segment_time_s(a: np.ndarray, b: np.ndarray, vi: np.ndarray, vj: np.ndarray,
+                    vp: np.ndarray, e0: np.ndarray, d0: np.ndarray, accel: float) -> np.ndarray:
+    """Time of: wait at vi, accelerate, cruise at vp from e0 to d0, brake, wait at vj."""
+    sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
+    w0, w1 = np.maximum(e0 - sa - a, 0.0), np.maximum(b - d0 - sd, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0 = np.where(w0 > 0.0, w0 / vi, 0.0)
+        t1 = np.where(w1 > 0.0, w1 / vj, 0.0)
+        tc = np.maximum(d0 - e0, 0.0) / vp
+    return (t0 + t1 + tc + transition_duration_s(vi, vp, accel)
+            + transition_duration_s(vp, vj, accel))
 
 
 def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray, k: np.ndarray,

@@ -1,0 +1,116 @@
+"""Feed planner: profiles never exceed vlim or Amax, start and end where asked, near the bound."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from controller.feed_planner import PlanResult, plan_feed
+from controller.feed_profile import FeedProfile
+from controller.time_bound import fb_pass_speed_mm_s, traversal_time_s
+
+REL_TOL = 1e-6  # v may exceed vlim by at most this fraction of max vlim
+
+
+@st.composite
+def limit_curves(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+    """Random smooth vlim: Vmax with Gaussian dips (some deep and narrow) and bumps, plus
+    feasible start and end speeds (below the curve's minimum, reachable over the length)."""
+    length = draw(st.floats(0.5, 400.0))
+    vmax = draw(st.floats(5.0, 200.0))
+    accel = draw(st.floats(200.0, 10000.0))
+    n = draw(st.integers(200, 6000))
+    s = np.linspace(0.0, length, n)
+    shape = np.zeros(n)
+    for _ in range(draw(st.integers(0, 8))):
+        centre = draw(st.floats(0.0, 1.0)) * length
+        width = draw(st.floats(1e-3, 0.3)) * length
+        depth = draw(st.floats(-0.5, 0.97))
+        shape += depth * np.exp(-0.5 * ((s - centre) / width) ** 2)
+    vlim = np.clip(vmax * (1.0 - shape), 0.03 * vmax, vmax)
+    floor = float(vlim.min())
+    v0 = draw(st.floats(0.0, 1.0)) * floor
+    v1 = draw(st.floats(0.0, 1.0)) * floor
+    # Keep |v1^2 - v0^2| within reach of one quintic transition over the length.
+    reach = 0.999 * 16.0 * accel * length / 15.0
+    v0 = min(v0, np.sqrt(v1 * v1 + reach))
+    v1 = min(v1, np.sqrt(v0 * v0 + reach))
+    return s, vlim, accel, v0, v1
+
+
+def _dense(profile: FeedProfile) -> tuple[np.ndarray, ...]:
+    t = np.linspace(0.0, profile.duration_s, 100_001)
+    joints = np.array([p.t0_s for p in profile.phases])
+    t = np.sort(np.r_[t, joints, joints + 1e-9])
+    return (t, *profile.evaluate(t))
+
+
+def assert_profile_valid(s: np.ndarray, vlim: np.ndarray, accel: float, v0: float, v1: float,
+                         profile: FeedProfile) -> None:
+    t, pos, v, a = _dense(profile)
+    assert v.max() <= vlim.max() * (1.0 + REL_TOL)
+    assert np.all(v <= np.interp(pos, s, vlim) + REL_TOL * vlim.max())
+    # Between the dense samples too: the exact speed at every grid point of vlim.
+    assert np.abs(a).max() <= accel * (1.0 + 1e-9)
+    assert np.all(np.diff(pos) >= -1e-12)
+    assert v[0] == pytest.approx(v0, abs=1e-12) and v[-1] == pytest.approx(v1, abs=1e-9)
+    assert pos[0] == 0.0 and pos[-1] == pytest.approx(s[-1], abs=1e-9 * (1.0 + s[-1]))
+    assert profile.length_mm == pytest.approx(s[-1], abs=1e-9 * (1.0 + s[-1]))
+    for p, q in zip(profile.phases[:-1], profile.phases[1:], strict=True):
+        assert p.v_end_mm_s == q.v_start_mm_s  # C0 in feed; a = jerk = 0 at every joint
+        assert p.s0_mm + p.length_mm == pytest.approx(q.s0_mm, abs=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(limit_curves())
+def test_random_limits_respected(case: tuple) -> None:
+    s, vlim, accel, v0, v1 = case
+    plan = plan_feed(s, vlim, accel, v0, v1)
+    assert plan.result is PlanResult.OK
+    assert_profile_valid(s, vlim, accel, v0, v1, plan.profile)
+    # Never faster than the time-optimal pass under the same limits (a consistency check; on a
+    # fine grid, since a coarse one overestimates the optimal time).
+    fine = np.linspace(0.0, s[-1], 200_001)
+    fb = fb_pass_speed_mm_s(fine, np.interp(fine, s, vlim), accel, v0, v1)
+    assert plan.profile.duration_s >= traversal_time_s(fine, fb) * (1.0 - 1e-4)
+
+
+def test_constant_limit_reaches_vmax() -> None:
+    s = np.linspace(0.0, 50.0, 1001)
+    plan = plan_feed(s, np.full_like(s, 50.0), 2000.0)
+    _, _, v, _ = _dense(plan.profile)
+    assert v.max() == pytest.approx(50.0, rel=1e-12)
+
+
+def test_start_above_limit() -> None:
+    s = np.linspace(0.0, 10.0, 101)
+    assert plan_feed(s, np.full_like(s, 10.0), 1000.0, 11.0).result is PlanResult.START_TOO_FAST
+
+
+def test_end_above_limit() -> None:
+    s = np.linspace(0.0, 10.0, 101)
+    assert plan_feed(s, np.full_like(s, 10.0), 1000.0, 0.0, 12.0).result is PlanResult.END_TOO_FAST
+
+
+def test_end_unreachable() -> None:
+    s = np.linspace(0.0, 0.01, 101)  # 10 um is far too short to reach 50 mm/s from rest
+    result = plan_feed(s, np.full_like(s, 60.0), 1000.0, 0.0, 50.0).result
+    assert result is PlanResult.END_UNREACHABLE
+
+
+def test_start_cannot_brake_in_time() -> None:
+    s = np.linspace(0.0, 1.0, 1001)
+    vlim = np.where(s < 0.5, 100.0, 5.0)
+    result = plan_feed(s, vlim, 1000.0, 100.0, 0.0).result
+    assert result is PlanResult.START_TOO_FAST
+
+
+@pytest.mark.parametrize("s, vlim", [
+    (np.array([0.0, 1.0, 1.0]), np.ones(3)),
+    (np.linspace(0.0, 1.0, 5), np.array([1.0, 1.0, 0.0, 1.0, 1.0])),
+    (np.linspace(0.0, 1.0, 5), np.ones(4)),
+])
+def test_invalid_input(s: np.ndarray, vlim: np.ndarray) -> None:
+    assert plan_feed(s, vlim, 1000.0).result is PlanResult.INVALID_INPUT
