@@ -97,6 +97,7 @@ def _contour(blocks: list[NcBlock], config: MachineConfig, algorithm: Algorithm,
         return None
     start = np.array(blocks[0].start[:2])
     run, xy, v, line = plan_run(curves, start, config, algorithm)
+    xy[-1] = blocks[-1].end[:2]  # the programmed end point exactly, not a curve evaluation
     pos = _pos_row(config, xy, blocks[0].start[2])
     return PlannedStep(RefChunk(t0_s + config.sample_period_s, pos, v, line), run)
 

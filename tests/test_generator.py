@@ -1,0 +1,137 @@
+"""Acceptance of the reference-point generator (issue 4) on the benchmarks and generated programs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from controller.blocks import NurbsBlock
+from controller.config import load_config
+from controller.feed_limits import path_feed_limit_mm_s  # noqa: F401  (documents the bound's vlim)
+from controller.generator import Algorithm, generate_reference
+from controller.interpreter import read_program
+from controller.nurbs import Nurbs
+from controller.sim_report import report, simulate
+from controller.time_bound import time_optimal_bound_s
+from tests.gen_programs import lobed_nurbs, lsq_nurbs, naca_points, write_g62
+
+REPO = Path(__file__).resolve().parents[1]
+NACA = str(REPO / "nc_programs/naca2415.nc")
+BUTTERFLY = str(REPO / "nc_programs/butterfly.nc")
+CFG = load_config()
+IP = CFG.interpolator
+LIMIT_UM = IP.contour_error_limit_mm * 1000.0
+
+
+def _nurbs_of(program: str) -> Nurbs:
+    blocks = [b for b in read_program(program, CFG) if isinstance(b, NurbsBlock)]
+    assert len(blocks) == 1
+    return Nurbs.from_block(blocks[0])
+
+
+def _distance_to_curve_mm(curve: Nurbs, pts: np.ndarray) -> np.ndarray:
+    """Distance from points to a dense polyline of the curve (sagitta error ~1e-5 mm)."""
+    u = np.linspace(curve.u_start, curve.u_end, 400_001)
+    poly = curve.evaluate(u, 0)[0]
+    _, idx = cKDTree(poly).query(pts)
+    best = np.full(len(pts), np.inf)
+    for j in (idx - 1, idx):
+        a = poly[np.clip(j, 0, len(poly) - 2)]
+        b = poly[np.clip(j + 1, 0, len(poly) - 1)]
+        ab = b - a
+        t = np.clip(np.einsum("ij,ij->i", pts - a, ab) / np.maximum(
+            np.einsum("ij,ij->i", ab, ab), 1e-300), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(pts - (a + t[:, None] * ab), axis=1))
+    return best
+
+
+def _bound_s(curve: Nurbs) -> float:
+    s = np.linspace(0.0, curve.length_mm, 40_000)
+    kappa = curve.curvature(curve.u_of_s(s))
+    return time_optimal_bound_s(s, kappa, IP.max_feed_mm_s, IP.max_accel_mm_s2,
+                                CFG.sample_period_s, IP.chord_tolerance_mm)
+
+
+def _check_limits(program: str) -> dict:
+    """Every limit of issue 4 on one program; returns the report for further checks."""
+    traj = simulate(read_program(program, CFG), CFG, "ph-lookahead")
+    r = report(traj, program, "ph-lookahead", CFG)
+    assert r["contour_limit_met"]
+    assert r["contour_error_um"]["max"] <= LIMIT_UM
+    assert r["max_feed_mm_s"] <= IP.max_feed_mm_s * (1 + 1e-9)
+    assert r["max_tangential_accel_mm_s2"] <= IP.max_accel_mm_s2 * (1 + 1e-6)
+    curve = _nurbs_of(program)
+    assert np.array_equal(traj.ref_mm[-1], curve.control_points[-1])  # exactly, as programmed
+    assert _distance_to_curve_mm(curve, traj.ref_mm).max() <= 0.003
+    return r
+
+
+@pytest.mark.parametrize("program", [NACA, BUTTERFLY])
+def test_benchmarks_meet_every_limit_and_the_time_target(program: str) -> None:
+    r = _check_limits(program)
+    assert r["motion_time_s"] <= 1.10 * _bound_s(_nurbs_of(program))
+
+
+def test_naca_bound_matches_the_corpus_value() -> None:
+    assert _bound_s(_nurbs_of(NACA)) == pytest.approx(1.088, abs=0.002)
+
+
+def test_naca_corner_is_the_leading_edge_replaced_by_ph() -> None:
+    r = report(simulate(read_program(NACA, CFG), CFG, "ph-lookahead"), NACA, "ph", CFG)
+    assert r["sharp_corners"] == 1
+    assert r["ph_segments"] >= 2
+    assert r["ph_fit_error_um"]["rms"] <= 1.0
+
+
+def _table(program: str) -> dict[str, dict]:
+    return {a.value: report(simulate(read_program(program, CFG), CFG, a.value), program,
+                            a.value, CFG) for a in Algorithm}
+
+
+def test_table_iv_qualitative_result_on_the_butterfly() -> None:
+    t = _table(BUTTERFLY)
+    assert t["adaptive"]["contour_error_um"]["max"] > LIMIT_UM
+    assert t["curvature"]["contour_error_um"]["max"] > LIMIT_UM
+    assert t["nurbs-lookahead"]["contour_error_um"]["max"] <= LIMIT_UM
+    assert t["ph-lookahead"]["contour_error_um"]["max"] <= LIMIT_UM
+    assert t["ph-lookahead"]["motion_time_s"] < t["nurbs-lookahead"]["motion_time_s"]
+
+
+def test_table_iv_on_the_naca() -> None:
+    t = _table(NACA)
+    assert t["adaptive"]["contour_error_um"]["max"] > LIMIT_UM
+    assert t["nurbs-lookahead"]["contour_error_um"]["max"] <= LIMIT_UM
+    assert t["ph-lookahead"]["contour_error_um"]["max"] <= LIMIT_UM
+    assert t["ph-lookahead"]["motion_time_s"] < t["nurbs-lookahead"]["motion_time_s"]
+
+
+@pytest.mark.parametrize(("code", "chord_mm"), [("0012", 20.0), ("4412", 40.0), ("2415", 25.0)])
+def test_other_naca_sections_meet_every_limit(tmp_path: Path, code: str, chord_mm: float) -> None:
+    ctrl, knots = lsq_nurbs(naca_points(code, chord_mm))
+    program = str(write_g62(tmp_path / f"naca{code}.nc", ctrl, knots))
+    _check_limits(program)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_random_lobed_nurbs_meet_every_limit(tmp_path: Path, seed: int) -> None:
+    ctrl, weights, knots = lobed_nurbs(seed)
+    program = str(write_g62(tmp_path / f"lobed{seed}.nc", ctrl, knots, weights))
+    r = _check_limits(program)
+    assert r["sharp_corners"] >= 1
+
+
+def test_stream_is_continuous_in_time_and_marks_the_last_chunk(tmp_path: Path) -> None:
+    prog = tmp_path / "mixed.nc"
+    prog.write_text("G21 G90 G17 F1200\nG1 X10 Y0\nG3 X20 Y10 I0 J10\nG4 P0.05\n"
+                    "G0 X0 Y0\nM2\n", encoding="utf-8")
+    chunks = list(generate_reference(read_program(str(prog), CFG), CFG))
+    assert [c.final for c in chunks] == [False] * (len(chunks) - 1) + [True]
+    t = np.concatenate([c.t0_s + np.arange(len(c)) * CFG.sample_period_s for c in chunks])
+    assert np.allclose(np.diff(t), CFG.sample_period_s)
+    pos = np.vstack([c.pos_mm for c in chunks])
+    assert np.array_equal(pos[-1], [0.0, 0.0])
+    steps = np.linalg.norm(np.diff(np.vstack([[0.0, 0.0], pos]), axis=0), axis=1)
+    assert steps.max() <= IP.rapid_feed_mm_s * CFG.sample_period_s * (1 + 1e-9)
