@@ -59,10 +59,11 @@ def _travel_error(path: str, block: NcBlock, name: str, reached: float, lo: floa
 
 def check_program(path: str, config: MachineConfig) -> CheckSummary:
     """Parse and check the whole program; raise NcError at the first problem."""
-    summary = CheckSummary(program=path, config=config.name)
     kinds: Counter[type] = Counter()
     lo, hi = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]  # the machine starts at X0 Y0 Z0
     limits = _limits(config)
+    feed_mm = rapid_mm = time_s = 0.0
+    nurbs_points = 0
     for block in read_program(path, config):
         kind = type(block)
         kinds[kind] += 1
@@ -79,24 +80,20 @@ def check_program(path: str, config: MachineConfig) -> CheckSummary:
                 lo[i] = blo[i]
             if bhi[i] > hi[i]:
                 hi[i] = bhi[i]
-        _add_motion(summary, block, length)
-    summary.blocks = dict(sorted((k.__name__, v) for k, v in kinds.items()))
-    for i, name, tlo, thi in limits:
-        summary.extents_mm[name] = [lo[i], hi[i]]
-        summary.travel_mm[name] = [tlo, thi]
-    return summary
-
-
-def _add_motion(summary: CheckSummary, block: NcBlock, length: float) -> None:
-    summary.path_length_mm += length
-    summary.nominal_time_s += length / block.feed_mm_s  # type: ignore[union-attr]
-    if getattr(block, "rapid", False):
-        summary.rapid_length_mm += length
-    else:
-        summary.feed_length_mm += length
-    if type(block) is NurbsBlock:
-        summary.nurbs_blocks += 1
-        summary.nurbs_control_points += block.control_points.shape[0]
+        time_s += length / block.feed_mm_s  # type: ignore[union-attr]
+        if kind is LineBlock and block.rapid:  # type: ignore[union-attr]
+            rapid_mm += length
+        else:
+            feed_mm += length
+        if kind is NurbsBlock:
+            nurbs_points += block.control_points.shape[0]  # type: ignore[union-attr]
+    return CheckSummary(
+        program=path, config=config.name,
+        blocks=dict(sorted((k.__name__, v) for k, v in kinds.items())),
+        path_length_mm=feed_mm + rapid_mm, feed_length_mm=feed_mm, rapid_length_mm=rapid_mm,
+        nominal_time_s=time_s, nurbs_blocks=kinds[NurbsBlock], nurbs_control_points=nurbs_points,
+        extents_mm={name: [lo[i], hi[i]] for i, name, _, _ in limits},
+        travel_mm={name: [tlo, thi] for _, name, tlo, thi in limits})
 
 
 def format_summary(s: CheckSummary) -> str:

@@ -16,6 +16,8 @@ TOLERANCE_MM = 0.005
 TOLERANCE_INCH = 0.0005
 SPIRAL_RELATIVE_TOLERANCE = 0.001
 _TINY = 1e-12
+_TAU = 2 * math.pi
+_HALF_PI = math.pi / 2
 
 
 def _tol_mm(inch: bool, tol_mm: float, tol_inch: float) -> float:
@@ -66,13 +68,17 @@ def arc_box(sx: float, sy: float, ex: float, ey: float, cx: float, cy: float, sw
             ) -> tuple[float, float, float, float]:
     """Axis-aligned box (xmin, ymin, xmax, ymax) of an arc of signed sweep from start."""
     r = math.hypot(sx - cx, sy - cy)
-    xs, ys = [sx, ex], [sy, ey]
     a0 = math.atan2(sy - cy, sx - cx)
-    lo, hi = (a0, a0 + sweep_rad) if sweep_rad >= 0 else (a0 + sweep_rad, a0)
-    for k in range(4):  # the four axis extremes at 0, 90, 180, 270 degrees
-        ang = k * math.pi / 2
-        ang += math.ceil((lo - ang) / (2 * math.pi)) * 2 * math.pi  # first occurrence >= lo
-        if ang <= hi:
-            xs.append(cx + r * math.cos(ang))
-            ys.append(cy + r * math.sin(ang))
-    return min(xs), min(ys), max(xs), max(ys)
+    lo, span = (a0, sweep_rad) if sweep_rad >= 0 else (a0 + sweep_rad, -sweep_rad)
+    x0, x1 = (sx, ex) if sx < ex else (ex, sx)
+    y0, y1 = (sy, ey) if sy < ey else (ey, sy)
+    # The circle's axis extremes at 0, 90, 180, 270 degrees count if the arc passes them.
+    if (-lo) % _TAU <= span:
+        x1 = cx + r
+    if (_HALF_PI - lo) % _TAU <= span:
+        y1 = cy + r
+    if (math.pi - lo) % _TAU <= span:
+        x0 = cx - r
+    if (3 * _HALF_PI - lo) % _TAU <= span:
+        y0 = cy - r
+    return x0, y0, x1, y1
