@@ -9,7 +9,7 @@ import pytest
 
 from controller.errors import NcError
 from controller.interpreter import read_program
-from controller.nc_fifo import NcFifo
+from controller.nc_fifo import NcFifo, batch_plan
 from tests.nc_helpers import XY_TABLE
 
 
@@ -36,9 +36,24 @@ def test_slow_consumer_keeps_the_producer_within_the_bound(tmp_path: Path) -> No
     assert got == expected
 
 
-def test_default_bound_comes_from_the_config(tmp_path: Path) -> None:
-    fifo = NcFifo(_program(tmp_path, 3), XY_TABLE)
-    assert fifo.maxsize == XY_TABLE.runtime.nc_fifo_blocks
+def test_batched_queue_stays_within_the_default_bound(tmp_path: Path) -> None:
+    path = _program(tmp_path, 600)
+    ahead = []
+    fifo = NcFifo(path, XY_TABLE)
+    assert fifo.maxsize == XY_TABLE.runtime.nc_fifo_blocks and fifo.batch > 1
+    with fifo:
+        for n, _ in enumerate(fifo):
+            if n < 40:
+                time.sleep(0.01)
+                ahead.append(fifo.produced - fifo.consumed)
+        assert fifo.consumed == 599
+    assert fifo.maxsize - fifo.batch < max(ahead) <= fifo.maxsize
+
+
+@pytest.mark.parametrize("max_blocks", [2, 3, 5, 8, 64, 100, 1000])
+def test_batch_plan_respects_the_bound(max_blocks: int) -> None:
+    batch, items = batch_plan(max_blocks)
+    assert items >= 1 and items * batch + batch - 1 <= max_blocks
 
 
 def test_error_arrives_as_nc_error_after_the_good_blocks(tmp_path: Path) -> None:
