@@ -9,10 +9,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from nc_helpers import XY_TABLE, XYZ_MILL
 
 from controller.check_cmd import check_program
 from controller.errors import NcError
-from tests.nc_helpers import XY_TABLE, XYZ_MILL
 
 BAD = sorted((Path(__file__).parent / "bad").glob("*.ngc"))
 

@@ -7,10 +7,10 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from nc_helpers import XY_TABLE, XYZ_MILL
 
 from controller.check_cmd import check_program
 from controller.errors import NcError
-from tests.nc_helpers import XY_TABLE, XYZ_MILL
 
 REPO = Path(__file__).resolve().parents[1]
 SEEDS = [REPO / "nc_programs" / n for n in ("naca2415.nc", "arcs.nc", "nurbs_g52.nc",

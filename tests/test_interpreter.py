@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 
 import pytest
+from nc_helpers import XY_TABLE, XYZ_MILL, blocks_of, motion
 
 from controller.blocks import (
     ArcBlock,
@@ -18,7 +19,6 @@ from controller.blocks import (
 )
 from controller.errors import NcError
 from controller.interpreter import read_program
-from tests.nc_helpers import XY_TABLE, XYZ_MILL, blocks_of, motion
 
 
 def test_rapid_and_feed_lines_in_mm_and_mm_per_s(tmp_path: Path) -> None:

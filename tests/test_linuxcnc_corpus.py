@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from nc_helpers import XYZ_MILL
 
 from controller.check_cmd import check_program
-from tests.nc_helpers import XYZ_MILL
 
 DATA = Path(__file__).parent / "data" / "linuxcnc"
 PROGRAMS = sorted(DATA.rglob("*.ngc"))

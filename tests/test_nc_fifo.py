@@ -6,11 +6,11 @@ import time
 from pathlib import Path
 
 import pytest
+from nc_helpers import XY_TABLE
 
 from controller.errors import NcError
 from controller.interpreter import read_program
 from controller.nc_fifo import NcFifo, batch_plan
-from tests.nc_helpers import XY_TABLE
 
 
 def _program(tmp_path: Path, n: int, tail: str = "") -> str:

@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from geomdl import NURBS
+from nc_helpers import XY_TABLE, XYZ_MILL, blocks_of
 
 from controller.blocks import NurbsBlock
 from controller.check_cmd import check_program
 from controller.interpreter import read_program
 from controller.nc_geometry import _sample_spans, nurbs_length_and_box
-from tests.nc_helpers import XY_TABLE, XYZ_MILL, blocks_of
 
 REPO = Path(__file__).resolve().parents[1]
 
