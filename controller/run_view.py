@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 from typing import Any, TextIO
 
 from controller.motion_types import MotionProgress, MotionResult
@@ -101,10 +100,12 @@ def status_text(p: MotionProgress, lines: list[str]) -> str:
 
 
 class RichView(PlainView):
-    """On a terminal: a live progress bar by planned time, with the status fields beside it."""
+    """On a terminal: a live progress bar by planned time and a status line under it."""
 
     def __init__(self, lines: list[str]) -> None:
         super().__init__(lines)
+        from rich.console import Group
+        from rich.live import Live
         from rich.progress import (
             BarColumn,
             Progress,
@@ -112,28 +113,36 @@ class RichView(PlainView):
             TimeElapsedColumn,
             TimeRemainingColumn,
         )
-        self._t0_s = time.monotonic()
-        self.bar = Progress(TextColumn("{task.fields[state]:>9}"), BarColumn(),
+        self.bar = Progress(TextColumn("{task.fields[state]:>9}"), BarColumn(bar_width=30),
                             TextColumn("{task.completed:.2f}/{task.fields[planned]} s"),
-                            TimeElapsedColumn(), TimeRemainingColumn(),
-                            TextColumn("{task.fields[status]}"), auto_refresh=False)
-        self.task = self.bar.add_task("run", total=None, state="start", planned="?", status="")
-        self.bar.start()
+                            TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn())
+        self.task = self.bar.add_task("run", total=None, state="start", planned="?")
+        self.status = _StatusLine()
+        self.live = Live(Group(self.bar, self.status), refresh_per_second=8)
+        self.live.start()
 
     def event(self, name: str, **fields: Any) -> None:
-        self.bar.console.print(f"[bold]{name}[/] " + " ".join(f"{k}={v}" for k, v in
-                                                             fields.items()))
+        self.live.console.print(f"[bold]{name}[/] " + " ".join(f"{k}={v}" for k, v in
+                                                              fields.items()))
 
     def progress(self, p: MotionProgress) -> None:
-        text = lines_text(self.lines, p.line)
         self.bar.update(self.task, completed=p.executed_s, total=p.planned_s,
-                        state=p.state.value, planned=f"{p.planned_s:.2f}" if p.planned_s else "?",
-                        status=f"line {p.line} {text}  F{p.feed_mm_s * 60:.0f} mm/min  "
-                               f"ferr {p.ferror_um:.0f} um  fifo {p.fifo_ms:.0f} ms")
-        self.bar.refresh()
+                        state=p.state.value, planned=f"{p.planned_s:.2f}" if p.planned_s else "?")
+        self.status.text = (f"line {p.line}: {lines_text(self.lines, p.line)}\n"
+                            f"feed {p.feed_mm_s * 60:.0f} mm/min   following error "
+                            f"{p.ferror_um:.0f} um   card FIFO {p.fifo_ms:.0f} ms")
 
     def close(self) -> None:
-        self.bar.stop()
+        self.live.stop()
+
+
+class _StatusLine:
+    """A renderable whose text the motion thread replaces; rich redraws it on refresh."""
+
+    text = ""
+
+    def __rich__(self) -> str:
+        return self.text
 
 
 def lines_text(lines: list[str], line: int) -> str:
