@@ -59,7 +59,7 @@ class InterpState(MotionMixin):
     def execute(self, gs: list[int], ms: list[int], vals: dict[str, float], lineno: int) -> None:
         if self.nurbs is not None and self.nurbs_line(gs, ms, vals, lineno):
             return
-        if not ms and self._fast(gs, vals, lineno):
+        if not ms and len(gs) <= 1 and self.fast(gs[0] if gs else -1, vals, lineno):
             return
         groups = _groups(gs, G_GROUP, g_name)
         mgroups = _groups(ms, M_GROUP, lambda m: f"M{m}")
@@ -76,13 +76,14 @@ class InterpState(MotionMixin):
             self.out.append(StopBlock(_STOPS[stop], self.pos, self._src(lineno)))
             self.ended = stop in (2, 30)
 
-    def _fast(self, gs: list[int], vals: dict[str, float], lineno: int) -> bool:
+    def fast(self, code: int, vals: dict[str, float], lineno: int) -> bool:
         """G0 G1 G2 G3 lines with only X Y Z F (and I J R for arcs): most lines of a program.
 
-        Same result as the general path, without its group and letter bookkeeping."""
-        if gs:
-            mode = gs[0]
-            if len(gs) > 1 or mode not in _FAST_MOTIONS:
+        `code` is the line's one G code (code10) or -1. Same result as the general path,
+        without its group and letter bookkeeping; False means "use the general path"."""
+        if code >= 0:
+            mode = code
+            if mode not in _FAST_MOTIONS:
                 return False
         else:
             mode = self.motion
@@ -94,7 +95,7 @@ class InterpState(MotionMixin):
             if vals["F"] < 0:
                 return False  # the general path reports it
             self.feed_mm_s = vals["F"] * self.scale / 60.0
-        self.move(gs[0] if gs else None, vals, lineno)
+        self.move(code if code >= 0 else None, vals, lineno)
         return True
 
     def _src(self, lineno: int) -> Source:

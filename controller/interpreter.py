@@ -17,6 +17,7 @@ from controller.gcodes import G_GROUP, G_UNSUPPORTED, M_GROUP, WordError, g_code
 from controller.interp_state import InterpState
 
 _G_CACHE: dict[str, int] = {}  # G number text -> code10, for supported/known codes only
+_G_BY_VALUE: dict[float, int] = {}  # the same by value (G01 and G1 alike)
 _M_CACHE: dict[str, int] = {}
 MAX_PARAMETER = 5399  # LinuxCNC's numbered parameters
 _VALUE_LETTERS = frozenset("XYZIJKRPQLFSTH")
@@ -75,16 +76,16 @@ class Interpreter:
     def _execute_plain(self, words: list[tuple[str, str]], text: str, lineno: int) -> None:
         """A line of plain words; the usual case (each letter once, one G, no M) inline."""
         self.words_seen = True
-        by_letter = dict(words)
-        if len(by_letter) == len(words) and "M" not in by_letter:
-            g = by_letter.pop("G", None)
-            if "N" in by_letter:
-                del by_letter["N"]
-            code = _G_CACHE.get(g) if g is not None else -1  # type: ignore[arg-type]
-            if code is not None and _VALUE_LETTERS.issuperset(by_letter):
-                vals = {k: float(v) for k, v in by_letter.items()}
+        vals = {k: float(v) for k, v in words}
+        if len(vals) == len(words) and "M" not in vals:
+            g = vals.pop("G", None)
+            vals.pop("N", None)
+            code = -1 if g is None else _G_BY_VALUE.get(g)
+            if code is not None and _VALUE_LETTERS.issuperset(vals):
+                state = self.state
                 try:
-                    self.state.execute([] if code < 0 else [code], [], vals, lineno)
+                    if state.nurbs is not None or not state.fast(code, vals, lineno):
+                        state.execute([] if code < 0 else [code], [], vals, lineno)
                 except WordError as exc:
                     raise self._error(Line(words, text), lineno, exc.word, exc.message) from None
                 return
@@ -147,6 +148,7 @@ class Interpreter:
         if code not in G_GROUP:
             raise NcError(self.path, lineno, line.col(i), word, f"unknown G code {g_name(code)}")
         _G_CACHE[text] = code
+        _G_BY_VALUE[float(text)] = code
         return code
 
     def _m_code(self, line: Line, i: int, text: str, lineno: int) -> int:
