@@ -16,7 +16,7 @@ from controller.interpreter import read_program
 from controller.nurbs import Nurbs
 from controller.sim_report import report, simulate
 from controller.time_bound import time_optimal_bound_s
-from tests.gen_programs import lobed_nurbs, lsq_nurbs, naca_points, write_g62
+from gen_programs import lobed_nurbs, lsq_nurbs, naca_points, write_g62
 
 REPO = Path(__file__).resolve().parents[1]
 NACA = str(REPO / "nc_programs/naca2415.nc")
