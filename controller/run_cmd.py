@@ -24,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="one JSON object per line")
     parser.add_argument("--virtual-time", action="store_true",
                         help="clock the simulated card as fast as possible (no wall clock)")
+    parser.add_argument("--daemon", metavar="SOCKET",
+                        help="send the job to a running cncd (python -m controller.daemon) "
+                             "and relay its JSON lines")
 
 
 def check_program(path: str, config: Any) -> None:
@@ -46,7 +49,35 @@ def _program_lines(path: str) -> list[str]:
         return []
 
 
+def run_on_daemon(args: argparse.Namespace) -> int:
+    """Client of controller.daemon: relays JSON lines; SIGINT asks the daemon to abort."""
+    import json
+    import socket
+
+    def send(request: dict[str, Any]) -> socket.socket:
+        conn = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        conn.connect(args.daemon)
+        conn.sendall((json.dumps(request) + "\n").encode())
+        return conn
+    conn = send({"cmd": "run", "program": str(Path(args.program).resolve()),
+                 "virtual_time": args.virtual_time})
+    previous = signal.signal(signal.SIGINT, lambda *_: send({"cmd": "abort"}).close())
+    last: dict[str, Any] = {}
+    try:
+        for line in conn.makefile("r"):
+            sys.stdout.write(line)
+            sys.stdout.flush()
+            last = json.loads(line)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        conn.close()
+    codes = {"done": 0, "rejected": EXIT_REJECTED, "fault": 3, "aborted": 4}
+    return codes.get(last.get("event", ""), 3)
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.daemon:
+        return run_on_daemon(args)
     try:
         config = load_config(args.config)
         check_program(args.program, config)
