@@ -35,8 +35,8 @@ def result_summary(result: MotionResult) -> dict[str, Any]:
 class JsonView:
     """One JSON object per line: start, progress (every 0.5 s), fault/abort notices, final."""
 
-    def __init__(self, out: TextIO = sys.stdout, every_s: float = 0.5) -> None:
-        self.out, self.every_s, self._next_s = out, every_s, 0.0
+    def __init__(self, out: TextIO | None = None, every_s: float = 0.5) -> None:
+        self.out, self.every_s, self._next_s = out or sys.stdout, every_s, 0.0
 
     def _emit(self, obj: dict[str, Any]) -> None:
         self.out.write(json.dumps(obj) + "\n")
@@ -64,8 +64,8 @@ class JsonView:
 class PlainView:
     """Not a terminal: a status line a second, then a short summary."""
 
-    def __init__(self, lines: list[str], out: TextIO = sys.stdout) -> None:
-        self.lines, self.out, self._next_s = lines, out, 0.0
+    def __init__(self, lines: list[str], out: TextIO | None = None) -> None:
+        self.lines, self.out, self._next_s = lines, out or sys.stdout, 0.0
 
     def event(self, name: str, **fields: Any) -> None:
         extra = " ".join(f"{k}={v}" for k, v in fields.items())
