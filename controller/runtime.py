@@ -22,6 +22,7 @@ from controller.runtime_stages import (
     blocks_source,
     generator_main,
     interpreter_main,
+    preload_stages,
     reference_source,
 )
 from drivers.base import Drive, make_drive
@@ -132,6 +133,8 @@ class Runtime:
         return self._finish(result, messages, t0_s)
 
     def _start(self, ring: RefRing, messages: _Messages) -> None:
+        if self.options.blocks_fn is blocks_source or self.options.generate_fn is reference_source:
+            preload_stages()
         nc_fifo = _CTX.Queue(maxsize=self.config.runtime.nc_fifo_blocks)
         # Generator first, so that it is waiting on the NC FIFO when the first block lands.
         self.procs["generator"] = _CTX.Process(

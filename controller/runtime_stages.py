@@ -36,6 +36,19 @@ def reference_source(blocks: Iterable[Any], config: MachineConfig) -> Iterator[R
     yield from generate_reference(blocks, config)
 
 
+def preload_stages() -> None:
+    """Import the real stages in the parent: forked children then start warm (~0.5 s saved).
+
+    An import error is left for the child to raise and report through the normal path.
+    """
+    import importlib
+    for name in ("controller.interpreter", "controller.generator"):
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            pass
+
+
 def _child_setup() -> int:
     # Ctrl-C goes to the whole process group: only the motion process decides how to stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
