@@ -87,22 +87,27 @@ def check_phases(ph: PhaseArrays, curve: LimitCurve, n_seg: int, tol: float) -> 
     lengths = ph.length_mm
     cruise = ph.vs_mm_s == ph.ve_mm_s
     _merge(exc, loc, plen, *_cruise_excess(ph, lengths, cruise, curve))
-    _merge(exc, loc, plen, *_transition_excess(ph, lengths, ~cruise, curve, tol))
+    for part in _transition_excess(ph, lengths, ~cruise, curve, tol):
+        _merge(exc, loc, plen, *part)
     return Violations(exc, loc, plen)
 
 
 def _merge(exc: np.ndarray, loc: np.ndarray, plen: np.ndarray, seg: np.ndarray, e: np.ndarray,
            s: np.ndarray, ln: np.ndarray) -> None:
-    """Keep, per segment, the largest excess among the candidates (one pass, vectorised)."""
+    """Keep, per segment, the largest excess among candidates sorted by segment (in place)."""
     if len(seg) == 0:
         return
-    order = np.lexsort((e, seg))  # by segment, then excess ascending: last one per segment wins
-    seg, e, s, ln = seg[order], e[order], s[order], ln[order]
-    last = np.r_[seg[1:] != seg[:-1], True]
-    seg, e, s, ln = seg[last], e[last], s[last], ln[last]
-    better = e > exc[seg]
-    seg, e, s, ln = seg[better], e[better], s[better], ln[better]
-    exc[seg], loc[seg], plen[seg] = e, s, ln
+    starts = np.r_[0, np.flatnonzero(seg[1:] != seg[:-1]) + 1]
+    gmax = np.maximum.reduceat(e, starts)
+    counts = np.diff(np.r_[starts, len(seg)])
+    at_max = np.flatnonzero(e == np.repeat(gmax, counts))
+    group = np.searchsorted(starts, at_max, side="right") - 1
+    _, first = np.unique(group, return_index=True)
+    pick = at_max[first]  # first sample reaching the group maximum
+    sg = seg[starts]
+    better = gmax > exc[sg]
+    sg, pick = sg[better], pick[better]
+    exc[sg], loc[sg], plen[sg] = e[pick], s[pick], ln[pick]
 
 
 def _cruise_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
@@ -120,10 +125,10 @@ def _cruise_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
 
 
 def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
-                       curve: LimitCurve, tol: float) -> tuple[np.ndarray, ...]:
+                       curve: LimitCurve, tol: float) -> tuple[tuple[np.ndarray, ...], ...]:
     dur, s0, vs, ve = ph.duration_s[mask], ph.s0_mm[mask], ph.vs_mm_s[mask], ph.ve_mm_s[mask]
     if len(dur) == 0:
-        return (np.empty(0, np.intp),) + (np.empty(0),) * 3
+        return ()
     n = _sample_counts(dur, vs, ve, lengths[mask], curve.spacing_mm, tol)
     k = np.repeat(np.arange(len(dur)), n)
     j = np.arange(len(k)) - np.repeat(np.cumsum(n) - n, n)
@@ -143,7 +148,7 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     ge = quintic_speed(tg, vs[gk], ve[gk]) - curve.vlim_mm_s[g]
     seg = ph.seg[mask]
     ln = lengths[mask]
-    return (np.r_[seg[k], seg[gk]], np.r_[e, ge], np.r_[s, curve.s_mm[g]], np.r_[ln[k], ln[gk]])
+    return (seg[k], e, s, ln[k]), (seg[gk], ge, curve.s_mm[g], ln[gk])
 
 
 def _sample_counts(dur: np.ndarray, vs: np.ndarray, ve: np.ndarray, length: np.ndarray,

@@ -16,6 +16,8 @@ from controller.time_bound import fb_pass_speed_mm_s
 # acceleration of 8A/15 in the v^2 passes between nodes.
 EFFECTIVE_ACCEL_FACTOR = 8.0 / 15.0
 MAX_SPLIT_DEPTH = 8  # a segment split this often is flattened instead (always safe)
+STAIR_STEP = 0.03  # relative speed step of the staircase where vlim binds
+FLATTEN_ROUNDS = 3  # rounds that only flatten, before flattening everything
 LIMIT_TOLERANCE = 1e-7  # relative to max vlim: v <= vlim + tol on the whole profile
 
 
@@ -50,10 +52,11 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     """Plan v(t) from s=0 at v_start to s=L at v_end, with v <= vlim(s) and |a| <= accel.
 
     Nodes start at the local minima of vlim. Each round: v^2 passes on the nodes; between nodes
-    accelerate to the highest cruise that fits under vlim, cruise, decelerate; then every segment
+    accelerate to the quickest cruise that fits under vlim, cruise, decelerate; then every segment
     whose transitions still cross vlim gets a node at its worst point (below vlim there), or, once
     split MAX_SPLIT_DEPTH times, is flattened (node speeds <= min vlim over it: safe by
-    construction). So the loop ends after a bounded number of rounds.
+    construction). After FLATTEN_ROUNDS more rounds every segment is flattened, so the loop ends
+    after a bounded number of rounds with a profile under vlim.
     """
     s = np.asarray(s_mm, float)
     vlim = np.asarray(vlim_mm_s, float)
@@ -61,9 +64,10 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     if bad is not None:
         return FeedPlan(FeedProfile(()), bad)
     curve = LimitCurve(s - s[0], vlim)
-    nodes = _initial_nodes(curve, v_start_mm_s, v_end_mm_s)
+    nodes = _initial_nodes(curve, v_start_mm_s, v_end_mm_s, accel_mm_s2)
     tol = LIMIT_TOLERANCE * float(vlim.max())
-    for rnd in range(1, MAX_SPLIT_DEPTH + 4):
+    n_rounds = MAX_SPLIT_DEPTH + FLATTEN_ROUNDS + 2
+    for rnd in range(1, n_rounds + 1):
         v = _node_speeds(nodes, accel_mm_s2, v_start_mm_s, v_end_mm_s)
         if isinstance(v, PlanResult):
             return FeedPlan(FeedProfile(()), v, rnd)
@@ -73,7 +77,9 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
         viol = check_phases(ph, curve, len(nodes.s) - 1, tol)
         if not np.any(viol.excess_mm_s > 0.5 * tol):
             return FeedPlan(_to_profile(ph, s[0]), PlanResult.OK, rnd)
-        failed = _repair(nodes, viol, curve, 0.5 * tol, last=rnd >= MAX_SPLIT_DEPTH + 2)
+        if rnd == n_rounds - 1:  # last resort: flatten everything (safe by construction)
+            viol = Violations(np.full(len(nodes.s) - 1, np.inf), viol.s_mm, viol.phase_len_mm)
+        failed = _repair(nodes, viol, curve, 0.5 * tol, last=rnd > MAX_SPLIT_DEPTH)
         if failed is not None:
             return FeedPlan(FeedProfile(()), failed, rnd)
     return FeedPlan(_to_profile(ph, s[0]), PlanResult.LIMIT_VIOLATED, rnd)
@@ -91,19 +97,38 @@ def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanR
     return None
 
 
-def _initial_nodes(curve: LimitCurve, v0: float, v1: float) -> _Nodes:
-    """The ends and every local minimum of vlim (both ends of a flat bottom, not its inside)."""
+def _initial_nodes(curve: LimitCurve, v0: float, v1: float, accel: float) -> _Nodes:
+    """The ends, every local minimum of vlim (both ends of a flat bottom, not its inside), and a
+    staircase of nodes where vlim binds (see _stair_nodes)."""
     v = curve.vlim_mm_s
     # Runs of equal values: a run is a bottom when both neighbouring runs are higher.
     start = np.flatnonzero(np.r_[True, v[1:] != v[:-1]])
     end = np.r_[start[1:] - 1, len(v) - 1]
-    rv = v[start]
-    bottom = np.flatnonzero((rv[1:-1] < rv[:-2]) & (rv[1:-1] < rv[2:])) + 1
-    idx = np.unique(np.r_[start[bottom], end[bottom]])
+    rv = np.r_[np.inf, v[start], np.inf]  # a run at an end is a bottom if its neighbour is higher
+    bottom = np.flatnonzero((rv[1:-1] < rv[:-2]) & (rv[1:-1] < rv[2:]))
+    idx = np.r_[start[bottom], end[bottom]]
+    stair, stair_cap = _stair_nodes(curve, v0, v1, accel)
+    cap = np.r_[v[idx], stair_cap]
+    idx = np.r_[idx, stair]
+    keep = (idx > 0) & (idx < len(v) - 1)
+    idx, order = np.unique(idx[keep], return_index=True)
     s = np.r_[0.0, curve.s_mm[idx], curve.s_mm[-1]]
-    cap = np.r_[v0, v[idx], v1]
+    cap = np.r_[v0, cap[keep][order], v1]
     n = len(s) - 1
     return _Nodes(s, cap, np.zeros(n, np.intp), np.zeros(n, bool))
+
+
+def _stair_nodes(curve: LimitCurve, v0: float, v1: float,
+                 accel: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where vlim is gentle enough to bind the v^2 passes at the quintics' mean acceleration
+    8A/15, the profile must follow it as a staircase (one transition per segment): seed nodes
+    where vlim crosses the levels (1+STAIR_STEP)^m, capped one level below vlim there."""
+    v = curve.vlim_mm_s
+    u = fb_pass_speed_mm_s(curve.s_mm, v, EFFECTIVE_ACCEL_FACTOR * accel, v0, v1)
+    binding = u >= v * (1.0 - 1e-9)
+    level = np.floor(np.log(v) / np.log1p(STAIR_STEP))
+    i = 1 + np.flatnonzero(binding[1:] & binding[:-1] & (level[1:] != level[:-1]))
+    return i, np.minimum(v[i], v[i - 1]) / (1.0 + STAIR_STEP)
 
 
 def _node_speeds(nodes: _Nodes, accel: float, v0: float, v1: float) -> np.ndarray | PlanResult:
@@ -116,6 +141,7 @@ def _node_speeds(nodes: _Nodes, accel: float, v0: float, v1: float) -> np.ndarra
         return PlanResult.START_TOO_FAST
     if v[-1] ** 2 < v1 * v1 - slack:
         return PlanResult.END_UNREACHABLE
+    v = np.minimum(v, nodes.cap)  # sqrt rounding must not lift a node above its cap
     v[0], v[-1] = v0, v1
     return v
 

@@ -14,7 +14,8 @@ from controller.feed_profile import (
     transition_length_mm,
 )
 
-PEAK_BISECTIONS = 16
+PEAK_BISECTIONS = 12
+REST_FRACTION = 1e-7  # of max vlim: node speeds this low never wait (cruise) before moving on
 CRUISE_LEVELS = 12  # candidate cruise speeds when waiting at a node speed is involved
 SHAPE_SAMPLES = 33  # samples of a transition's v(s) when fitting it under vlim
 
@@ -175,21 +176,31 @@ def _segment_time_s(a: np.ndarray, b: np.ndarray, vi: np.ndarray, vj: np.ndarray
 
 def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray, k: np.ndarray,
             accel: float) -> tuple[np.ndarray, np.ndarray]:
-    """(end of the acceleration, start of the braking) for cruise speed vp in segments k."""
+    """(end of the acceleration, start of the braking) for cruise speed vp in segments k.
+
+    Between two samples a monotone transition stays inside their bounding box, so testing the
+    box corner nearest to vlim (position of one sample, speed of the other) makes a placed
+    transition lie under vlim everywhere, not only at the samples. Waiting at vi (vj) before
+    (after) the transitions must stay where vlim >= vi (vj)."""
+    if len(k) == 0:
+        return np.empty(0), np.empty(0)
     a, b = win.a[k], win.b[k]
     sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
     tau = np.linspace(0.0, 1.0, SHAPE_SAMPLES)
-    kk = np.repeat(k, SHAPE_SAMPLES)
-    # Acceleration: earliest start so that every sample is past where vlim reaches its speed.
+    kk = np.repeat(k, SHAPE_SAMPLES - 1)
+    rest = REST_FRACTION * win.big
+    # Acceleration: earliest start with every box corner past where vlim reaches its speed.
     xa, ca = _shape(tau, vi, vp, accel)
-    need = win.first_reach(ca.ravel(), kk).reshape(ca.shape) - xa
+    need = win.first_reach(ca[:, 1:].ravel(), kk).reshape(len(k), -1) - xa[:, :-1]
     start = np.maximum(a, need.max(axis=1))
-    start = np.where((vi <= 0.0) & (start > a), np.inf, start)  # cannot wait at rest
-    # Braking: latest end so that every sample is before where vlim falls below its speed.
+    start = np.where((vi <= rest) & (start > a), np.inf, start)  # cannot wait at (near) rest
+    start = np.where(start > win.last_reach(vi, k), np.inf, start)
+    # Braking: latest end with every box corner before where vlim falls below its speed.
     xd, cd = _shape(tau, vp, vj, accel)
-    room = win.last_reach(cd.ravel(), kk).reshape(cd.shape) + (sd[:, None] - xd)
+    room = win.last_reach(cd[:, :-1].ravel(), kk).reshape(len(k), -1) + (sd[:, None] - xd[:, 1:])
     end = np.minimum(b, room.min(axis=1))
-    end = np.where((vj <= 0.0) & (end < b), -np.inf, end)
+    end = np.where((vj <= rest) & (end < b), -np.inf, end)
+    end = np.where(end < win.first_reach(vj, k), -np.inf, end)
     return start + sa, end - sd
 
 
@@ -211,8 +222,10 @@ def segment_phases(sp: SegmentPlan, accel: float) -> PhaseArrays:
                                           sp.b - dec1]), 0.0)
     vs = np.column_stack([sp.vi, sp.vi, sp.vp, sp.vp, sp.vj])
     ve = np.column_stack([sp.vi, sp.vp, sp.vp, sp.vj, sp.vj])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        dur = np.where(vs == ve, lengths / vs, transition_duration_s(vs, ve, accel))
+    # A cruise at zero speed can only be a rounding residue (waiting at rest is never planned).
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        cruise = np.where(vs > 0.0, lengths / vs, 0.0)
+    dur = np.where(vs == ve, cruise, transition_duration_s(vs, ve, accel))
     dur = np.where(lengths > 0.0, dur, 0.0)
     seg = np.repeat(np.arange(len(sp.a)), 5).reshape(-1, 5)
     keep = (dur > 0.0).ravel()
