@@ -17,11 +17,14 @@ from controller.time_bound import fb_pass_speed_mm_s
 EFFECTIVE_ACCEL_FACTOR = 8.0 / 15.0
 MAX_SPLIT_DEPTH = 8  # a segment split this often is flattened instead (always safe)
 STAIR_STEP = 0.03  # relative speed step of the staircase where vlim binds
+STAIR_CAP = 0.25  # stair node speed: this many steps below vlim there
 FLATTEN_ROUNDS = 3  # rounds that only flatten, before flattening everything
 LIMIT_TOLERANCE = 1e-7  # relative to max vlim: v <= vlim + tol on the whole profile
 
 
 class PlanResult(Enum):
+    """Outcome of plan_feed."""
+
     OK = "ok"
     START_TOO_FAST = "start speed above the limit or too fast to slow down in time"
     END_TOO_FAST = "end speed above the limit at the end of the path"
@@ -32,6 +35,8 @@ class PlanResult(Enum):
 
 @dataclass(frozen=True)
 class FeedPlan:
+    """A planned feed profile (empty unless result is OK) and the planning rounds it took."""
+
     profile: FeedProfile
     result: PlanResult
     rounds: int = 0
@@ -51,12 +56,18 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
               v_start_mm_s: float = 0.0, v_end_mm_s: float = 0.0) -> FeedPlan:
     """Plan v(t) from s=0 at v_start to s=L at v_end, with v <= vlim(s) and |a| <= accel.
 
-    Nodes start at the local minima of vlim. Each round: v^2 passes on the nodes; between nodes
-    accelerate to the quickest cruise that fits under vlim, cruise, decelerate; then every segment
-    whose transitions still cross vlim gets a node at its worst point (below vlim there), or, once
-    split MAX_SPLIT_DEPTH times, is flattened (node speeds <= min vlim over it: safe by
-    construction). After FLATTEN_ROUNDS more rounds every segment is flattened, so the loop ends
-    after a bounded number of rounds with a profile under vlim.
+    The profile passes every node with zero acceleration. Nodes: the ends, the local minima of
+    vlim, and a staircase where vlim is gentler than the quintics can follow. Each round:
+    - v^2 passes on the nodes at the quintics' mean acceleration 8A/15 (node speeds reachable);
+    - per segment between nodes (vlim unimodal there): wait at vi, accelerate, cruise at V,
+      decelerate, wait at vj, with the quickest V whose transitions, placed as early / late as
+      fits, lie under vlim (feed_segments: safe by construction up to sampling);
+    - check every phase against vlim (feed_check); a segment still crossing vlim gets a node at
+      its worst point (below vlim there), or, once split MAX_SPLIT_DEPTH times, is flattened
+      (node speeds <= min vlim over it: safe by construction). After FLATTEN_ROUNDS more rounds
+      every segment is flattened, so the loop ends after a bounded number of rounds.
+    s_mm may start anywhere; the profile's s runs from s_mm[0] to s_mm[-1]. On any result but OK
+    the profile is empty.
     """
     s = np.asarray(s_mm, float)
     vlim = np.asarray(vlim_mm_s, float)
@@ -82,7 +93,7 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
         failed = _repair(nodes, viol, curve, 0.5 * tol, last=rnd > MAX_SPLIT_DEPTH)
         if failed is not None:
             return FeedPlan(FeedProfile(()), failed, rnd)
-    return FeedPlan(_to_profile(ph, s[0]), PlanResult.LIMIT_VIOLATED, rnd)
+    return FeedPlan(FeedProfile(()), PlanResult.LIMIT_VIOLATED, rnd)
 
 
 def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanResult | None:
@@ -122,13 +133,13 @@ def _stair_nodes(curve: LimitCurve, v0: float, v1: float,
                  accel: float) -> tuple[np.ndarray, np.ndarray]:
     """Where vlim is gentle enough to bind the v^2 passes at the quintics' mean acceleration
     8A/15, the profile must follow it as a staircase (one transition per segment): seed nodes
-    where vlim crosses the levels (1+STAIR_STEP)^m, capped one level below vlim there."""
+    where vlim crosses the levels (1+STAIR_STEP)^m, capped STAIR_CAP steps below vlim there."""
     v = curve.vlim_mm_s
     u = fb_pass_speed_mm_s(curve.s_mm, v, EFFECTIVE_ACCEL_FACTOR * accel, v0, v1)
     binding = u >= v * (1.0 - 1e-9)
     level = np.floor(np.log(v) / np.log1p(STAIR_STEP))
     i = 1 + np.flatnonzero(binding[1:] & binding[:-1] & (level[1:] != level[:-1]))
-    return i, np.minimum(v[i], v[i - 1]) / (1.0 + STAIR_STEP)
+    return i, np.minimum(v[i], v[i - 1]) / (1.0 + STAIR_CAP * STAIR_STEP)
 
 
 def _node_speeds(nodes: _Nodes, accel: float, v0: float, v1: float) -> np.ndarray | PlanResult:
