@@ -7,8 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import controller.feed_planner as fp
 from controller.feed_planner import PlanResult, plan_feed
-from controller.feed_profile import FeedProfile
+from controller.feed_profile import FeedProfile, transition_length_mm
+from controller.feed_segments import SegmentPlan, SegmentWindows
 from controller.time_bound import fb_pass_speed_mm_s, traversal_time_s
 
 REL_TOL = 1e-6  # v may exceed vlim by at most this fraction of max vlim
@@ -114,3 +116,30 @@ def test_start_cannot_brake_in_time() -> None:
 ])
 def test_invalid_input(s: np.ndarray, vlim: np.ndarray) -> None:
     assert plan_feed(s, vlim, 1000.0).result is PlanResult.INVALID_INPUT
+
+
+def _naive_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.ndarray,
+                    accel: float) -> SegmentPlan:
+    """Peak at once, brake at the end, ignoring vlim's shape: forces the repair rounds."""
+    a, b = win.a, win.b
+    vc = np.sqrt((16.0 * accel * (b - a) / 15.0 + vi * vi + vj * vj) / 2.0)
+    cap = np.where(flat, win.curve.span_min(a, b), win.curve.span_max(a, b))
+    vp = np.maximum(np.minimum(vc, cap), np.maximum(vi, vj))
+    e0 = a + transition_length_mm(vi, vp, accel)
+    return SegmentPlan(a, b, vi, vj, vp, e0, np.maximum(b - transition_length_mm(vp, vj, accel),
+                                                        e0))
+
+
+@settings(max_examples=25, deadline=None)
+@given(limit_curves())
+def test_repair_rounds_alone_keep_limits(case: tuple) -> None:
+    """Without the shape-aware placement, splitting and flattening must still end under vlim."""
+    s, vlim, accel, v0, v1 = case
+    original = fp.plan_segments
+    fp.plan_segments = _naive_segments
+    try:
+        plan = plan_feed(s, vlim, accel, v0, v1)
+    finally:
+        fp.plan_segments = original
+    assert plan.result is PlanResult.OK
+    assert_profile_valid(s, vlim, accel, v0, v1, plan.profile)
