@@ -148,7 +148,8 @@ class MotionController:
         finished_before, _ = self.source.state()
         ask = max(0, want + hold - len(self.held))
         rows = self.source.read(ask) if ask else np.zeros((0, self.n + 2))
-        final = finished_before is SourceState.FINISHED and len(rows) < max(ask, 1)
+        # Final only when a read came back short after the producer had finished.
+        final = finished_before is SourceState.FINISHED and 0 < ask and len(rows) < ask
         state, problem = self.source.state()
         if state is SourceState.FAILED:
             self._begin_stop(Outcome.FAULT, problem)

@@ -11,7 +11,7 @@ from typing import Any
 
 from controller.config import MachineConfig
 from controller.motion import MotionController
-from controller.motion_types import MotionProgress, MotionResult, MotionSettings
+from controller.motion_types import MotionProgress, MotionResult, MotionSettings, MotionState
 from controller.pacing import VirtualPacer, WallPacer
 from controller.refring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
 from controller.refsource import SourceState
@@ -77,8 +77,10 @@ class RingSource:
             return SourceState.FINISHED, ""
         if flags & FLAG_FAILED:
             self.messages.drain(wait_s=0.05)  # the message may still be in the queue pipe
-            return SourceState.FAILED, self.messages.errors.get(
-                "generator", "reference generator failed")
+            errors = self.messages.errors
+            if "interpreter" in errors:  # the generator only failed because its input did
+                return SourceState.FAILED, f"NC interpreter failed: {errors['interpreter']}"
+            return SourceState.FAILED, errors.get("generator", "reference generator failed")
         if self.generator.exitcode is not None:
             return SourceState.FAILED, ("reference generator process died "
                                         f"(exit code {self.generator.exitcode})")
@@ -167,11 +169,16 @@ class Runtime:
         watch = self._watch(messages)
         if self.options.virtual_time:
             need = round((self.settings.high_water_ms + self.settings.holdback_ms) * 1e-3
-                         / period_s) + 1
+                         / period_s) + 2 * self.settings.cycle_frames
 
             def ready() -> bool:
-                aborted = self.controller is not None and self.controller.abort_requested
-                return (ring.available() >= need or aborted or watch() is not None
+                # Rows produced but not yet executed (ring + held back + card FIFO) must cover
+                # a full refill; otherwise virtual time waits for the generator.
+                ctrl = self.controller
+                ahead = ring.written - (ctrl.executed if ctrl is not None else 0)
+                aborted = ctrl is not None and (ctrl.abort_requested or ctrl.state not in (
+                    MotionState.WAITING, MotionState.RUNNING))  # stopping needs no new rows
+                return (ahead >= need or aborted or watch() is not None
                         or source.state()[0] is not SourceState.STREAMING)
             pacer: Any = VirtualPacer(self.settings.cycle_frames, period_s, drive.advance,
                                       ready=ready)

@@ -124,3 +124,21 @@ def failing_generate(blocks: object, config: object) -> Iterator[RefChunk]:
     for _ in range(8):
         yield next(chunks)
     raise PlanningError("contour error 41 um > 30 um after 20 dynamics rounds")
+
+
+def erroring_blocks(path: str, config: object) -> Iterator[int]:
+    """The interpreter raises an NcError mid-program (e.g. a file changed after the check)."""
+    from controller.errors import NcError
+    yield from range(8)
+    raise NcError(path, 12, 5, "G5", "unknown G-code G5")
+
+
+def hanging_generate(blocks: object, config: object) -> Iterator[RefChunk]:
+    """Streams 400 rows of a 10 mm circle, then hangs (so a test can kill it mid-program)."""
+    import time
+    list(blocks)  # type: ignore[call-overload]
+    chunks = circle_chunks(radius_mm=10.0)
+    for _ in range(8):
+        yield next(chunks)
+    time.sleep(30.0)
+    yield from chunks

@@ -80,11 +80,9 @@ def test_three_processes_run_a_circle_exactly(virtual: bool) -> None:
     assert all(not p.is_alive() for p in runtime.procs.values())
 
 
-@pytest.mark.parametrize("virtual,gen", [(True, refgen.slow_generate),
-                                         (False, refgen.paced_generate)])
-def test_killing_the_generator_stops_the_table_without_underrun(virtual: bool,
-                                                                  gen: object) -> None:
-    result, _, rec, seen = run_rt(virtual, generate_fn=gen, kill_at_s=0.15)
+@pytest.mark.parametrize("virtual", [True, False])
+def test_killing_the_generator_stops_the_table_without_underrun(virtual: bool) -> None:
+    result, _, rec, seen = run_rt(virtual, generate_fn=refgen.hanging_generate, kill_at_s=0.15)
     assert "killed" in seen
     assert result.outcome is Outcome.FAULT and "generator process died" in result.message
     assert result.underruns == 0 and result.position_known
@@ -119,3 +117,12 @@ def test_operator_abort_stops_all_processes() -> None:
     assert result.outcome is Outcome.ABORTED and result.underruns == 0
     assert result.commanded_counts == result.executed_counts
     assert all(not p.is_alive() for p in runtime.procs.values())
+
+
+def test_interpreter_error_mid_run_is_reported_with_its_location() -> None:
+    result, _, rec, _ = run_rt(True, blocks_fn=refgen.erroring_blocks,
+                               generate_fn=refgen.per_block_generate)
+    assert result.outcome is Outcome.FAULT
+    assert "NC interpreter failed: test.nc:12:5: error: unknown G-code G5" in result.message
+    assert result.underruns == 0 and result.commanded_counts == result.executed_counts
+    assert_smooth(rec.commanded(), np.zeros(2), CFG)
