@@ -80,13 +80,46 @@ class Nurbs:
         n, p = self.control_points.shape[0], self.degree
         return np.clip(np.searchsorted(self.knots, u, side="right") - 1, p, n - 1)
 
-    def homogeneous_derivatives(self, u: ArrayLike, order: int = 2) -> np.ndarray:
-        """[A, A', ..., A^(order)] of the homogeneous curve, shape (order+1, N, 3)."""
+    def de_boor_derivatives(self, u: ArrayLike, order: int = 2) -> np.ndarray:
+        """[A, A', ..., A^(order)] of the homogeneous curve by de Boor, shape (order+1, N, 3)."""
         uu = np.atleast_1d(np.asarray(u, dtype=float))
         span = self._spans(uu)
         out = np.zeros((order + 1, uu.size, 3))
         for j in range(min(order, self.degree) + 1):
             out[j] = _de_boor(self.knots, self._homogeneous[j], self.degree - j, span, uu, j)
+        return out
+
+    @cached_property
+    def _taylor_table(self) -> np.ndarray:
+        """A^(k)(u_i) / k! at the left end of every non-empty span i, shape (n, p+1, 3).
+
+        Built once by de Boor; evaluation is then a Horner scheme on the span's polynomial,
+        several times faster than the triangular scheme on every call (the generator's hot path).
+        """
+        n, p = self.control_points.shape[0], self.degree
+        spans = np.arange(p, n)
+        spans = spans[self.knots[spans + 1] > self.knots[spans]]
+        left = self.knots[spans]
+        table = np.zeros((n, p + 1, 3))
+        for j in range(p + 1):
+            table[spans, j] = _de_boor(self.knots, self._homogeneous[j], p - j, spans, left,
+                                       j) / factorial(j)
+        return table
+
+    def homogeneous_derivatives(self, u: ArrayLike, order: int = 2) -> np.ndarray:
+        """[A, A', ..., A^(order)] of the homogeneous curve, shape (order+1, N, 3)."""
+        uu = np.atleast_1d(np.asarray(u, dtype=float))
+        span = self._spans(uu)
+        coef = self._taylor_table[span]  # (N, p+1, 3)
+        h = (uu - self.knots[span])[:, None]
+        p = self.degree
+        out = np.zeros((order + 1, uu.size, 3))
+        for j in range(min(order, p) + 1):
+            # d^j/dh^j of sum_k coef_k h^k = sum_{k>=j} k!/(k-j)! coef_k h^(k-j), by Horner.
+            acc = coef[:, p] * (factorial(p) / factorial(p - j))
+            for k in range(p - 1, j - 1, -1):
+                acc = acc * h + coef[:, k] * (factorial(k) / factorial(k - j))
+            out[j] = acc
         return out
 
     def evaluate(self, u: ArrayLike, order: int = 2) -> np.ndarray:
