@@ -13,7 +13,7 @@ SpeedFn = Callable[[np.ndarray], np.ndarray]  # |C'(u)| for an array of u
 
 _GL_ORDER = 10
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(_GL_ORDER)
-_NEWTON_SWEEPS = 8
+_NEWTON_SWEEPS = 60  # safeguarded: usually 1-2 sweeps, bisection at worst
 _NEWTON_TOL_MM = 1e-11
 
 
@@ -73,25 +73,32 @@ class ArcLengthTable:
         return self.s_nodes[idx] + _gauss_integrals(self.speed, self.u_nodes[idx], uu)
 
     @cached_property
-    def _node_speed(self) -> np.ndarray:
-        return self.speed(self.u_nodes)
+    def _node_speeds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Speed at each sub-interval's two ends, seen from inside it (it may jump at knots)."""
+        lo = self.speed(self.u_nodes[:-1])
+        hi = self.speed(np.nextafter(self.u_nodes[1:], -np.inf))
+        return lo, hi
 
     def u_of_s(self, s_mm: ArrayLike) -> np.ndarray:
         """Inverse: cubic Hermite start in each sub-interval (du/ds = 1/speed at its ends), then
-        Newton on the Gauss-Legendre arc length until every residual is below 1e-11 mm."""
+        safeguarded Newton (bisection when a step leaves the bracket) to 1e-11 mm."""
         s = np.clip(np.atleast_1d(np.asarray(s_mm, dtype=float)), 0.0, self.total_length_mm)
         idx = np.clip(np.searchsorted(self.s_nodes, s, side="right") - 1, 0, self.u_nodes.size - 2)
-        u_lo, u_hi = self.u_nodes[idx], self.u_nodes[idx + 1]
+        lo, hi = self.u_nodes[idx], self.u_nodes[idx + 1]
         s_lo, s_hi = self.s_nodes[idx], self.s_nodes[idx + 1]
-        u = _hermite_start(s, s_lo, s_hi, u_lo, u_hi, self._node_speed[idx],
-                           self._node_speed[idx + 1])
+        v_lo, v_hi = self._node_speeds
+        u = _hermite_start(s, s_lo, s_hi, lo, hi, v_lo[idx], v_hi[idx])
+        a, b, u_node = lo.copy(), hi.copy(), lo
         for _ in range(_NEWTON_SWEEPS):
-            err = s_lo + _gauss_integrals(self.speed, u_lo, u) - s
+            err = s_lo + _gauss_integrals(self.speed, u_node, u) - s
             if not np.any(np.abs(err) > _NEWTON_TOL_MM):
                 break
+            a = np.where(err < 0, u, a)
+            b = np.where(err > 0, u, b)
             speed = self.speed(u)
-            step = np.where(speed > 0, err / np.where(speed > 0, speed, 1.0), 0.0)
-            u = np.clip(u - step, u_lo, u_hi)
+            newton = u - err / np.where(speed > 0, speed, np.inf)
+            inside = (newton > a) & (newton < b)
+            u = np.where(np.abs(err) > _NEWTON_TOL_MM, np.where(inside, newton, 0.5 * (a + b)), u)
         return u
 
 
