@@ -1,4 +1,4 @@
-"""Baseline interpolators without look-ahead: adaptive feed (Yeh & Hsu) and curvature feed (Zhiming).
+"""Baseline interpolators without look-ahead: adaptive feed (Yeh & Hsu), curvature feed (Zhiming).
 
 Both command a feed computed from the curvature at the current parameter, with no acceleration
 limit (that is what the paper compares against), and step along each curve with the

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from controller.curves import Curve
 
@@ -42,10 +42,58 @@ def _dkappa(curve: Curve, u: float) -> float:
     return float(curve.curvature_derivative(u)[0])
 
 
+def brentq(f: Callable[[float], float], lo: float, hi: float, xtol: float = _XTOL) -> float:
+    """Root of f in [lo, hi] (f(lo), f(hi) of opposite signs) by the Illinois method.
+
+    A small stand-in for scipy's brentq: scipy.optimize costs half a second to import, which
+    `cncctl run` pays before the first motion."""
+    flo, fhi = f(lo), f(hi)
+    if flo == 0.0:
+        return lo
+    if fhi == 0.0:
+        return hi
+    side = 0
+    for _ in range(200):
+        x = (lo * fhi - hi * flo) / (fhi - flo)
+        if not lo < x < hi:
+            x = 0.5 * (lo + hi)
+        fx = f(x)
+        if fx == 0.0 or hi - lo <= xtol:
+            return x
+        if (fx > 0) == (fhi > 0):
+            hi, fhi = x, fx
+            if side == 1:
+                flo *= 0.5
+            side = 1
+        else:
+            lo, flo = x, fx
+            if side == -1:
+                fhi *= 0.5
+            side = -1
+        if hi - lo <= xtol:
+            break
+    return 0.5 * (lo + hi)
+
+
+def _bisect_all(f: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray,
+                xtol: float = _XTOL) -> np.ndarray:
+    """Roots of f in every bracket [lo_i, hi_i] at once (f(lo) > 0 >= f(hi)): vectorised
+    bisection, one curve evaluation per halving for all brackets together."""
+    lo, hi = lo.astype(float).copy(), hi.astype(float).copy()
+    while lo.size and np.max(hi - lo) > xtol:
+        mid = 0.5 * (lo + hi)
+        positive = f(mid) > 0
+        lo = np.where(positive, mid, lo)
+        hi = np.where(positive, hi, mid)
+        if np.all(mid == lo) & np.all(mid == hi):
+            break
+    return 0.5 * (lo + hi)
+
+
 def _peaks(curve: Curve, grid: np.ndarray, dk: np.ndarray) -> list[float]:
     """Local maxima of kappa: dkappa/du = 0 going + to - (eq. 13), or at an end."""
-    peaks = [brentq(lambda u: _dkappa(curve, u), grid[i], grid[i + 1], xtol=_XTOL)
-             for i in np.nonzero((dk[:-1] > 0) & (dk[1:] <= 0))[0]]
+    i = np.nonzero((dk[:-1] > 0) & (dk[1:] <= 0))[0]
+    peaks = _bisect_all(curve.curvature_derivative, grid[i], grid[i + 1]).tolist()
     if dk[0] < 0:
         peaks.insert(0, float(grid[0]))
     if dk[-1] > 0:

@@ -21,7 +21,14 @@ from controller.gen_dynamics import (
     predict,
 )
 from controller.gen_feed import FeedInput, LimitPolicy, Reduction, plan_path_feed
-from controller.gen_geometry import BlockCurve, CornerInfo, Geometry, build_path, find_corners, widen
+from controller.gen_geometry import (
+    BlockCurve,
+    CornerInfo,
+    Geometry,
+    build_path,
+    find_corners,
+    widen,
+)
 from controller.gen_sampling import Interpolation, Samples, interpolate
 from controller.path import PieceKind
 
@@ -129,8 +136,9 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
         reductions += tuple(_reduction(v, samples, ip.contour_error_limit_mm, lookback)
                             for v in violations)
         if settings.widen_zones:
+            last = len(samples.s_mm) - 1
             for v in violations:
-                _widen_at(geo, curves, zones, float(samples.s_mm[min(v.k_peak, len(samples.s_mm) - 1)]))
+                _widen_at(geo, curves, zones, float(samples.s_mm[min(v.k_peak, last)]))
     return RunPlan(samples, start_xy_mm, geo, pred, rounds, status, feed.result,
                    time.process_time() - cpu0)
 

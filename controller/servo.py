@@ -5,25 +5,91 @@ Convention (ALGORITHMS.md section 3): the tracking error E = R - P is the output
 velocity v[k] = (r[k] - r[k-1]) / T. With a0 = b0 the s factor of eq. 27 cancels, so
 E/V = (s^3 + a3 s^2 + (a2 - b2) s + (a1 - b1)) / (s^4 + a3 s^3 + a2 s^2 + a1 s + a0)
 (divided through by a4). This convention gives the steady ramp error V (a1 - b1) / a0.
+
+Only numpy is used: scipy.signal costs 0.6 s to import, which `cncctl run` would pay before
+the first motion. tests/test_servo.py checks both functions against scipy.signal.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import cont2discrete, lfilter, lfilter_zi  # noqa: F401  (lfilter_zi for users)
 
 from controller.config import ServoParams
 
+BLOCK = 256  # samples per block of the block-recursive filter
 
-@dataclass(frozen=True, slots=True)
+
+def error_transfer(p: ServoParams) -> tuple[np.ndarray, np.ndarray]:
+    """Continuous E/V numerator and denominator (4th-order form, leading coefficient 1)."""
+    if abs(p.a0 - p.b0) > 1e-9 * p.a0:
+        # General case keeps the pole at s = 0 (eq. 27 as printed): E/V = (D - N) / (s D).
+        num5 = np.array([p.a4, p.a3, p.a2 - p.b2, p.a1 - p.b1, p.a0 - p.b0]) / p.a4
+        den5 = np.array([p.a4, p.a3, p.a2, p.a1, p.a0, 0.0]) / p.a4
+        return num5, den5
+    num = np.array([p.a4, p.a3, p.a2 - p.b2, p.a1 - p.b1]) / p.a4
+    den = np.array([p.a4, p.a3, p.a2, p.a1, p.a0]) / p.a4
+    return num, den
+
+
+def expm(m: np.ndarray) -> np.ndarray:
+    """Matrix exponential by scaling and squaring of a Taylor series (small, tame matrices)."""
+    norm = float(np.abs(m).sum(axis=1).max())
+    squarings = max(0, int(np.ceil(np.log2(norm / 0.25)))) if norm > 0.25 else 0
+    a = m / 2.0**squarings
+    term = np.eye(len(m))
+    out = term.copy()
+    for k in range(1, 20):
+        term = term @ a / k
+        out = out + term
+    for _ in range(squarings):
+        out = out @ out
+    return out
+
+
+def _companion(num: np.ndarray, den: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Controllable canonical state space of a strictly proper num/den (den monic)."""
+    n = len(den) - 1
+    a = np.zeros((n, n))
+    a[0, :] = -den[1:]
+    a[1:, :-1] = np.eye(n - 1)
+    b = np.zeros((n, 1))
+    b[0, 0] = 1.0
+    c = np.zeros((1, n))
+    c[0, n - len(num):] = num
+    return a, b, c
+
+
+def zoh(num: np.ndarray, den: np.ndarray, sample_period_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-order-hold discretisation of a strictly proper SISO transfer function -> (b, a)."""
+    a_c, b_c, c_c = _companion(np.asarray(num, float), np.asarray(den, float))
+    n = len(a_c)
+    aug = np.zeros((n + 1, n + 1))
+    aug[:n, :n], aug[:n, n:] = a_c, b_c
+    e = expm(aug * sample_period_s)
+    phi, gamma = e[:n, :n], e[:n, n:]
+    a = np.real(np.poly(phi))
+    # SISO identity: C (zI - Phi)^-1 Gamma = (det(zI - Phi + Gamma C) - det(zI - Phi)) / det(...)
+    b = np.real(np.poly(phi - gamma @ c_c)) - a
+    return b, a
+
+
+@dataclass(frozen=True, eq=False)
 class DiscreteServo:
     """Discrete E/V filter coefficients (b, a) for one axis at period T."""
 
     b: np.ndarray
     a: np.ndarray
     sample_period_s: float
+    _blocks: tuple[np.ndarray, ...] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_blocks", _block_matrices(self.b, self.a, BLOCK))
+
+    @property
+    def order(self) -> int:
+        return len(self.a) - 1
 
     @property
     def steady_lag_s(self) -> float:
@@ -31,29 +97,70 @@ class DiscreteServo:
         return float(np.sum(self.b) / np.sum(self.a))
 
 
-def error_transfer(p: ServoParams) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous E/V numerator and denominator (4th-order form, leading coefficient 1)."""
-    num = np.array([p.a4, p.a3, p.a2 - p.b2, p.a1 - p.b1]) / p.a4
-    if abs(p.a0 - p.b0) > 1e-9 * p.a0:
-        # General case keeps the pole at s = 0 (eq. 27 as printed): E/V = (D - N) / (s D).
-        num5 = np.array([p.a4, p.a3, p.a2 - p.b2, p.a1 - p.b1, p.a0 - p.b0]) / p.a4
-        den5 = np.array([p.a4, p.a3, p.a2, p.a1, p.a0, 0.0]) / p.a4
-        return num5, den5
-    den = np.array([p.a4, p.a3, p.a2, p.a1, p.a0]) / p.a4
-    return num, den
+def _block_matrices(b: np.ndarray, a: np.ndarray, n_block: int) -> tuple[np.ndarray, ...]:
+    """State space (F, G, H, J) of b/a and its block form: y = O x + T u, x' = FL x + R u."""
+    n = len(a) - 1
+    bb = np.r_[b, np.zeros(len(a) - len(b))] if len(b) < len(a) else np.asarray(b, float)
+    j = bb[0]
+    f = np.zeros((n, n))
+    f[0, :] = -a[1:]
+    f[1:, :-1] = np.eye(n - 1)
+    g = np.zeros(n)
+    g[0] = 1.0
+    h = bb[1:] - j * a[1:]
+    powers = [np.eye(n)]
+    for _ in range(n_block):
+        powers.append(f @ powers[-1])
+    obs = np.array([h @ powers[k] for k in range(n_block)])  # (L, n)
+    impulse = np.r_[j, [h @ powers[k] @ g for k in range(n_block - 1)]]
+    idx = np.arange(n_block)
+    lag = idx[:, None] - idx[None, :]
+    toeplitz = np.where(lag >= 0, impulse[np.clip(lag, 0, None)], 0.0)
+    reach = np.column_stack([powers[n_block - 1 - k] @ g for k in range(n_block)])  # (n, L)
+    return obs, toeplitz, powers[n_block], reach
+
+
+def filter_block(servo: DiscreteServo, u: np.ndarray, state: np.ndarray) -> tuple[np.ndarray,
+                                                                                 np.ndarray]:
+    """Run the filter over u from state; vectorised in blocks of BLOCK samples."""
+    obs, toeplitz, f_block, reach = servo._blocks
+    out = np.empty(len(u))
+    x = state.copy()
+    for k0 in range(0, len(u), BLOCK):
+        chunk = u[k0:k0 + BLOCK]
+        m = len(chunk)
+        if m == BLOCK:
+            out[k0:k0 + m] = obs @ x + toeplitz @ chunk
+            x = f_block @ x + reach @ chunk
+        else:
+            out[k0:k0 + m] = obs[:m] @ x + toeplitz[:m, :m] @ chunk
+            x = _advance(servo, x, chunk)
+    return out, x
+
+
+def _advance(servo: DiscreteServo, x: np.ndarray, chunk: np.ndarray) -> np.ndarray:
+    """State after a partial block (sample by sample: at most BLOCK-1 steps)."""
+    a = servo.a
+    n = len(a) - 1
+    f = np.zeros((n, n))
+    f[0, :] = -a[1:]
+    f[1:, :-1] = np.eye(n - 1)
+    for v in chunk:
+        x = f @ x
+        x[0] += v
+    return x
 
 
 def discretise(p: ServoParams, sample_period_s: float) -> DiscreteServo:
     """Zero-order-hold discretisation of E/V at T."""
     num, den = error_transfer(p)
-    b, a, _ = cont2discrete((num, den), sample_period_s, method="zoh")
-    b = np.atleast_1d(np.squeeze(b))
-    return DiscreteServo(b=b / a[0], a=np.asarray(a) / a[0], sample_period_s=sample_period_s)
+    b, a = zoh(num, den, sample_period_s)
+    return DiscreteServo(b=b / a[0], a=a / a[0], sample_period_s=sample_period_s)
 
 
 def tracking_error_mm(servo: DiscreteServo, v_mm_s: np.ndarray) -> np.ndarray:
     """Tracking error of an axis at rest at t = 0, for per-sample velocities (vectorised)."""
-    return lfilter(servo.b, servo.a, np.asarray(v_mm_s, dtype=float))
+    return filter_block(servo, np.asarray(v_mm_s, dtype=float), np.zeros(servo.order))[0]
 
 
 class AxisServoStepper:
@@ -61,12 +168,11 @@ class AxisServoStepper:
 
     def __init__(self, servo: DiscreteServo) -> None:
         self.servo = servo
-        self.state = np.zeros(max(len(servo.a), len(servo.b)) - 1)
+        self.state = np.zeros(servo.order)
 
     def step(self, v_mm_s: np.ndarray) -> np.ndarray:
         """Tracking errors (mm) for the next chunk of per-sample velocities."""
-        e, self.state = lfilter(self.servo.b, self.servo.a, np.asarray(v_mm_s, float),
-                                zi=self.state)
+        e, self.state = filter_block(self.servo, np.asarray(v_mm_s, float), self.state)
         return e
 
 

@@ -1,4 +1,4 @@
-"""Plots for `cncctl simulate --plot`: feedrate profile and contour error (paper Figures 3, 5, 6)."""
+"""Plots for `cncctl simulate --plot`: feedrate and contour error (paper Figures 3, 5, 6)."""
 
 from __future__ import annotations
 

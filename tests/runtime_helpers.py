@@ -33,13 +33,18 @@ class Recorder:
         return fb
 
     def commanded(self) -> np.ndarray:
-        return np.concatenate([p.commanded_counts for p in self.parts if len(p)])
+        """Commanded counts of every executed frame; none when the run stopped before moving
+        (a fault can be seen before the first frame when the machine is loaded)."""
+        parts = [p.commanded_counts for p in self.parts if len(p)]
+        return np.concatenate(parts) if parts else np.zeros((0, 2), dtype=np.int64)
 
 
 def assert_smooth(cmd_counts: np.ndarray, start_counts: np.ndarray, config: MachineConfig) -> None:
     """No commanded position jump: |dp| <= Vmax T and |d2p| <= Amax T^2, plus pulse rounding."""
     t = config.sample_period_s
     pulse = config.axes[0].pulse_mm
+    if len(cmd_counts) == 0:
+        return  # stopped before the first frame: nothing moved, so nothing jumped
     p = np.vstack([start_counts, start_counts, cmd_counts])
     d1 = np.abs(np.diff(p, axis=0)).max()
     d2 = np.abs(np.diff(p, n=2, axis=0)).max()

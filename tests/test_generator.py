@@ -1,4 +1,4 @@
-"""Acceptance of the reference-point generator (issue 4) on the benchmarks and generated programs."""
+"""Acceptance of the reference-point generator (issue 4): benchmarks and generated programs."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from gen_programs import lobed_nurbs, lsq_nurbs, naca_points, write_g62
 from scipy.spatial import cKDTree
 
 from controller.blocks import NurbsBlock
@@ -16,7 +17,6 @@ from controller.interpreter import read_program
 from controller.nurbs import Nurbs
 from controller.sim_report import report, simulate
 from controller.time_bound import time_optimal_bound_s
-from gen_programs import lobed_nurbs, lsq_nurbs, naca_points, write_g62
 
 REPO = Path(__file__).resolve().parents[1]
 NACA = str(REPO / "nc_programs/naca2415.nc")
