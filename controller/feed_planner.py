@@ -19,6 +19,8 @@ MAX_SPLIT_DEPTH = 8  # a segment split this often is flattened instead (always s
 STAIR_STEP = 0.03  # relative speed step of the staircase where vlim binds
 STAIR_CAP = 0.25  # stair node speed: this many steps below vlim there
 FLATTEN_ROUNDS = 3  # rounds that only flatten, before flattening everything
+MAX_CRUISE_RAISES = 4  # rounds spent lifting cruises that vlim lets rise later on
+MIN_RAISED_CRUISE_S = 0.01  # only cruises at least this long are worth a new node
 LIMIT_TOLERANCE = 1e-7  # relative to max vlim: v <= vlim + tol on the whole profile
 
 
@@ -78,21 +80,33 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     nodes = _initial_nodes(curve, v_start_mm_s, v_end_mm_s, accel_mm_s2)
     tol = LIMIT_TOLERANCE * float(vlim.max())
     n_rounds = MAX_SPLIT_DEPTH + FLATTEN_ROUNDS + 2
-    for rnd in range(1, n_rounds + 1):
+    best: FeedPlan | None = None
+    raises = 0
+    for rnd in range(1, n_rounds + MAX_CRUISE_RAISES + 1):
         v = _node_speeds(nodes, accel_mm_s2, v_start_mm_s, v_end_mm_s)
         if isinstance(v, PlanResult):
-            return FeedPlan(FeedProfile(()), v, rnd)
+            return best or FeedPlan(FeedProfile(()), v, rnd)
         win = SegmentWindows.build(curve, nodes.s)
         ph = segment_phases(plan_segments(win, v[:-1], v[1:], nodes.flat, accel_mm_s2),
                             accel_mm_s2)
         viol = check_phases(ph, curve, len(nodes.s) - 1, tol)
         if not np.any(viol.excess_mm_s > 0.5 * tol):
-            return FeedPlan(_to_profile(ph, s[0]), PlanResult.OK, rnd)
+            plan = FeedPlan(_to_profile(ph, s[0]), PlanResult.OK, rnd)
+            if best is None or plan.profile.duration_s < best.profile.duration_s:
+                best = plan
+            if raises < MAX_CRUISE_RAISES and _raise_cruises(nodes, ph, curve):
+                raises += 1
+                continue
+            return best
+        if best is not None and rnd >= n_rounds - 1:
+            return best  # an improvement attempt did not settle: keep the last good plan
         if rnd == n_rounds - 1:  # last resort: flatten everything (safe by construction)
             viol = Violations(np.full(len(nodes.s) - 1, np.inf), viol.s_mm, viol.phase_len_mm)
         failed = _repair(nodes, viol, curve, 0.5 * tol, last=rnd > MAX_SPLIT_DEPTH)
         if failed is not None:
-            return FeedPlan(FeedProfile(()), failed, rnd)
+            return best or FeedPlan(FeedProfile(()), failed, rnd)
+    if best is not None:
+        return best
     return FeedPlan(FeedProfile(()), PlanResult.LIMIT_VIOLATED, rnd)
 
 
@@ -194,6 +208,35 @@ def _flatten(nodes: _Nodes, k: np.ndarray, curve: LimitCurve) -> PlanResult | No
     np.minimum.at(nodes.cap, k + 1, m)
     nodes.flat[k] = True
     return None
+
+
+def _raise_cruises(nodes: _Nodes, ph: PhaseArrays, curve: LimitCurve) -> bool:
+    """Add a node inside every long cruise where vlim later rises a stair step above it.
+
+    A segment's single accelerate-cruise-decelerate shape must cruise under the lowest vlim it
+    crosses after its acceleration; when vlim keeps rising gently beyond, a node there lets the
+    profile step up again (the staircase of _stair_nodes, found after the fact)."""
+    cruise = np.flatnonzero((ph.vs_mm_s == ph.ve_mm_s) & (ph.duration_s >= MIN_RAISED_CRUISE_S))
+    h = curve.spacing_mm
+    added = False
+    for k in cruise:
+        v_c = ph.vs_mm_s[k]
+        a, b = ph.s0_mm[k], ph.s0_mm[k] + ph.length_mm[k]
+        lo, hi = np.searchsorted(curve.s_mm, [a, b])
+        above = np.flatnonzero(curve.vlim_mm_s[lo:hi] >= v_c * (1.0 + 0.5 * STAIR_STEP))
+        if above.size == 0:
+            continue
+        i = lo + above[0]
+        s_new = float(curve.s_mm[i])
+        j = int(np.searchsorted(nodes.s, s_new))
+        if s_new - nodes.s[j - 1] < 4.0 * h or nodes.s[j] - s_new < 4.0 * h:
+            continue
+        nodes.s = np.insert(nodes.s, j, s_new)
+        nodes.cap = np.insert(nodes.cap, j, curve.vlim_mm_s[i] / (1.0 + STAIR_CAP * STAIR_STEP))
+        nodes.depth = np.insert(nodes.depth, j - 1, nodes.depth[j - 1])
+        nodes.flat = np.insert(nodes.flat, j - 1, False)
+        added = True
+    return added
 
 
 def _to_profile(ph: PhaseArrays, s_offset: float) -> FeedProfile:
