@@ -55,7 +55,8 @@ class _Nodes:
 
 
 def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
-              v_start_mm_s: float = 0.0, v_end_mm_s: float = 0.0) -> FeedPlan:
+              v_start_mm_s: float = 0.0, v_end_mm_s: float = 0.0,
+              raise_cruises: bool = True) -> FeedPlan:
     """Plan v(t) from s=0 at v_start to s=L at v_end, with v <= vlim(s) and |a| <= accel.
 
     The profile passes every node with zero acceleration. Nodes: the ends, the local minima of
@@ -94,7 +95,7 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
             plan = FeedPlan(_to_profile(ph, s[0]), PlanResult.OK, rnd)
             if best is None or plan.profile.duration_s < best.profile.duration_s:
                 best = plan
-            if raises < MAX_CRUISE_RAISES and _raise_cruises(nodes, ph, curve):
+            if raise_cruises and raises < MAX_CRUISE_RAISES and _raise_cruises(nodes, ph, curve):
                 raises += 1
                 continue
             return best

@@ -137,7 +137,8 @@ def _concat(profiles: list[FeedProfile]) -> FeedProfile:
     return FeedProfile(tuple(phases))
 
 
-def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None) -> FeedOutput:
+def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None,
+                   raise_cruises: bool = True) -> FeedOutput:
     """Module 3: vlim on a fine grid, then a quintic plan from rest to rest per section.
 
     Sections are separated by the path's stops (G1 corners brought to zero feed)."""
@@ -148,7 +149,8 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
     result = PlanResult.OK
     for a, b in zip(cuts[:-1], cuts[1:], strict=True):
         mask = (s >= a) & (s <= b)
-        plan = plan_feed(s[mask] - a, np.maximum(vlim[mask], 1e-6), inp.max_accel_mm_s2)
+        plan = plan_feed(s[mask] - a, np.maximum(vlim[mask], 1e-6), inp.max_accel_mm_s2,
+                         raise_cruises=raise_cruises)
         if plan.result != PlanResult.OK:
             result = plan.result
         profiles.append(plan.profile)

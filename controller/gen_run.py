@@ -9,6 +9,7 @@ from enum import StrEnum
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.errors import PlanningError
 from controller.feed_planner import PlanResult
 from controller.gen_dynamics import (
     LOOKBACK_S,
@@ -20,7 +21,7 @@ from controller.gen_dynamics import (
     find_violations,
     predict,
 )
-from controller.gen_feed import FeedInput, LimitPolicy, Reduction, plan_path_feed
+from controller.gen_feed import FeedInput, FeedOutput, LimitPolicy, Reduction, plan_path_feed
 from controller.gen_geometry import (
     BlockCurve,
     CornerInfo,
@@ -106,41 +107,67 @@ def _widen_at(geo: Geometry, curves: list[BlockCurve], zones: dict, s_mm: float)
     widen(curves, zones, block, u, 0.9 * kappa)
 
 
+@dataclass(frozen=True, eq=False)
+class _Attempt:
+    feed: FeedOutput
+    samples: Samples | None = None
+    prediction: ServoPrediction | None = None
+    violations: tuple[Violation, ...] = ()
+
+
+def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: MachineConfig,
+             settings: RunSettings, cache: dict, raise_cruises: bool) -> _Attempt:
+    """Modules 3 and 4 once: plan the feed, interpolate, predict the contour error."""
+    T = config.sample_period_s  # noqa: N806
+    feed = plan_path_feed(geo.path, inp, cache, raise_cruises)
+    if feed.result != PlanResult.OK:
+        return _Attempt(feed)
+    samples = interpolate(geo.path, feed.profile, T, settings.interpolation)
+    pred = predict(samples.xy_mm, samples.phi_rad, start_xy_mm, axis_servos(config), T)
+    limit = config.interpolator.contour_error_limit_mm
+    return _Attempt(feed, samples, pred, tuple(find_violations(pred.contour_mm, limit)))
+
+
 def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: MachineConfig,
                      settings: RunSettings = PH_LOOKAHEAD) -> RunPlan:
-    """Modules 1-4 on one run of XY blocks from rest to rest (Figure 4's loop)."""
+    """Modules 1-4 on one run of XY blocks from rest to rest (Figure 4's loop).
+
+    Rounds plan without the planner's cruise-raising pass (cheaper); once a round meets the
+    contour limit, one more attempt with it is kept if it meets the limit too."""
     cpu0 = time.process_time()
     ip = config.interpolator
-    T = config.sample_period_s  # noqa: N806
-    servos = axis_servos(config)
     zones = find_corners(curves, ip.kappa_threshold_per_mm)
     reductions: tuple[Reduction, ...] = ()
-    lookback = int(round(LOOKBACK_S / T))
+    lookback = int(round(LOOKBACK_S / config.sample_period_s))
     status = RunStatus.CONTOUR_LIMIT_NOT_MET
     fit_cache: dict = {}
     sample_cache: dict = {}
     for rounds in range(1, ip.max_dynamics_rounds + 1):
         geo = build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph, fit_cache)
-        feed = plan_path_feed(geo.path, _feed_input(config, settings, reductions), sample_cache)
-        if feed.result != PlanResult.OK:
+        inp = _feed_input(config, settings, reductions)
+        att = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, False)
+        if att.samples is None:
             status = RunStatus.FEED_PLAN_FAILED
             break
-        samples = interpolate(geo.path, feed.profile, T, settings.interpolation)
-        pred = predict(samples.xy_mm, samples.phi_rad, start_xy_mm, servos, T)
-        violations = find_violations(pred.contour_mm, ip.contour_error_limit_mm)
-        if not violations:
+        if not att.violations:
             status = RunStatus.OK
+            faster = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, True)
+            if faster.samples is not None and not faster.violations:
+                att = faster
             break
         if rounds == ip.max_dynamics_rounds:
             break
+        samples = att.samples
         reductions += tuple(_reduction(v, samples, ip.contour_error_limit_mm, lookback)
-                            for v in violations)
+                            for v in att.violations)
         if settings.widen_zones:
             last = len(samples.s_mm) - 1
-            for v in violations:
+            for v in att.violations:
                 _widen_at(geo, curves, zones, float(samples.s_mm[min(v.k_peak, last)]))
-    return RunPlan(samples, start_xy_mm, geo, pred, rounds, status, feed.result,
-                   time.process_time() - cpu0)
+    if att.samples is None or att.prediction is None:
+        raise PlanningError(f"feed planning failed: {att.feed.result.value}")
+    return RunPlan(att.samples, start_xy_mm, geo, att.prediction, rounds, status,
+                   att.feed.result, time.process_time() - cpu0)
 
 
 def with_status(plan: RunPlan, status: RunStatus) -> RunPlan:

@@ -13,6 +13,7 @@ the first motion. tests/test_servo.py checks both functions against scipy.signal
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -151,8 +152,9 @@ def _advance(servo: DiscreteServo, x: np.ndarray, chunk: np.ndarray) -> np.ndarr
     return x
 
 
+@lru_cache(maxsize=64)
 def discretise(p: ServoParams, sample_period_s: float) -> DiscreteServo:
-    """Zero-order-hold discretisation of E/V at T."""
+    """Zero-order-hold discretisation of E/V at T (cached: the generator asks every round)."""
     num, den = error_transfer(p)
     b, a = zoh(num, den, sample_period_s)
     return DiscreteServo(b=b / a[0], a=a / a[0], sample_period_s=sample_period_s)
