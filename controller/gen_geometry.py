@@ -7,9 +7,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller.blocks import ArcBlock, LineBlock, MotionBlock, NurbsBlock
+from controller.blocks import ArcBlock, LineBlock, MotionBlock, NurbsBlock, PathMode
 from controller.corners import CornerZone, detect_sharp_corners, joint_angle_rad, widen_zone
 from controller.curves import ArcCurve, Curve, LineCurve
+from controller.gen_blend import blend_joint
 from controller.nurbs import Nurbs
 from controller.path import Path, Piece, PieceKind, chain, make_piece
 from controller.ph_fit import PhSegment, fit_zone
@@ -27,6 +28,7 @@ class BlockCurve:
     feed_mm_s: float
     line: int
     nurbs: bool
+    blend_tolerance_mm: float | None = None  # how far a G1 corner at its end may be rounded
 
 
 @dataclass(frozen=True)
@@ -50,23 +52,33 @@ class Geometry:
     corners: tuple[CornerInfo, ...]
     ph_pieces: tuple[Piece, ...]
     stops_at_mm: tuple[float, ...] = field(default=())
+    g1_blends: int = 0
 
 
-def block_curve(block: MotionBlock, feed_cap_mm_s: float) -> BlockCurve | None:
-    """The XY curve of a block, or None for a block that does not move in XY."""
+def block_curve(block: MotionBlock, feed_cap_mm_s: float,
+                default_tolerance_mm: float = 0.0) -> BlockCurve | None:
+    """The XY curve of a block, or None for a block that does not move in XY.
+
+    Under G64 a G1 corner at the block's end may be rounded by G64 P, or by default_tolerance_mm
+    (the contour error limit) when P is not given; under G61/G61.1 it is an exact stop."""
     feed = min(block.feed_mm_s, feed_cap_mm_s)
     line = block.source.first_line
+    tol = None
+    if block.path.mode == PathMode.BLEND:
+        tol = block.path.tolerance_mm if block.path.tolerance_mm is not None \
+            else default_tolerance_mm
     if isinstance(block, NurbsBlock):
-        return BlockCurve(Nurbs.from_block(block), feed, line, True)
+        return BlockCurve(Nurbs.from_block(block), feed, line, True, tol)
     if isinstance(block, ArcBlock):
         c = block.center
         a0 = math.atan2(block.start[1] - c[1], block.start[0] - c[0])
-        return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad), feed, line, False)
+        return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad), feed, line, False,
+                          tol)
     assert isinstance(block, LineBlock)
     p0, p1 = block.start[:2], block.end[:2]
     if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
         return None
-    return BlockCurve(LineCurve(p0, p1), feed, line, False)
+    return BlockCurve(LineCurve(p0, p1), feed, line, False, tol)
 
 
 def find_corners(curves: list[BlockCurve], kappa_th_per_mm: float) -> dict[int, list[CornerZone]]:
@@ -146,26 +158,35 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
                cache: FitCache | None = None) -> Geometry:
     """Module 2: the run's path, corner zones replaced by PH quintics within error_limit_mm.
 
-    Joints between blocks whose tangents turn by more than SMOOTH_JOINT_RAD are G1 corners:
-    the feed is brought to zero there (exact stop), which is always within any tolerance.
+    Joints between blocks whose tangents turn by more than SMOOTH_JOINT_RAD are G1 corners: a
+    PH quintic blend within the block's tolerance (gen_blend), else an exact stop (feed zero).
     """
     cache = {} if cache is None else cache
     pieces: list[Piece] = []
     infos: list[CornerInfo] = []
-    stops: list[float] = []
+    stops: list[int] = []
+    blends = 0
     for i, bc in enumerate(curves):
         if bc.nurbs:
             ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph,
-                                     len(infos), cache)
+                                    len(infos), cache)
             infos += inf
         else:
             kind = PieceKind.ARC if isinstance(bc.curve, ArcCurve) else PieceKind.LINE
             ps = [make_piece(kind, bc.curve, 0.0, 1.0, 0.0, bc.feed_mm_s, bc.line)]
         if pieces and joint_angle_rad(_tangent(pieces[-1], True), _tangent(ps[0], False)) \
                 > SMOOTH_JOINT_RAD:
-            stops.append(len(pieces))
+            tol = curves[i - 1].blend_tolerance_mm
+            blended = blend_joint(pieces[-1], ps[0], tol) if tol else None
+            if blended is None:
+                stops.append(len(pieces))
+            else:
+                pieces[-1] = blended[0]
+                pieces.append(blended[1])
+                ps[0] = blended[2]
+                blends += 1
         pieces += ps
     chained = chain(pieces)
     stop_s = tuple(chained[k].s0_mm for k in stops)
     ph = tuple(p for p in chained if p.kind == PieceKind.PH)
-    return Geometry(Path(chained, stop_s), tuple(infos), ph, stop_s)
+    return Geometry(Path(chained, stop_s), tuple(infos), ph, stop_s, blends)

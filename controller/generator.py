@@ -91,8 +91,9 @@ def plan_run(curves: list[BlockCurve], start_xy: np.ndarray, config: MachineConf
 
 def _contour(blocks: list[NcBlock], config: MachineConfig, algorithm: Algorithm,
              t0_s: float) -> PlannedStep | None:
+    ip = config.interpolator
     curves = [c for b in blocks
-              if (c := block_curve(b, config.interpolator.max_feed_mm_s)) is not None]
+              if (c := block_curve(b, ip.max_feed_mm_s, ip.contour_error_limit_mm)) is not None]
     if not curves:
         return None
     start = np.array(blocks[0].start[:2])
