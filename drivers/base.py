@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -46,7 +47,7 @@ class Feedback:
         return int(self.seq.shape[0])
 
 
-class Drive:
+class Drive(ABC):
     """Base class of every backend; subclasses implement the `_hooks` only."""
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
@@ -118,35 +119,43 @@ class Drive:
             raise DriveError(f"{type(self).__name__}: drive is not open")
 
     # -- backend hooks --------------------------------------------------------------------
+    @abstractmethod
     def _open(self) -> None:
-        raise NotImplementedError
+        """Backend hook."""
 
+    @abstractmethod
     def _send_frames(self, frames: np.ndarray, end_of_stream: bool) -> None:
-        raise NotImplementedError
+        """Backend hook."""
 
+    @abstractmethod
     def _fifo_level(self) -> int:
-        raise NotImplementedError
+        """Backend hook."""
 
+    @abstractmethod
     def _fifo_capacity(self) -> int:
-        raise NotImplementedError
+        """Backend hook."""
 
+    @abstractmethod
     def _read_feedback(self) -> Feedback:
-        raise NotImplementedError
+        """Backend hook."""
 
+    @abstractmethod
     def _read_position(self) -> tuple[np.ndarray, np.ndarray]:
-        raise NotImplementedError
+        """Backend hook."""
 
+    @abstractmethod
     def _read_status(self) -> CardStatus:
-        raise NotImplementedError
+        """Backend hook."""
 
     def _fault_message(self) -> str:
         return ""
 
+    @abstractmethod
     def _reset(self) -> None:
-        raise NotImplementedError
+        """Backend hook."""
 
-    def _close(self) -> None:
-        pass
+    def _close(self) -> None:  # noqa: B027 (optional hook: most backends have nothing to close)
+        return None
 
 
 _BACKENDS: dict[str, Callable[..., Drive]] = {}

@@ -7,6 +7,8 @@ from pathlib import Path
 from controller.blocks import NcBlock
 from controller.config import MachineConfig, load_config
 from controller.interpreter import read_program
+from controller.nurbs import Nurbs
+from controller.nurbs_program import program_nurbs
 
 XY_TABLE = load_config("xy_table")
 XYZ_MILL = load_config("xyz_mill")
@@ -22,3 +24,17 @@ def blocks_of(tmp_path: Path, text: str, config: MachineConfig = XY_TABLE,
 
 def motion(blocks: list[NcBlock]) -> list[NcBlock]:
     return [b for b in blocks if hasattr(b, "feed_mm_s")]
+
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def program(name: str) -> Path:
+    """A program of nc_programs/."""
+    return REPO / "nc_programs" / name
+
+
+def read_program_nurbs(name: str) -> Nurbs:
+    """The one NURBS block of a program in nc_programs/, as a curve."""
+    (curve,) = program_nurbs(str(program(name)))
+    return curve

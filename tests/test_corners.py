@@ -3,28 +3,16 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from nc_helpers import read_program_nurbs
 
 from controller.corners import detect_sharp_corners, joint_angle_rad, widen_zone
 from controller.curves import ArcCurve, LineCurve
-from controller.nurbs import Nurbs
-from controller.nurbs_program import program_nurbs
 
 KAPPA_TH = 2450.0 / (3500.0 / 60.0) ** 2  # eq. 15 with Table III: 0.720 /mm
 
-REPO = Path(__file__).resolve().parents[1]
-
-
-def program(name: str) -> Path:
-    return REPO / "nc_programs" / name
-
-
-def read_program_nurbs(name: str) -> Nurbs:
-    (curve,) = program_nurbs(str(program(name)))
-    return curve
 
 
 @pytest.fixture(scope="module")

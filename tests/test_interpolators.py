@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from nc_helpers import read_program_nurbs
 
 from controller.curves import ArcCurve, LineCurve
 from controller.interpolators import (
@@ -18,23 +18,11 @@ from controller.interpolators import (
     taylor_interpolate,
     taylor_step,
 )
-from controller.nurbs import Nurbs
-from controller.nurbs_program import program_nurbs
 from controller.ph_quintic import PhQuintic
 
 cplx = st.complex_numbers(max_magnitude=50, min_magnitude=0.5, allow_nan=False,
                           allow_infinity=False)
 
-REPO = Path(__file__).resolve().parents[1]
-
-
-def program(name: str) -> Path:
-    return REPO / "nc_programs" / name
-
-
-def read_program_nurbs(name: str) -> Nurbs:
-    (curve,) = program_nurbs(str(program(name)))
-    return curve
 
 
 @settings(max_examples=60, deadline=None)

@@ -3,29 +3,18 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from nc_helpers import read_program_nurbs
 
 from controller.corners import detect_sharp_corners
 from controller.nurbs import Nurbs
-from controller.nurbs_program import program_nurbs
 from controller.ph_fit import fit_single, fit_zone, foot_distances, zone_fit_report
 
 KAPPA_TH = 2450.0 / (3500.0 / 60.0) ** 2
 E_MM = 1e-3
 
-REPO = Path(__file__).resolve().parents[1]
-
-
-def program(name: str) -> Path:
-    return REPO / "nc_programs" / name
-
-
-def read_program_nurbs(name: str) -> Nurbs:
-    (curve,) = program_nurbs(str(program(name)))
-    return curve
 
 
 def circle(radius: float) -> Nurbs:

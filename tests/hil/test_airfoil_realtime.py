@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -15,18 +14,14 @@ from controller.servo import contour_error_mm, discretise, tracking_error_mm
 
 PROGRAM = Path(__file__).resolve().parents[2] / "nc_programs" / "naca2415.nc"
 
-pytestmark = [
-    pytest.mark.hil,
-    pytest.mark.skipif(importlib.util.find_spec("controller.generator") is None,
-                       reason="controller.generator (reference-point generator) not importable"),
-]
+pytestmark = [pytest.mark.hil]
 
 
 def planned_reference(config: object) -> np.ndarray:
     """The reference the generator streams, computed offline in this process."""
     from controller.generator import generate_reference
-
     from controller.interpreter import read_program
+
     chunks = list(generate_reference(read_program(str(PROGRAM), config), config))
     assert chunks[-1].final
     return np.vstack([c.pos_mm for c in chunks])
