@@ -65,15 +65,33 @@ def _as_u(u: ArrayLike) -> np.ndarray:
     return np.atleast_1d(np.asarray(u, dtype=float))
 
 
+class _ConstantSpeed:
+    """Curves of constant parametric speed on u in [0, 1]: s = u * length, curvature constant."""
+
+    u_start = 0.0
+    u_end = 1.0
+    length_mm: float
+
+    def curvature(self, u: ArrayLike) -> np.ndarray:
+        return np.full(_as_u(u).size, self._curvature)
+
+    def curvature_derivative(self, u: ArrayLike) -> np.ndarray:
+        return np.zeros(_as_u(u).size)
+
+    def s_of_u(self, u: ArrayLike) -> np.ndarray:
+        return _as_u(u) * self.length_mm
+
+    def u_of_s(self, s_mm: ArrayLike) -> np.ndarray:
+        return _as_u(s_mm) / self.length_mm
+
+
 @dataclass(frozen=True)
-class LineCurve:
+class LineCurve(_ConstantSpeed):
     """Straight segment p0 -> p1 with u in [0, 1] (arc length is exactly u * length)."""
 
     p0: tuple[float, float]
     p1: tuple[float, float]
-
-    u_start = 0.0
-    u_end = 1.0
+    _curvature = 0.0
 
     @property
     def length_mm(self) -> float:
@@ -88,33 +106,18 @@ class LineCurve:
             out[1] = d
         return out
 
-    def curvature(self, u: ArrayLike) -> np.ndarray:
-        return np.zeros(_as_u(u).size)
-
-    def curvature_derivative(self, u: ArrayLike) -> np.ndarray:
-        return np.zeros(_as_u(u).size)
-
-    def s_of_u(self, u: ArrayLike) -> np.ndarray:
-        return _as_u(u) * self.length_mm
-
-    def u_of_s(self, s_mm: ArrayLike) -> np.ndarray:
-        return _as_u(s_mm) / self.length_mm
-
     def derivatives_scalar(self, u: float) -> tuple[float, float, float, float]:
         return (self.p1[0] - self.p0[0], self.p1[1] - self.p0[1], 0.0, 0.0)
 
 
 @dataclass(frozen=True)
-class ArcCurve:
+class ArcCurve(_ConstantSpeed):
     """Circular arc: centre, radius, start angle and signed sweep (ccw > 0); u in [0, 1]."""
 
     center: tuple[float, float]
     radius: float
     angle0: float
     sweep: float
-
-    u_start = 0.0
-    u_end = 1.0
 
     @property
     def length_mm(self) -> float:
@@ -134,17 +137,9 @@ class ArcCurve:
             out[k, :, 1] = (self.center[1] if k == 0 else 0.0) + scale * ry
         return out
 
-    def curvature(self, u: ArrayLike) -> np.ndarray:
-        return np.full(_as_u(u).size, 1.0 / self.radius)
-
-    def curvature_derivative(self, u: ArrayLike) -> np.ndarray:
-        return np.zeros(_as_u(u).size)
-
-    def s_of_u(self, u: ArrayLike) -> np.ndarray:
-        return _as_u(u) * self.length_mm
-
-    def u_of_s(self, s_mm: ArrayLike) -> np.ndarray:
-        return _as_u(s_mm) / self.length_mm
+    @property
+    def _curvature(self) -> float:
+        return 1.0 / self.radius
 
     def derivatives_scalar(self, u: float) -> tuple[float, float, float, float]:
         theta = self.angle0 + self.sweep * u
