@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.servo import DiscreteServo, contour_error_mm, discretise, tracking_error_mm
+from controller.servo import DiscreteServo, contour_error_mm, discretise, filter_block
 
 SETTLE_S = 0.06  # simulate this long at rest after the run so the tail error is seen too
 TARGET_FRACTION = 0.95  # re-plan aiming this far under the limit, so rounds converge quickly
@@ -50,18 +50,41 @@ def acceleration_gain_s2(config: MachineConfig) -> float:
     return max(gains)
 
 
+ServoState = tuple[np.ndarray, np.ndarray]  # filter states of X and Y
+
+
+def rest_state(servos: tuple[DiscreteServo, DiscreteServo]) -> ServoState:
+    return np.zeros(servos[0].order), np.zeros(servos[1].order)
+
+
+def _velocities(xy_mm: np.ndarray, start_xy_mm: np.ndarray, sample_period_s: float) -> np.ndarray:
+    return np.diff(np.vstack([start_xy_mm[None, :], xy_mm]), axis=0) / sample_period_s
+
+
 def predict(xy_mm: np.ndarray, phi_rad: np.ndarray, start_xy_mm: np.ndarray,
-            servos: tuple[DiscreteServo, DiscreteServo], sample_period_s: float) -> ServoPrediction:
-    """Drive each axis model with its per-sample velocity; the run starts and ends at rest.
+            servos: tuple[DiscreteServo, DiscreteServo], sample_period_s: float,
+            state: ServoState | None = None) -> ServoPrediction:
+    """Drive each axis model with its per-sample velocity, from rest or from a servo state (a
+    window continuing the previous one); the run ends at rest.
 
     Returns errors for the run's samples followed by SETTLE_S of samples holding the end point."""
     settle = int(round(SETTLE_S / sample_period_s))
-    pos = np.vstack([start_xy_mm[None, :], xy_mm, np.repeat(xy_mm[-1:], settle, axis=0)])
-    v = np.diff(pos, axis=0) / sample_period_s
-    ex = tracking_error_mm(servos[0], v[:, 0])
-    ey = tracking_error_mm(servos[1], v[:, 1])
+    xy = np.vstack([xy_mm, np.repeat(xy_mm[-1:], settle, axis=0)])
+    v = _velocities(xy, start_xy_mm, sample_period_s)
+    sx, sy = rest_state(servos) if state is None else state
+    ex = filter_block(servos[0], v[:, 0], sx)[0]
+    ey = filter_block(servos[1], v[:, 1], sy)[0]
     phi = np.r_[phi_rad, np.full(settle, phi_rad[-1])]
     return ServoPrediction(ex, ey, contour_error_mm(ex, ey, phi))
+
+
+def state_after(xy_mm: np.ndarray, start_xy_mm: np.ndarray,
+                servos: tuple[DiscreteServo, DiscreteServo], sample_period_s: float,
+                state: ServoState | None = None) -> ServoState:
+    """The servo filter states after following xy_mm from start_xy_mm (and state)."""
+    v = _velocities(xy_mm, start_xy_mm, sample_period_s)
+    sx, sy = rest_state(servos) if state is None else state
+    return filter_block(servos[0], v[:, 0], sx)[1], filter_block(servos[1], v[:, 1], sy)[1]
 
 
 def find_violations(contour_mm: np.ndarray, limit_mm: float) -> list[Violation]:

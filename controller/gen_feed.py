@@ -138,10 +138,12 @@ def _concat(profiles: list[FeedProfile]) -> FeedProfile:
 
 
 def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None,
-                   raise_cruises: bool = True) -> FeedOutput:
-    """Module 3: vlim on a fine grid, then a quintic plan from rest to rest per section.
+                   raise_cruises: bool = True, v_start_mm_s: float = 0.0) -> FeedOutput:
+    """Module 3: vlim on a fine grid, then a quintic plan per section, ending at rest.
 
-    Sections are separated by the path's stops (G1 corners brought to zero feed)."""
+    Sections are separated by the path's stops (G1 corners brought to zero feed). The first
+    starts at v_start_mm_s (a window continuing a cruise of the previous one), the others at
+    rest."""
     s, kappa = limit_samples(path, cache)
     vlim = feed_limit_mm_s(path, s, kappa, inp)
     cuts = [0.0, *path.stops_at_mm, path.length_mm]
@@ -149,7 +151,8 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
     result = PlanResult.OK
     for a, b in zip(cuts[:-1], cuts[1:], strict=True):
         mask = (s >= a) & (s <= b)
-        plan = plan_feed(s[mask] - a, np.maximum(vlim[mask], 1e-6), inp.max_accel_mm_s2,
+        v0 = v_start_mm_s if a == 0.0 else 0.0
+        plan = plan_feed(s[mask] - a, np.maximum(vlim[mask], 1e-6), inp.max_accel_mm_s2, v0,
                          raise_cruises=raise_cruises)
         if plan.result != PlanResult.OK:
             result = plan.result

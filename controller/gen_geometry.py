@@ -155,28 +155,31 @@ def _tangent(piece: Piece, at_end: bool) -> np.ndarray:
 
 def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
                error_limit_mm: float, use_ph: bool = True,
-               cache: FitCache | None = None) -> Geometry:
+               cache: FitCache | None = None, prefix: tuple[Piece, ...] = (),
+               prefix_tolerance_mm: float | None = None) -> Geometry:
     """Module 2: the run's path, corner zones replaced by PH quintics within error_limit_mm.
 
     Joints between blocks whose tangents turn by more than SMOOTH_JOINT_RAD are G1 corners: a
     PH quintic blend within the block's tolerance (gen_blend), else an exact stop (feed zero).
+    A prefix is geometry already decided by the previous look-ahead window; the blocks follow it.
     """
     cache = {} if cache is None else cache
-    pieces: list[Piece] = []
+    pieces: list[Piece] = list(prefix)
+    corner_base = max((p.corner for p in prefix), default=-1) + 1  # keep corner ids distinct
     infos: list[CornerInfo] = []
     stops: list[int] = []
     blends = 0
     for i, bc in enumerate(curves):
         if bc.nurbs:
             ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph,
-                                    len(infos), cache)
+                                    corner_base + len(infos), cache)
             infos += inf
         else:
             kind = PieceKind.ARC if isinstance(bc.curve, ArcCurve) else PieceKind.LINE
             ps = [make_piece(kind, bc.curve, 0.0, 1.0, 0.0, bc.feed_mm_s, bc.line)]
         if pieces and joint_angle_rad(_tangent(pieces[-1], True), _tangent(ps[0], False)) \
                 > SMOOTH_JOINT_RAD:
-            tol = curves[i - 1].blend_tolerance_mm
+            tol = curves[i - 1].blend_tolerance_mm if i > 0 else prefix_tolerance_mm
             blended = blend_joint(pieces[-1], ps[0], tol) if tol else None
             if blended is None:
                 stops.append(len(pieces))

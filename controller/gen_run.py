@@ -15,6 +15,7 @@ from controller.gen_dynamics import (
     LOOKBACK_S,
     TARGET_FRACTION,
     ServoPrediction,
+    ServoState,
     Violation,
     acceleration_gain_s2,
     axis_servos,
@@ -31,7 +32,7 @@ from controller.gen_geometry import (
     widen,
 )
 from controller.gen_sampling import Interpolation, Samples, interpolate
-from controller.path import PieceKind
+from controller.path import Piece, PieceKind
 
 # The first plan keeps kappa v^2 under this share of eps_max / c2 (the steady contour error);
 # the rest of the limit is left for the transients the dynamics module then measures.
@@ -115,25 +116,43 @@ class _Attempt:
     violations: tuple[Violation, ...] = ()
 
 
+@dataclass(frozen=True, eq=False)
+class Continuation:
+    """Where the previous look-ahead window was cut: the next window starts here, mid-cruise."""
+
+    pieces: tuple[Piece, ...]  # geometry decided by the previous window, from the cut on
+    tolerance_mm: float | None  # blend tolerance at the end of the last of those blocks
+    v_mm_s: float  # the cruise feed at the cut (acceleration zero)
+    xy_mm: np.ndarray  # reference point at the cut
+    servo: ServoState  # servo model state at the cut
+    end_mm: tuple[float, float, float]  # programmed end point of the last of those blocks
+
+
 def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: MachineConfig,
-             settings: RunSettings, cache: dict, raise_cruises: bool) -> _Attempt:
+             settings: RunSettings, cache: dict, raise_cruises: bool,
+             cont: Continuation | None) -> _Attempt:
     """Modules 3 and 4 once: plan the feed, interpolate, predict the contour error."""
     T = config.sample_period_s  # noqa: N806
-    feed = plan_path_feed(geo.path, inp, cache, raise_cruises)
+    v0 = 0.0 if cont is None else cont.v_mm_s
+    feed = plan_path_feed(geo.path, inp, cache, raise_cruises, v0)
     if feed.result != PlanResult.OK:
         return _Attempt(feed)
     samples = interpolate(geo.path, feed.profile, T, settings.interpolation)
-    pred = predict(samples.xy_mm, samples.phi_rad, start_xy_mm, axis_servos(config), T)
+    pred = predict(samples.xy_mm, samples.phi_rad, start_xy_mm, axis_servos(config), T,
+                   None if cont is None else cont.servo)
     limit = config.interpolator.contour_error_limit_mm
     return _Attempt(feed, samples, pred, tuple(find_violations(pred.contour_mm, limit)))
 
 
 def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: MachineConfig,
-                     settings: RunSettings = PH_LOOKAHEAD) -> RunPlan:
-    """Modules 1-4 on one run of XY blocks from rest to rest (Figure 4's loop).
+                     settings: RunSettings = PH_LOOKAHEAD,
+                     cont: Continuation | None = None) -> RunPlan:
+    """Modules 1-4 on one run of XY blocks to rest (Figure 4's loop), from rest or from where
+    the previous look-ahead window was cut.
 
     Rounds plan without the planner's cruise-raising pass (cheaper); once a round meets the
-    contour limit, one more attempt with it is kept if it meets the limit too."""
+    contour limit, one more attempt with it is kept if it meets the limit too. If a later round
+    cannot be planned, the last plan is returned with its status."""
     cpu0 = time.process_time()
     ip = config.interpolator
     zones = find_corners(curves, ip.kappa_threshold_per_mm)
@@ -142,18 +161,23 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
     status = RunStatus.CONTOUR_LIMIT_NOT_MET
     fit_cache: dict = {}
     sample_cache: dict = {}
+    prefix = () if cont is None else cont.pieces
+    tol = None if cont is None else cont.tolerance_mm
+    good: tuple[Geometry, _Attempt] | None = None
     for rounds in range(1, ip.max_dynamics_rounds + 1):
-        geo = build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph, fit_cache)
+        geo = build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph, fit_cache,
+                         prefix, tol)
         inp = _feed_input(config, settings, reductions)
-        att = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, False)
+        att = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, False, cont)
         if att.samples is None:
             status = RunStatus.FEED_PLAN_FAILED
             break
+        good = (geo, att)
         if not att.violations:
             status = RunStatus.OK
-            faster = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, True)
+            faster = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, True, cont)
             if faster.samples is not None and not faster.violations:
-                att = faster
+                good = (geo, faster)
             break
         if rounds == ip.max_dynamics_rounds:
             break
@@ -164,8 +188,10 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
             last = len(samples.s_mm) - 1
             for v in att.violations:
                 _widen_at(geo, curves, zones, float(samples.s_mm[min(v.k_peak, last)]))
-    if att.samples is None or att.prediction is None:
+    if good is None:
         raise PlanningError(f"feed planning failed: {att.feed.result.value}")
+    geo, att = good
+    assert att.samples is not None and att.prediction is not None
     return RunPlan(att.samples, start_xy_mm, geo, att.prediction, rounds, status,
                    att.feed.result, time.process_time() - cpu0)
 

@@ -20,10 +20,19 @@ from controller.blocks import (
 from controller.config import MachineConfig
 from controller.feed_planner import plan_feed
 from controller.gen_geometry import BlockCurve, block_curve
-from controller.gen_run import NURBS_LOOKAHEAD, PH_LOOKAHEAD, RunPlan, plan_contour_run
+from controller.gen_run import (
+    NURBS_LOOKAHEAD,
+    PH_LOOKAHEAD,
+    Continuation,
+    RunPlan,
+    RunStatus,
+    plan_contour_run,
+)
+from controller.gen_window import continuation_cut
 from controller.refpoints import RefChunk
 
-MAX_RUN_BLOCKS = 500  # look-ahead window: a longer contour is planned in pieces, stopping between
+MAX_RUN_BLOCKS = 500  # baselines: a longer contour is planned in pieces, stopping between
+WINDOW_BLOCKS = 200  # ph-lookahead: new blocks per look-ahead window (cut and continued)
 
 
 class Algorithm(StrEnum):
@@ -79,28 +88,60 @@ def _dwell(block: DwellBlock, config: MachineConfig, t0_s: float) -> RefChunk | 
 
 
 def plan_run(curves: list[BlockCurve], start_xy: np.ndarray, config: MachineConfig,
-             algorithm: Algorithm) -> tuple[RunPlan | None, np.ndarray, np.ndarray, np.ndarray]:
+             algorithm: Algorithm, cont: Continuation | None = None,
+             ) -> tuple[RunPlan | None, np.ndarray, np.ndarray, np.ndarray]:
     """Plan one XY contour run with the chosen algorithm: (report, xy, feed, line)."""
     if algorithm in FORMULA_FEEDS:
         s = plan_formula_run(curves, config, algorithm.value)
         return None, s.xy_mm, s.v_mm_s, s.line
     settings = PH_LOOKAHEAD if algorithm == Algorithm.PH_LOOKAHEAD else NURBS_LOOKAHEAD
-    run = plan_contour_run(curves, start_xy, config, settings)
+    run = plan_contour_run(curves, start_xy, config, settings, cont)
     return run, run.samples.xy_mm, run.samples.v_mm_s, run.samples.line
 
 
-def _contour(blocks: list[NcBlock], config: MachineConfig, algorithm: Algorithm,
-             t0_s: float) -> PlannedStep | None:
+def _curves(blocks: list[NcBlock], config: MachineConfig) -> list[BlockCurve]:
     ip = config.interpolator
-    curves = [c for b in blocks
-              if (c := block_curve(b, ip.max_feed_mm_s, ip.contour_error_limit_mm)) is not None]
-    if not curves:
+    return [c for b in blocks
+            if (c := block_curve(b, ip.max_feed_mm_s, ip.contour_error_limit_mm)) is not None]
+
+
+def _contour(blocks: list[NcBlock], config: MachineConfig, algorithm: Algorithm,
+             t0_s: float, cont: Continuation | None = None) -> PlannedStep | None:
+    """Plan pending blocks (after a cut of the previous window, if any) all the way to rest."""
+    curves = _curves(blocks, config)
+    if not curves and cont is None:
         return None
-    start = np.array(blocks[0].start[:2])
-    run, xy, v, line = plan_run(curves, start, config, algorithm)
-    xy[-1] = blocks[-1].end[:2]  # the programmed end point exactly, not a curve evaluation
-    pos = _pos_row(config, xy, blocks[0].start[2])
+    start = np.array(blocks[0].start[:2]) if cont is None else cont.xy_mm
+    end = blocks[-1].end if blocks else cont.end_mm  # type: ignore[union-attr]
+    run, xy, v, line = plan_run(curves, start, config, algorithm, cont)
+    xy[-1] = end[:2]  # the programmed end point exactly, not a curve evaluation
+    pos = _pos_row(config, xy, end[2])
     return PlannedStep(RefChunk(t0_s + config.sample_period_s, pos, v, line), run)
+
+
+def _window(blocks: list[NcBlock], config: MachineConfig, t0_s: float,
+            cont: Continuation | None) -> tuple[PlannedStep, Continuation | None]:
+    """Plan a look-ahead window to rest, then keep only what precedes its last cruise sample
+    before the overlap; the rest is planned again with the next blocks (no stop between).
+
+    Without such a cruise sample the whole window is kept and the machine stops at its end."""
+    curves = _curves(blocks, config)
+    start = np.array(blocks[0].start[:2]) if cont is None else cont.xy_mm
+    run = plan_contour_run(curves, start, config, PH_LOOKAHEAD, cont)
+    cut = continuation_cut(run, curves[-1].blend_tolerance_mm, blocks[-1].end, config, cont)
+    z = blocks[-1].end[2]
+    if cut is None or run.status != RunStatus.OK:
+        s = run.samples
+        xy = s.xy_mm.copy()
+        xy[-1] = blocks[-1].end[:2]
+        chunk = RefChunk(t0_s + config.sample_period_s, _pos_row(config, xy, z), s.v_mm_s,
+                         s.line)
+        return PlannedStep(chunk, run), None
+    k, nxt = cut
+    s = run.samples
+    chunk = RefChunk(t0_s + config.sample_period_s, _pos_row(config, s.xy_mm[:k + 1], z),
+                     s.v_mm_s[:k + 1], s.line[:k + 1])
+    return PlannedStep(chunk, run), nxt
 
 
 def _is_contour_block(block: NcBlock) -> bool:
@@ -111,11 +152,16 @@ def _is_contour_block(block: NcBlock) -> bool:
 
 def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
                  algorithm: Algorithm | str = Algorithm.PH_LOOKAHEAD) -> Iterator[PlannedStep]:
-    """Group blocks into runs (rest to rest) and plan each; chunks follow each other in time."""
+    """Group blocks into runs (rest to rest) and plan each; chunks follow each other in time.
+
+    ph-lookahead plans long runs in look-ahead windows of WINDOW_BLOCKS new blocks, each cut
+    mid-cruise and continued by the next (see _window); the other algorithms stop between
+    windows."""
     algorithm = Algorithm(algorithm)
     T = config.sample_period_s  # noqa: N806
     t_s = 0.0
     pending: list[NcBlock] = []
+    cont: Continuation | None = None
 
     def emit(step: PlannedStep | None) -> Iterator[PlannedStep]:
         nonlocal t_s
@@ -124,16 +170,30 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
             yield step
 
     def flush() -> Iterator[PlannedStep]:
-        if pending:
+        nonlocal cont
+        if pending or cont is not None:
             run_blocks = list(pending)
             pending.clear()
-            yield from emit(_contour(run_blocks, config, algorithm, t_s))
+            step = _contour(run_blocks, config, algorithm, t_s, cont)
+            cont = None
+            yield from emit(step)
+
+    def window() -> Iterator[PlannedStep]:
+        nonlocal cont
+        run_blocks = list(pending)
+        pending.clear()
+        step, cont = _window(run_blocks, config, t_s, cont)
+        yield from emit(step)
 
     for block in blocks:
         if _is_contour_block(block):
             pending.append(block)  # type: ignore[arg-type]
             exact = block.path.mode != PathMode.BLEND  # type: ignore[union-attr]
-            if exact or len(pending) >= MAX_RUN_BLOCKS:
+            if exact:
+                yield from flush()
+            elif len(pending) >= WINDOW_BLOCKS and algorithm == Algorithm.PH_LOOKAHEAD:
+                yield from window()
+            elif len(pending) >= MAX_RUN_BLOCKS:
                 yield from flush()
             continue
         yield from flush()
