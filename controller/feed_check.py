@@ -8,6 +8,8 @@ import numpy as np
 
 from controller.feed_profile import bernstein6_distance, quintic_speed
 
+CHUNK_SAMPLES = 16  # check-sample intervals per chunk of the coarse pass over transitions
+
 
 @dataclass(frozen=True, eq=False)
 class LimitCurve:
@@ -130,17 +132,24 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     if len(dur) == 0:
         return ()
     n = _sample_counts(dur, vs, ve, lengths[mask], curve.spacing_mm, tol)
-    k = np.repeat(np.arange(len(dur)), n)
-    j = np.arange(len(k)) - np.repeat(np.cumsum(n) - n, n)
+    ch = _Chunks.build(n, dur, s0, vs, ve, curve, tol)
+    # Dense samples only in the chunks that may hold an excess above tol/4 (the very samples a
+    # full pass takes there, so the worst points found are the same).
+    c = np.flatnonzero(ch.keep)
+    cnt = ch.j1[c] - ch.j0[c] + ~ch.keep_next[c]  # a chunk's last sample unless the next has it
+    k = np.repeat(ch.k[c], cnt)
+    j = np.repeat(ch.j0[c], cnt) + np.arange(len(k)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
     tau = j / (n[k] - 1.0)
     s = s0[k] + bernstein6_distance(tau, dur[k], vs[k], ve[k])
     v = quintic_speed(tau, vs[k], ve[k])
     e = v - curve.at(s)
     # Grid samples inside transitions (where vlim may kink): exact v, by Newton on s(tau) from
-    # the interpolated tau.
+    # the interpolated tau; only those in kept chunks (elsewhere v - vlim <= tol/4 there too).
     g = _grid_inside(curve, s0, s0 + lengths[mask])
     gk = np.clip(np.searchsorted(s0, curve.s_mm[g], side="right") - 1, 0, len(s0) - 1)
-    tg = np.interp(curve.s_mm[g], s, tau)
+    in_kept = ch.keep[ch.chunk_of(curve.s_mm[g], gk)]
+    g, gk = g[in_kept], gk[in_kept]
+    tg = np.interp(curve.s_mm[g], s, tau) if len(g) else np.empty(0)
     for _ in range(3):
         sg = s0[gk] + bernstein6_distance(tg, dur[gk], vs[gk], ve[gk])
         vg = np.maximum(quintic_speed(tg, vs[gk], ve[gk]), 1e-12) * dur[gk]
@@ -149,6 +158,48 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     seg = ph.seg[mask]
     ln = lengths[mask]
     return (seg[k], e, s, ln[k]), (seg[gk], ge, curve.s_mm[g], ln[gk])
+
+
+@dataclass(frozen=True, eq=False)
+class _Chunks:
+    """Runs of CHUNK_SAMPLES check-sample intervals per transition, and whether each may hold an
+    excess above tol/4: a transition is monotone, so on a chunk v <= its larger end speed, and
+    vlim >= its minimum over the chunk's span."""
+
+    k: np.ndarray  # transition of each chunk
+    j0: np.ndarray  # first and last sample index of the chunk
+    j1: np.ndarray
+    first: np.ndarray  # per transition: its first chunk
+    start_s: np.ndarray  # where each chunk starts (mm)
+    keep: np.ndarray
+    keep_next: np.ndarray  # the next chunk of the same transition is kept
+
+    @classmethod
+    def build(cls, n: np.ndarray, dur: np.ndarray, s0: np.ndarray, vs: np.ndarray,
+              ve: np.ndarray, curve: LimitCurve, tol: float) -> _Chunks:
+        m = (n - 2) // CHUNK_SAMPLES + 1  # chunks per transition (n >= 2 samples)
+        first = np.cumsum(m) - m
+        # Chunk boundaries: m + 1 per transition, the last at sample n - 1.
+        kb = np.repeat(np.arange(len(n)), m + 1)
+        cb = np.arange(len(kb)) - np.repeat(first + np.arange(len(n)), m + 1)
+        jb = np.minimum(cb * CHUNK_SAMPLES, n[kb] - 1)
+        tau = jb / (n[kb] - 1.0)
+        sb = s0[kb] + bernstein6_distance(tau, dur[kb], vs[kb], ve[kb])
+        vb = quintic_speed(tau, vs[kb], ve[kb])
+        last = np.zeros(len(kb), bool)
+        last[np.cumsum(m + 1) - 1] = True
+        i0 = np.flatnonzero(~last)  # a chunk runs from boundary i0 to i0 + 1
+        vmax = np.maximum(vb[i0], vb[i0 + 1])
+        keep = vmax - curve.span_min(sb[i0], sb[i0 + 1]) > 0.25 * tol
+        k = kb[i0]
+        keep_next = np.r_[keep[1:], False] & (np.r_[k[1:], -1] == k)
+        return cls(k, jb[i0], jb[i0 + 1], first, sb[i0], keep, keep_next)
+
+    def chunk_of(self, s_mm: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """The chunk of transition k holding s (the later one at a shared boundary)."""
+        c = np.searchsorted(self.start_s, s_mm, side="right") - 1
+        n_chunks = np.diff(np.r_[self.first, len(self.k)])
+        return np.clip(c, self.first[k], self.first[k] + n_chunks[k] - 1)
 
 
 def _sample_counts(dur: np.ndarray, vs: np.ndarray, ve: np.ndarray, length: np.ndarray,
