@@ -31,8 +31,12 @@ class SegmentWindows:
     curve: LimitCurve
     a: np.ndarray
     b: np.ndarray
+    va: np.ndarray  # vlim at a and at b
+    vb: np.ndarray
     lo: np.ndarray  # first grid index inside the segment
     hi: np.ndarray  # last grid index inside (hi < lo: none)
+    n_in: np.ndarray  # grid samples inside
+    kbig: np.ndarray  # k * big per segment
     big: float
     fkey: np.ndarray  # running max from each segment's start, + k * big: non-decreasing
     bkey: np.ndarray  # k * big - running max from each segment's end: non-decreasing
@@ -49,38 +53,45 @@ class SegmentWindows:
         off = seg * big
         fkey = np.maximum.accumulate(v + off)
         bkey = -np.maximum.accumulate((v - off)[::-1])[::-1]
-        return cls(curve, a, b, lo, hi, big, fkey, bkey)
+        return cls(curve, a, b, curve.at(a), curve.at(b), lo, hi, np.maximum(hi - lo + 1, 0),
+                   np.arange(len(a)) * big, big, fkey, bkey)
 
     def first_reach(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """Smallest s in segment k with vlim(s) >= level (inf when none)."""
+        """Smallest s in segment k with vlim(s) >= level (inf when none); level is (len(k),)
+        or (len(k), n) for n levels per segment."""
         return self._reach(level, k, forward=True)
 
     def last_reach(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """Largest s in segment k with vlim(s) >= level (-inf when none)."""
+        """Largest s in segment k with vlim(s) >= level (-inf when none); shapes as first_reach."""
         return self._reach(level, k, forward=False)
 
     def _reach(self, level: np.ndarray, k: np.ndarray, forward: bool) -> np.ndarray:
         s, v = self.curve.s_mm, self.curve.vlim_mm_s
-        near, far = (self.a[k], self.b[k]) if forward else (self.b[k], self.a[k])
-        lo, hi = self.lo[k], self.hi[k]
-        vn, vf = self.curve.at(near), self.curve.at(far)
-        n_in = np.maximum(hi - lo + 1, 0)
+        if level.ndim == 2:
+            k = k[:, None]  # per-segment values broadcast over the levels
+        if forward:
+            near, far, vn, vf = self.a[k], self.b[k], self.va[k], self.vb[k]
+        else:
+            near, far, vn, vf = self.b[k], self.a[k], self.vb[k], self.va[k]
+        lo, hi, n_in, kbig = self.lo[k], self.hi[k], self.n_in[k], self.kbig[k]
+        last = len(s) - 1
         # j: grid samples, counted from the near end, before the running max reaches level.
         if forward:
-            j = np.searchsorted(self.fkey, level + k * self.big, side="left") - lo
+            j = np.searchsorted(self.fkey, level + kbig, side="left") - lo
         else:
-            j = hi - (np.searchsorted(self.bkey, k * self.big - level, side="right") - 1)
-        j = np.clip(j, 0, n_in)
+            j = hi - (np.searchsorted(self.bkey, kbig - level, side="right") - 1)
+        j = np.minimum(np.maximum(j, 0), n_in)
         hit = j < n_in
-        gi = np.clip(lo + j if forward else hi - j, 0, len(s) - 1)
-        pi = np.clip(lo + j - 1 if forward else hi - j + 1, 0, len(s) - 1)
+        gi = np.minimum(np.maximum(lo + j if forward else hi - j, 0), last)
+        pi = np.minimum(np.maximum(lo + j - 1 if forward else hi - j + 1, 0), last)
         # Crossing lies between the previous point (grid sample or the near end) and the hit,
         # or between the last sample (or near end) and the far end.
         p_s = np.where(j > 0, s[pi], near)
         p_v = np.where(j > 0, v[pi], vn)
         q_s = np.where(hit, s[gi], far)
         q_v = np.where(hit, v[gi], vf)
-        frac = np.clip((level - p_v) / np.where(q_v != p_v, q_v - p_v, 1.0), 0.0, 1.0)
+        dv = q_v - p_v
+        frac = np.minimum(np.maximum((level - p_v) / np.where(dv != 0.0, dv, 1.0), 0.0), 1.0)
         x = p_s + frac * (q_s - p_s)
         x = np.where(vn >= level, near, x)
         none = (vn < level) & ~hit & (vf < level)
@@ -187,17 +198,16 @@ def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray,
     a, b = win.a[k], win.b[k]
     sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
     tau = np.linspace(0.0, 1.0, SHAPE_SAMPLES)
-    kk = np.repeat(k, SHAPE_SAMPLES - 1)
     rest = REST_FRACTION * win.big
     # Acceleration: earliest start with every box corner past where vlim reaches its speed.
     xa, ca = _shape(tau, vi, vp, accel)
-    need = win.first_reach(ca[:, 1:].ravel(), kk).reshape(len(k), -1) - xa[:, :-1]
+    need = win.first_reach(ca[:, 1:], k) - xa[:, :-1]
     start = np.maximum(a, need.max(axis=1))
     start = np.where((vi <= rest) & (start > a), np.inf, start)  # cannot wait at (near) rest
     start = np.where(start > win.last_reach(vi, k), np.inf, start)
     # Braking: latest end with every box corner before where vlim falls below its speed.
     xd, cd = _shape(tau, vp, vj, accel)
-    room = win.last_reach(cd[:, :-1].ravel(), kk).reshape(len(k), -1) + (sd[:, None] - xd[:, 1:])
+    room = win.last_reach(cd[:, :-1], k) + (sd[:, None] - xd[:, 1:])
     end = np.minimum(b, room.min(axis=1))
     end = np.where((vj <= rest) & (end < b), -np.inf, end)
     end = np.where(end < win.first_reach(vj, k), -np.inf, end)
