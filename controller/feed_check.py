@@ -68,6 +68,10 @@ class PhaseArrays:
     def length_mm(self) -> np.ndarray:
         return 0.5 * self.duration_s * (self.vs_mm_s + self.ve_mm_s)
 
+    def take(self, mask: np.ndarray) -> PhaseArrays:
+        return PhaseArrays(self.duration_s[mask], self.s0_mm[mask], self.vs_mm_s[mask],
+                           self.ve_mm_s[mask], self.seg[mask])
+
 
 @dataclass(frozen=True, eq=False)
 class Violations:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 
@@ -9,7 +10,7 @@ import numpy as np
 
 from controller.feed_check import LimitCurve, PhaseArrays, Violations, check_phases
 from controller.feed_profile import FeedProfile
-from controller.feed_segments import SegmentWindows, plan_segments, segment_phases
+from controller.feed_segments import SegmentPlan, SegmentWindows, plan_segments, segment_phases
 from controller.time_bound import fb_pass_speed_mm_s
 
 # A quintic transition changes v^2 by 16 A d / 15 over a distance d: an "effective" constant
@@ -80,6 +81,7 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     curve = LimitCurve(s - s[0], vlim)
     nodes = _initial_nodes(curve, v_start_mm_s, v_end_mm_s, accel_mm_s2)
     tol = LIMIT_TOLERANCE * float(vlim.max())
+    memo = _memo_for(curve, accel_mm_s2, v_start_mm_s, v_end_mm_s)
     n_rounds = MAX_SPLIT_DEPTH + FLATTEN_ROUNDS + 2
     best: FeedPlan | None = None
     raises = 0
@@ -87,10 +89,7 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
         v = _node_speeds(nodes, accel_mm_s2, v_start_mm_s, v_end_mm_s)
         if isinstance(v, PlanResult):
             return best or FeedPlan(FeedProfile(()), v, rnd)
-        win = SegmentWindows.build(curve, nodes.s)
-        ph = segment_phases(plan_segments(win, v[:-1], v[1:], nodes.flat, accel_mm_s2),
-                            accel_mm_s2)
-        viol = check_phases(ph, curve, len(nodes.s) - 1, tol)
+        ph, viol = _plan_round(nodes, v, curve, accel_mm_s2, tol, memo)
         if not np.any(viol.excess_mm_s > 0.5 * tol):
             plan = FeedPlan(_to_profile(ph, s[0]), PlanResult.OK, rnd)
             if best is None or plan.profile.duration_s < best.profile.duration_s:
@@ -109,6 +108,59 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     if best is not None:
         return best
     return FeedPlan(FeedProfile(()), PlanResult.LIMIT_VIOLATED, rnd)
+
+
+@dataclass(frozen=True, eq=False)
+class _Memo:
+    """Per segment, by (a, b, vi, vj, flat): (cruise speed, end of the acceleration, start of the
+    braking, excess, where, phase length). Segments are planned and checked each on its own, so
+    a segment a round leaves unchanged keeps its plan and check; a call repeating the previous
+    call's input (the generator's second attempt with raise_cruises) reuses them too."""
+
+    curve: LimitCurve
+    accel: float
+    v_ends: tuple[float, float]
+    planner: Callable[..., SegmentPlan]  # plan_segments (a test may swap it)
+    rows: dict[tuple, tuple[float, ...]]
+
+
+_last_memo: list[_Memo] = []  # the previous call's memo (at most one)
+
+
+def _memo_for(curve: LimitCurve, accel: float, v0: float, v1: float) -> _Memo:
+    for m in _last_memo:
+        if (m.accel == accel and m.v_ends == (v0, v1) and m.planner is plan_segments
+                and np.array_equal(m.curve.s_mm, curve.s_mm)
+                and np.array_equal(m.curve.vlim_mm_s, curve.vlim_mm_s)):
+            return m
+    m = _Memo(LimitCurve(curve.s_mm.copy(), curve.vlim_mm_s.copy()), accel, (v0, v1),
+              plan_segments, {})
+    _last_memo[:] = [m]
+    return m
+
+
+def _plan_round(nodes: _Nodes, v: np.ndarray, curve: LimitCurve, accel: float, tol: float,
+                memo: _Memo) -> tuple[PhaseArrays, Violations]:
+    """Plan every segment between the nodes and check it against vlim (new segments only)."""
+    win = SegmentWindows.build(curve, nodes.s)
+    vi, vj = v[:-1], v[1:]
+    keys = list(zip(win.a.tolist(), win.b.tolist(), vi.tolist(), vj.tolist(),
+                    nodes.flat.tolist(), strict=True))
+    known = np.array([key in memo.rows for key in keys], bool)
+    new = np.flatnonzero(~known)
+    out = np.empty((len(keys), 6))
+    if new.size < len(keys):
+        out[known] = [memo.rows[key] for key, kn in zip(keys, known.tolist(), strict=True) if kn]
+    sp = memo.planner(win.take(new), vi[new], vj[new], nodes.flat[new], accel)
+    out[new, 0], out[new, 1], out[new, 2] = sp.vp, sp.acc_end, sp.dec_start
+    ph = segment_phases(SegmentPlan(win.a, win.b, vi, vj, out[:, 0], out[:, 1], out[:, 2]),
+                        accel)
+    viol = check_phases(ph.take(~known[ph.seg]), curve, len(keys), tol)
+    out[new, 3], out[new, 4], out[new, 5] = (viol.excess_mm_s[new], viol.s_mm[new],
+                                              viol.phase_len_mm[new])
+    for i, row in zip(new.tolist(), out[new].tolist(), strict=True):
+        memo.rows[keys[i]] = tuple(row)
+    return ph, Violations(out[:, 3], out[:, 4], out[:, 5])
 
 
 def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanResult | None:

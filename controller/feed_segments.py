@@ -56,6 +56,12 @@ class SegmentWindows:
         return cls(curve, a, b, curve.at(a), curve.at(b), lo, hi, np.maximum(hi - lo + 1, 0),
                    np.arange(len(a)) * big, big, fkey, bkey)
 
+    def take(self, k: np.ndarray) -> SegmentWindows:
+        """Segments k alone (their searches still use the whole grid's keys)."""
+        return SegmentWindows(self.curve, self.a[k], self.b[k], self.va[k], self.vb[k],
+                              self.lo[k], self.hi[k], self.n_in[k], self.kbig[k], self.big,
+                              self.fkey, self.bkey)
+
     def first_reach(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
         """Smallest s in segment k with vlim(s) >= level (inf when none); level is (len(k),)
         or (len(k), n) for n levels per segment."""
@@ -119,7 +125,8 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     A transition sampled at (x_j, c_j) (distance from its start, speed) fits when started at p
     with p + x_j >= first_reach(c_j) for all j: the earliest start is max_j(first_reach - x_j).
     Braking mirrors this with last_reach. Feasibility is monotone in V, so a bisection over all
-    segments at once finds it. Flat segments cruise at min(vc, min vlim), which is safe."""
+    segments at once finds it. Flat segments cruise at min(vc, min vlim), which is safe.
+    Each segment is planned on its own (see SegmentWindows.take)."""
     a, b = win.a, win.b
     low = np.maximum(vi, vj)
     vc = np.sqrt((16.0 * accel * (b - a) / 15.0 + vi * vi + vj * vj) / 2.0)
