@@ -75,33 +75,35 @@ class SegmentWindows:
         s, v = self.curve.s_mm, self.curve.vlim_mm_s
         if level.ndim == 2:
             k = k[:, None]  # per-segment values broadcast over the levels
+        lo, hi, kbig = self.lo[k], self.hi[k], self.kbig[k]
+        # g: the first (last) grid sample inside where the running max reaches level, clamped
+        # to one past the far end of the samples inside; p: the point before it (toward near).
         if forward:
             near, far, vn, vf = self.a[k], self.b[k], self.va[k], self.vb[k]
+            end = lo + self.n_in[k]
+            g = np.searchsorted(self.fkey, level + kbig, side="left")
+            g = np.minimum(np.maximum(g, lo), end)
+            hit, moved = g < end, g > lo
+            qi, pi = np.minimum(g, len(s) - 1), g - 1
         else:
             near, far, vn, vf = self.b[k], self.a[k], self.vb[k], self.va[k]
-        lo, hi, n_in, kbig = self.lo[k], self.hi[k], self.n_in[k], self.kbig[k]
-        last = len(s) - 1
-        # j: grid samples, counted from the near end, before the running max reaches level.
-        if forward:
-            j = np.searchsorted(self.fkey, level + kbig, side="left") - lo
-        else:
-            j = hi - (np.searchsorted(self.bkey, kbig - level, side="right") - 1)
-        j = np.minimum(np.maximum(j, 0), n_in)
-        hit = j < n_in
-        gi = np.minimum(np.maximum(lo + j if forward else hi - j, 0), last)
-        pi = np.minimum(np.maximum(lo + j - 1 if forward else hi - j + 1, 0), last)
+            end = hi - self.n_in[k]
+            g = np.searchsorted(self.bkey, kbig - level, side="right") - 1
+            g = np.minimum(np.maximum(g, end), hi)
+            hit, moved = g > end, g < hi
+            qi, pi = g, np.minimum(g + 1, len(s) - 1)
         # Crossing lies between the previous point (grid sample or the near end) and the hit,
         # or between the last sample (or near end) and the far end.
-        p_s = np.where(j > 0, s[pi], near)
-        p_v = np.where(j > 0, v[pi], vn)
-        q_s = np.where(hit, s[gi], far)
-        q_v = np.where(hit, v[gi], vf)
+        p_s = np.where(moved, s[pi], near)
+        p_v = np.where(moved, v[pi], vn)
+        q_s = np.where(hit, s[qi], far)
+        q_v = np.where(hit, v[qi], vf)
         dv = q_v - p_v
         frac = np.minimum(np.maximum((level - p_v) / np.where(dv != 0.0, dv, 1.0), 0.0), 1.0)
         x = p_s + frac * (q_s - p_s)
-        x = np.where(vn >= level, near, x)
-        none = (vn < level) & ~hit & (vf < level)
-        return np.where(none, np.inf if forward else -np.inf, x)
+        below = vn < level
+        x = np.where(below, x, near)
+        return np.where(below & ~hit & (vf < level), np.inf if forward else -np.inf, x)
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,14 +140,20 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     ok = (e0 <= d0) & ~flat
     todo = np.flatnonzero(~ok & ~flat & (high > safe))
     lo_v, hi_v = safe[todo], high[todo]
+    lo_e0, lo_d0 = np.full(len(todo), np.nan), np.full(len(todo), np.nan)  # window at lo_v
     for _ in range(PEAK_BISECTIONS if len(todo) else 0):
         mid = 0.5 * (lo_v + hi_v)
         m0, m1 = _window(win, vi[todo], vj[todo], mid, todo, accel)
         good = m0 <= m1
         lo_v, hi_v = np.where(good, mid, lo_v), np.where(good, hi_v, mid)
+        lo_e0, lo_d0 = np.where(good, m0, lo_e0), np.where(good, m1, lo_d0)
     vp = np.where(ok, high, safe)
     vp[todo] = lo_v
-    e0[todo], d0[todo] = _window(win, vi[todo], vj[todo], lo_v, todo, accel)
+    # Only segments that never found a good mid still need their window (at the safe speed).
+    at_safe = np.flatnonzero(np.isnan(lo_e0))
+    lo_e0[at_safe], lo_d0[at_safe] = _window(win, vi[todo[at_safe]], vj[todo[at_safe]],
+                                             lo_v[at_safe], todo[at_safe], accel)
+    e0[todo], d0[todo] = lo_e0, lo_d0
     _prefer_no_wait(win, vi, vj, safe, vp, e0, d0, accel, flat)
     # Flat segments, and those whose window stays empty: accelerate at once, brake at the end
     # (safe when the node speeds are below the segment's minimum; otherwise the check splits or
