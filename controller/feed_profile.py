@@ -27,16 +27,28 @@ def transition_length_mm(v_start_mm_s: np.ndarray | float, v_end_mm_s: np.ndarra
 def bernstein6_distance(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray,
                         ve: np.ndarray) -> np.ndarray:
     """Distance travelled after tau*T: (T/6) sum F_k b_k^6(tau), F_k = [0,Vs,2Vs,3Vs,3Vs+Ve,..]."""
+    return bernstein6_sum(bernstein6_weights(tau), duration_s, vs, ve)
+
+
+def bernstein6_weights(tau: np.ndarray) -> tuple[np.ndarray, ...]:
+    """b_1^6 .. b_6^6 at tau (b_0^6 has F_0 = 0, so it is omitted); reusable for fixed tau."""
     u = 1.0 - tau
     t2, u2 = tau * tau, u * u
     t3, u3 = t2 * tau, u2 * u
-    # b_0^6 has F_0 = 0, so it is omitted.
-    acc = 6.0 * u3 * u2 * tau * vs
-    acc += 15.0 * u2 * u2 * t2 * (2.0 * vs)
-    acc += 20.0 * u3 * t3 * (3.0 * vs)
-    acc += 15.0 * u2 * t2 * t2 * (3.0 * vs + ve)
-    acc += 6.0 * u * t3 * t2 * (3.0 * vs + 2.0 * ve)
-    acc += t3 * t3 * (3.0 * vs + 3.0 * ve)
+    return (6.0 * u3 * u2 * tau, 15.0 * u2 * u2 * t2, 20.0 * u3 * t3, 15.0 * u2 * t2 * t2,
+            6.0 * u * t3 * t2, t3 * t3)
+
+
+def bernstein6_sum(weights: tuple[np.ndarray, ...], duration_s: np.ndarray, vs: np.ndarray,
+                   ve: np.ndarray) -> np.ndarray:
+    """bernstein6_distance from precomputed bernstein6_weights."""
+    w1, w2, w3, w4, w5, w6 = weights
+    acc = w1 * vs
+    acc += w2 * (2.0 * vs)
+    acc += w3 * (3.0 * vs)
+    acc += w4 * (3.0 * vs + ve)
+    acc += w5 * (3.0 * vs + 2.0 * ve)
+    acc += w6 * (3.0 * vs + 3.0 * ve)
     return duration_s / 6.0 * acc
 
 

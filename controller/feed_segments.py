@@ -8,7 +8,8 @@ import numpy as np
 
 from controller.feed_check import LimitCurve, PhaseArrays
 from controller.feed_profile import (
-    bernstein6_distance,
+    bernstein6_sum,
+    bernstein6_weights,
     quintic_speed,
     transition_duration_s,
     transition_length_mm,
@@ -18,6 +19,8 @@ PEAK_BISECTIONS = 12
 REST_FRACTION = 1e-7  # of max vlim: node speeds this low never wait (cruise) before moving on
 CRUISE_LEVELS = 12  # candidate cruise speeds when waiting at a node speed is involved
 SHAPE_SAMPLES = 33  # samples of a transition's v(s) when fitting it under vlim
+_SHAPE_TAU = np.linspace(0.0, 1.0, SHAPE_SAMPLES)
+_SHAPE_WEIGHTS = bernstein6_weights(_SHAPE_TAU)
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,14 +139,16 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     safe = np.maximum(np.minimum(vc, win.curve.span_min(a, b)), low)
     high = np.maximum(np.minimum(vc, win.curve.span_max(a, b)), low)
     allk = np.arange(len(a))
-    e0, d0 = _window(win, vi, vj, high, allk, accel)
+    # Where waiting at vi may last, where waiting at vj may start: fixed for the segment.
+    reach = (win.last_reach(vi, allk), win.first_reach(vj, allk))
+    e0, d0 = _window(win, vi, vj, high, allk, accel, reach)
     ok = (e0 <= d0) & ~flat
     todo = np.flatnonzero(~ok & ~flat & (high > safe))
     lo_v, hi_v = safe[todo], high[todo]
     lo_e0, lo_d0 = np.full(len(todo), np.nan), np.full(len(todo), np.nan)  # window at lo_v
     for _ in range(PEAK_BISECTIONS if len(todo) else 0):
         mid = 0.5 * (lo_v + hi_v)
-        m0, m1 = _window(win, vi[todo], vj[todo], mid, todo, accel)
+        m0, m1 = _window(win, vi[todo], vj[todo], mid, todo, accel, reach)
         good = m0 <= m1
         lo_v, hi_v = np.where(good, mid, lo_v), np.where(good, hi_v, mid)
         lo_e0, lo_d0 = np.where(good, m0, lo_e0), np.where(good, m1, lo_d0)
@@ -152,9 +157,9 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     # Only segments that never found a good mid still need their window (at the safe speed).
     at_safe = np.flatnonzero(np.isnan(lo_e0))
     lo_e0[at_safe], lo_d0[at_safe] = _window(win, vi[todo[at_safe]], vj[todo[at_safe]],
-                                             lo_v[at_safe], todo[at_safe], accel)
+                                             lo_v[at_safe], todo[at_safe], accel, reach)
     e0[todo], d0[todo] = lo_e0, lo_d0
-    _prefer_no_wait(win, vi, vj, safe, vp, e0, d0, accel, flat)
+    _prefer_no_wait(win, vi, vj, safe, vp, e0, d0, accel, flat, reach)
     # Flat segments, and those whose window stays empty: accelerate at once, brake at the end
     # (safe when the node speeds are below the segment's minimum; otherwise the check splits or
     # flattens the segment).
@@ -167,7 +172,7 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
 
 def _prefer_no_wait(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, safe: np.ndarray,
                     vp: np.ndarray, e0: np.ndarray, d0: np.ndarray, accel: float,
-                    flat: np.ndarray) -> None:
+                    flat: np.ndarray, reach: tuple[np.ndarray, np.ndarray]) -> None:
     """Where the highest cruise makes the profile wait at a node speed, a lower cruise may be
     faster overall: try levels between the safe one and the highest, keep the quickest (in place).
     """
@@ -179,7 +184,7 @@ def _prefer_no_wait(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, safe: n
     frac = np.linspace(0.0, 1.0, CRUISE_LEVELS)
     levels = (safe[k, None] + (vp[k] - safe[k])[:, None] * frac).ravel()
     kk = np.repeat(k, CRUISE_LEVELS)
-    c0, c1 = _window(win, vi[kk], vj[kk], levels, kk, accel)
+    c0, c1 = _window(win, vi[kk], vj[kk], levels, kk, accel, reach)
     dur = _segment_time_s(win.a[kk], win.b[kk], vi[kk], vj[kk], levels, c0, c1, accel)
     dur = np.where(c0 <= c1, dur, np.inf).reshape(len(k), CRUISE_LEVELS)
     best = np.argmin(dur, axis=1)
@@ -201,40 +206,39 @@ def _segment_time_s(a: np.ndarray, b: np.ndarray, vi: np.ndarray, vj: np.ndarray
 
 
 def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray, k: np.ndarray,
-            accel: float) -> tuple[np.ndarray, np.ndarray]:
+            accel: float, reach: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """(end of the acceleration, start of the braking) for cruise speed vp in segments k.
 
     Between two samples a monotone transition stays inside their bounding box, so testing the
     box corner nearest to vlim (position of one sample, speed of the other) makes a placed
     transition lie under vlim everywhere, not only at the samples. Waiting at vi (vj) before
-    (after) the transitions must stay where vlim >= vi (vj)."""
+    (after) the transitions must stay where vlim >= vi (vj): reach = (last_reach(vi),
+    first_reach(vj)) for all segments."""
     if len(k) == 0:
         return np.empty(0), np.empty(0)
     a, b = win.a[k], win.b[k]
     sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
-    tau = np.linspace(0.0, 1.0, SHAPE_SAMPLES)
     rest = REST_FRACTION * win.big
     # Acceleration: earliest start with every box corner past where vlim reaches its speed.
-    xa, ca = _shape(tau, vi, vp, accel)
+    xa, ca = _shape(vi, vp, accel)
     need = win.first_reach(ca[:, 1:], k) - xa[:, :-1]
     start = np.maximum(a, need.max(axis=1))
     start = np.where((vi <= rest) & (start > a), np.inf, start)  # cannot wait at (near) rest
-    start = np.where(start > win.last_reach(vi, k), np.inf, start)
+    start = np.where(start > reach[0][k], np.inf, start)
     # Braking: latest end with every box corner before where vlim falls below its speed.
-    xd, cd = _shape(tau, vp, vj, accel)
+    xd, cd = _shape(vp, vj, accel)
     room = win.last_reach(cd[:, :-1], k) + (sd[:, None] - xd[:, 1:])
     end = np.minimum(b, room.min(axis=1))
     end = np.where((vj <= rest) & (end < b), -np.inf, end)
-    end = np.where(end < win.first_reach(vj, k), -np.inf, end)
+    end = np.where(end < reach[1][k], -np.inf, end)
     return start + sa, end - sd
 
 
-def _shape(tau: np.ndarray, vs: np.ndarray, ve: np.ndarray,
-           accel: float) -> tuple[np.ndarray, np.ndarray]:
+def _shape(vs: np.ndarray, ve: np.ndarray, accel: float) -> tuple[np.ndarray, np.ndarray]:
     """Samples (distance from start, speed) of the transitions vs -> ve, one row each."""
     dur = transition_duration_s(vs, ve, accel)[:, None]
     v0, v1 = vs[:, None], ve[:, None]
-    return bernstein6_distance(tau, dur, v0, v1), quintic_speed(tau, v0, v1)
+    return bernstein6_sum(_SHAPE_WEIGHTS, dur, v0, v1), quintic_speed(_SHAPE_TAU, v0, v1)
 
 
 def segment_phases(sp: SegmentPlan, accel: float) -> PhaseArrays:
