@@ -83,31 +83,39 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     tol = LIMIT_TOLERANCE * float(vlim.max())
     memo = _memo_for(curve, accel_mm_s2, v_start_mm_s, v_end_mm_s)
     n_rounds = MAX_SPLIT_DEPTH + FLATTEN_ROUNDS + 2
-    best: FeedPlan | None = None
+    best: tuple[float, PhaseArrays, int] | None = None  # duration, phases, round
     raises = 0
     for rnd in range(1, n_rounds + MAX_CRUISE_RAISES + 1):
         v = _node_speeds(nodes, accel_mm_s2, v_start_mm_s, v_end_mm_s)
         if isinstance(v, PlanResult):
-            return best or FeedPlan(FeedProfile(()), v, rnd)
+            return _result(best, s[0], v, rnd)
         ph, viol = _plan_round(nodes, v, curve, accel_mm_s2, tol, memo)
         if not np.any(viol.excess_mm_s > 0.5 * tol):
-            plan = FeedPlan(_to_profile(ph, s[0]), PlanResult.OK, rnd)
-            if best is None or plan.profile.duration_s < best.profile.duration_s:
-                best = plan
+            # The profile's duration (FeedProfile sums the durations in the same order).
+            dur = float(np.cumsum(ph.duration_s)[-1]) if len(ph.duration_s) else 0.0
+            if best is None or dur < best[0]:
+                best = (dur, ph, rnd)
             if raise_cruises and raises < MAX_CRUISE_RAISES and _raise_cruises(nodes, ph, curve):
                 raises += 1
                 continue
-            return best
+            return _result(best, s[0], PlanResult.OK, rnd)
         if best is not None and rnd >= n_rounds - 1:
-            return best  # an improvement attempt did not settle: keep the last good plan
+            # An improvement attempt did not settle: keep the last good plan.
+            return _result(best, s[0], PlanResult.OK, rnd)
         if rnd == n_rounds - 1:  # last resort: flatten everything (safe by construction)
             viol = Violations(np.full(len(nodes.s) - 1, np.inf), viol.s_mm, viol.phase_len_mm)
         failed = _repair(nodes, viol, curve, 0.5 * tol, last=rnd > MAX_SPLIT_DEPTH)
         if failed is not None:
-            return best or FeedPlan(FeedProfile(()), failed, rnd)
-    if best is not None:
-        return best
-    return FeedPlan(FeedProfile(()), PlanResult.LIMIT_VIOLATED, rnd)
+            return _result(best, s[0], failed, rnd)
+    return _result(best, s[0], PlanResult.LIMIT_VIOLATED, rnd)
+
+
+def _result(best: tuple[float, PhaseArrays, int] | None, s0: float, failed: PlanResult,
+            rnd: int) -> FeedPlan:
+    """The best plan found (its profile built only now), else the empty plan with failed."""
+    if best is None:
+        return FeedPlan(FeedProfile(()), failed, rnd)
+    return FeedPlan(_to_profile(best[1], s0), PlanResult.OK, best[2])
 
 
 @dataclass(frozen=True, eq=False)
