@@ -53,6 +53,7 @@ def brentq(f: Callable[[float], float], lo: float, hi: float, xtol: float = _XTO
     if fhi == 0.0:
         return hi
     side = 0
+    xtol = xtol * max(1.0, abs(lo), abs(hi))  # relative for large parameters (knots ~ 1e2)
     for _ in range(200):
         x = (lo * fhi - hi * flo) / (fhi - flo)
         if not lo < x < hi:
@@ -80,13 +81,15 @@ def _bisect_all(f: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.nd
     """Roots of f in every bracket [lo_i, hi_i] at once (f(lo) > 0 >= f(hi)): vectorised
     bisection, one curve evaluation per halving for all brackets together."""
     lo, hi = lo.astype(float).copy(), hi.astype(float).copy()
-    while lo.size and np.max(hi - lo) > xtol:
+    # Relative to the parameter's size too: knots in the hundreds cannot be split to 1e-13.
+    tol = xtol * np.maximum(1.0, np.maximum(np.abs(lo), np.abs(hi)))
+    for _ in range(200):
+        if not lo.size or np.all(hi - lo <= tol):
+            break
         mid = 0.5 * (lo + hi)
         positive = f(mid) > 0
         lo = np.where(positive, mid, lo)
         hi = np.where(positive, hi, mid)
-        if np.all(mid == lo) & np.all(mid == hi):
-            break
     return 0.5 * (lo + hi)
 
 

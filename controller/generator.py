@@ -32,6 +32,7 @@ from controller.gen_window import continuation_cut
 from controller.refpoints import RefChunk
 
 MAX_RUN_BLOCKS = 500  # baselines: a longer contour is planned in pieces, stopping between
+IN_POSITION_S = 0.04  # wait after a rapid: the servo model settles to 2 % in 32 ms
 WINDOW_BLOCKS = 200  # ph-lookahead: new blocks per look-ahead window (cut and continued)
 
 
@@ -48,6 +49,7 @@ class PlannedStep:
 
     chunk: RefChunk
     run: RunPlan | None = None
+    rapid: bool = False  # a G0 move (and its in-position wait): not part of any contour
 
 
 def _pos_row(config: MachineConfig, xy: np.ndarray, z_mm: float) -> np.ndarray:
@@ -73,7 +75,13 @@ def _straight_move(block: LineBlock, config: MachineConfig, t0_s: float) -> RefC
     s, v, _ = plan.profile.evaluate(np.minimum(np.arange(1, k + 1) * T, plan.profile.duration_s))
     pos = start + (s / length)[:, None] * (end - start)
     pos[-1] = end
-    line = np.full(k, block.source.first_line, np.int32)
+    if block.rapid:
+        # In-position check after a rapid (as Fanuc does by default): hold until the servo has
+        # settled, so the next contour does not start with the rapid's residual error.
+        hold = int(round(IN_POSITION_S / T))
+        pos = np.vstack([pos, np.repeat(pos[-1:], hold, axis=0)])
+        v = np.r_[v, np.zeros(hold)]
+    line = np.full(len(pos), block.source.first_line, np.int32)
     return RefChunk(t0_s + T, pos, v, line)
 
 
@@ -199,7 +207,7 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
         yield from flush()
         if isinstance(block, LineBlock):
             chunk = _straight_move(block, config, t_s)
-            yield from emit(PlannedStep(chunk) if chunk is not None else None)
+            yield from emit(PlannedStep(chunk, rapid=block.rapid) if chunk is not None else None)
         elif isinstance(block, DwellBlock):
             chunk = _dwell(block, config, t_s)
             yield from emit(PlannedStep(chunk) if chunk is not None else None)

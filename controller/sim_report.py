@@ -28,6 +28,7 @@ class Trajectory:
     ex_mm: np.ndarray  # including SETTLE_S after the end
     ey_mm: np.ndarray
     contour_mm: np.ndarray
+    contouring: np.ndarray  # per entry of contour_mm: False on rapids (not a contour)
     runs: tuple[RunPlan, ...]
     planning_cpu_s: float
 
@@ -52,7 +53,8 @@ def simulate(blocks: Iterable[NcBlock], config: MachineConfig,
     if not steps:
         empty = np.zeros((0, len(config.axis_names)))
         z = np.zeros(0)
-        return Trajectory(z, empty, empty, z, z.astype(np.int32), z, z, z, (), cpu)
+        return Trajectory(z, empty, empty, z, z.astype(np.int32), z, z, z, z.astype(bool), (),
+                          cpu)
     ref = np.vstack([s.chunk.pos_mm for s in steps])
     T = config.sample_period_s  # noqa: N806
     settle = int(round(SETTLE_S / T))
@@ -68,10 +70,12 @@ def simulate(blocks: Iterable[NcBlock], config: MachineConfig,
     act[:, 0] -= ex[:n]
     act[:, 1] -= ey[:n]
     runs = tuple(s.run for s in steps if s.run is not None)
+    rapid = np.concatenate([np.full(len(s.chunk), s.rapid) for s in steps])
+    contouring = ~np.r_[rapid, np.full(settle, rapid[-1])]
     return Trajectory(np.arange(1, n + 1) * T, ref, act,
                       np.concatenate([s.chunk.feed_mm_s for s in steps]),
                       np.concatenate([s.chunk.line for s in steps]), ex, ey,
-                      contour_error_mm(ex, ey, phi), runs, cpu)
+                      contour_error_mm(ex, ey, phi), contouring, runs, cpu)
 
 
 def _stats_um(e_mm: np.ndarray) -> dict[str, float]:
@@ -104,7 +108,7 @@ def report(traj: Trajectory, program: str, algorithm: str, config: MachineConfig
         "sample_period_s": T,
         "tracking_error_um": {"x": {"max": x["max"], "rms": x["rms"]},
                               "y": {"max": y["max"], "rms": y["rms"]}},
-        "contour_error_um": _stats_um(traj.contour_mm),
+        "contour_error_um": _stats_um(traj.contour_mm[traj.contouring]),
         "max_feed_mm_s": float(steps.max()) if steps.size else 0.0,
         "max_tangential_accel_mm_s2": float(np.abs(accel).max()) if accel.size else 0.0,
         "sharp_corners": sum(len(r.corners) for r in traj.runs),

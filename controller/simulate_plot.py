@@ -27,7 +27,8 @@ def plot_simulation(path: str, trajectories: list[Trajectory], reports: list[dic
         ax_f.axhline(vmax, color="grey", ls="--", lw=0.8)
         ax_f.set_title(f"{rep['algorithm']}: {rep['motion_time_s']:.3f} s")
         ax_f.set_ylabel("feed (mm/s)")
-        ax_e.plot(t_full, traj.contour_mm * 1000.0, lw=1, color="tab:red")
+        contour_um = np.where(traj.contouring, traj.contour_mm * 1000.0, np.nan)  # not on rapids
+        ax_e.plot(t_full, contour_um, lw=1, color="tab:red")
         for sign in (1, -1):
             ax_e.axhline(sign * limit_um, color="grey", ls="--", lw=0.8)
         ax_e.set_ylabel("contour error (um)")
