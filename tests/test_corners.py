@@ -79,3 +79,15 @@ def test_joint_angle() -> None:
     assert joint_angle_rad(np.array([1.0, 0]), np.array([0, 2.0])) == pytest.approx(math.pi / 2)
     assert joint_angle_rad(np.array([1.0, 0]), np.array([3.0, 0])) == 0.0
     assert joint_angle_rad(np.array([1.0, 1]), np.array([-1.0, -1])) == pytest.approx(math.pi)
+
+
+def test_large_knot_values_give_the_same_corner(naca) -> None:  # type: ignore[no-untyped-def]
+    """Knots in the hundreds (LinuxCNC corpus files count knots 0..600): the root finders
+    must stop at the parameter's float resolution, not loop for ever."""
+    from controller.nurbs import Nurbs
+
+    shifted = Nurbs(naca.degree, naca.knots * 600.0 + 50.0, naca.control_points, naca.weights)
+    (z,) = detect_sharp_corners(naca, KAPPA_TH)
+    (zs,) = detect_sharp_corners(shifted, KAPPA_TH)
+    assert zs.kappa_peak_per_mm == pytest.approx(z.kappa_peak_per_mm, rel=1e-9)
+    assert (zs.u_peak - 50.0) / 600.0 == pytest.approx(z.u_peak, abs=1e-9)
