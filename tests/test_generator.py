@@ -135,3 +135,20 @@ def test_stream_is_continuous_in_time_and_marks_the_last_chunk(tmp_path: Path) -
     assert np.array_equal(pos[-1], [0.0, 0.0])
     steps = np.linalg.norm(np.diff(np.vstack([[0.0, 0.0], pos]), axis=0), axis=1)
     assert steps.max() <= IP.rapid_feed_mm_s * CFG.sample_period_s * (1 + 1e-9)
+
+
+MILL = load_config("xyz_mill")
+CORPUS = REPO / "tests/data/linuxcnc"
+
+
+@pytest.mark.parametrize("name", ["nurbs/G6/homer-16__1_1-xy.ngc", "nurbs/G5/nurbs-xy.ngc",
+                                  "nurbs/G5/leto-xy.ngc", "nurbs/G6/Curva_Mazatrol__1_2.ngc"])
+def test_linuxcnc_programs_plan_within_the_limits(name: str) -> None:
+    """Real programs with rapids, Z moves, G5.2/G6.2 NURBS of order 3-6 on the mill config."""
+    program = str(CORPUS / name)
+    traj = simulate(read_program(program, MILL), MILL, "ph-lookahead")
+    r = report(traj, program, "ph-lookahead", MILL)
+    assert r["contour_limit_met"]
+    assert r["contour_error_um"]["max"] <= MILL.interpolator.contour_error_limit_mm * 1000
+    assert r["max_tangential_accel_mm_s2"] <= MILL.interpolator.max_accel_mm_s2 * (1 + 1e-6)
+    assert r["max_feed_mm_s"] <= MILL.interpolator.rapid_feed_mm_s * (1 + 1e-9)
