@@ -23,6 +23,7 @@ FLATTEN_ROUNDS = 3  # rounds that only flatten, before flattening everything
 MAX_CRUISE_RAISES = 4  # rounds spent lifting cruises that vlim lets rise later on
 MIN_RAISED_CRUISE_S = 0.01  # only cruises at least this long are worth a new node
 LIMIT_TOLERANCE = 1e-7  # relative to max vlim: v <= vlim + tol on the whole profile
+MEMO_BYTES = 1 << 24  # size of the memo's vlim keys kept across calls (then it starts afresh)
 
 
 class PlanResult(Enum):
@@ -81,7 +82,7 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     curve = LimitCurve(s - s[0], vlim)
     nodes = _initial_nodes(curve, v_start_mm_s, v_end_mm_s, accel_mm_s2)
     tol = LIMIT_TOLERANCE * float(vlim.max())
-    memo = _memo_for(curve, accel_mm_s2, v_start_mm_s, v_end_mm_s)
+    memo = _memo_for(curve, accel_mm_s2, tol)
     n_rounds = MAX_SPLIT_DEPTH + FLATTEN_ROUNDS + 2
     best: tuple[float, PhaseArrays, int] | None = None  # duration, phases, round
     raises = 0
@@ -115,34 +116,36 @@ def _result(best: tuple[float, PhaseArrays, int] | None, s0: float, failed: Plan
     """The best plan found (its profile built only now), else the empty plan with failed."""
     if best is None:
         return FeedPlan(FeedProfile(()), failed, rnd)
-    return FeedPlan(_to_profile(best[1], s0), PlanResult.OK, best[2])
+    ph = best[1]
+    profile = FeedProfile.from_arrays(ph.duration_s, ph.s0_mm + s0, ph.vs_mm_s, ph.ve_mm_s)
+    return FeedPlan(profile, PlanResult.OK, best[2])
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(eq=False)
 class _Memo:
-    """Per segment, by (a, b, vi, vj, flat): (cruise speed, end of the acceleration, start of the
-    braking, excess, where, phase length). Segments are planned and checked each on its own, so
-    a segment a round leaves unchanged keeps its plan and check; a call repeating the previous
-    call's input (the generator's second attempt with raise_cruises) reuses them too."""
+    """Segment results (cruise speed, end of the acceleration, start of the braking, excess,
+    where, phase length) by segment: its ends, node speeds, flat flag and the vlim samples it
+    depends on (the grid inside and one sample either side). A segment is planned and checked on
+    its own, so one that a round leaves unchanged keeps its result, and so does one that a later
+    call with the same globals (accel, tolerance, grid step, vlim maximum) sees again: the
+    generator's raise_cruises attempt repeats its previous call, and its dynamics rounds change
+    vlim only locally."""
 
-    curve: LimitCurve
-    accel: float
-    v_ends: tuple[float, float]
+    globals_: tuple[float, float, float, float]
     planner: Callable[..., SegmentPlan]  # plan_segments (a test may swap it)
     rows: dict[tuple, tuple[float, ...]]
+    key_bytes: int = 0
 
 
 _last_memo: list[_Memo] = []  # the previous call's memo (at most one)
 
 
-def _memo_for(curve: LimitCurve, accel: float, v0: float, v1: float) -> _Memo:
+def _memo_for(curve: LimitCurve, accel: float, tol: float) -> _Memo:
+    key = (accel, tol, curve.spacing_mm, float(curve.vlim_mm_s.max()))
     for m in _last_memo:
-        if (m.accel == accel and m.v_ends == (v0, v1) and m.planner is plan_segments
-                and np.array_equal(m.curve.s_mm, curve.s_mm)
-                and np.array_equal(m.curve.vlim_mm_s, curve.vlim_mm_s)):
+        if m.globals_ == key and m.planner is plan_segments and m.key_bytes < MEMO_BYTES:
             return m
-    m = _Memo(LimitCurve(curve.s_mm.copy(), curve.vlim_mm_s.copy()), accel, (v0, v1),
-              plan_segments, {})
+    m = _Memo(key, plan_segments, {})
     _last_memo[:] = [m]
     return m
 
@@ -152,8 +155,11 @@ def _plan_round(nodes: _Nodes, v: np.ndarray, curve: LimitCurve, accel: float, t
     """Plan every segment between the nodes and check it against vlim (new segments only)."""
     win = SegmentWindows.build(curve, nodes.s)
     vi, vj = v[:-1], v[1:]
-    keys = list(zip(win.a.tolist(), win.b.tolist(), vi.tolist(), vj.tolist(),
-                    nodes.flat.tolist(), strict=True))
+    s, vl = curve.s_mm, curve.vlim_mm_s
+    keys = [(a, b, v0, v1, f, s[lo - 1:hi + 2].tobytes(), vl[lo - 1:hi + 2].tobytes())
+            for a, b, v0, v1, f, lo, hi in zip(win.a.tolist(), win.b.tolist(), vi.tolist(),
+                                               vj.tolist(), nodes.flat.tolist(),
+                                               win.lo.tolist(), win.hi.tolist(), strict=True)]
     known = np.array([key in memo.rows for key in keys], bool)
     new = np.flatnonzero(~known)
     out = np.empty((len(keys), 6))
@@ -168,6 +174,7 @@ def _plan_round(nodes: _Nodes, v: np.ndarray, curve: LimitCurve, accel: float, t
                                               viol.phase_len_mm[new])
     for i, row in zip(new.tolist(), out[new].tolist(), strict=True):
         memo.rows[keys[i]] = tuple(row)
+        memo.key_bytes += len(keys[i][5]) + len(keys[i][6])
     return ph, Violations(out[:, 3], out[:, 4], out[:, 5])
 
 
@@ -299,6 +306,3 @@ def _raise_cruises(nodes: _Nodes, ph: PhaseArrays, curve: LimitCurve) -> bool:
         added = True
     return added
 
-
-def _to_profile(ph: PhaseArrays, s_offset: float) -> FeedProfile:
-    return FeedProfile.from_arrays(ph.duration_s, ph.s0_mm + s_offset, ph.vs_mm_s, ph.ve_mm_s)
