@@ -197,7 +197,7 @@ def _segment_time_s(a: np.ndarray, b: np.ndarray, vi: np.ndarray, vj: np.ndarray
     """Time of: wait at vi, accelerate, cruise at vp from e0 to d0, brake, wait at vj."""
     sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
     w0, w1 = np.maximum(e0 - sa - a, 0.0), np.maximum(b - d0 - sd, 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         t0 = np.where(w0 > 0.0, w0 / vi, 0.0)
         t1 = np.where(w1 > 0.0, w1 / vj, 0.0)
         tc = np.maximum(d0 - e0, 0.0) / vp
