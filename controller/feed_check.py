@@ -86,7 +86,9 @@ class Violations:
 def check_phases(ph: PhaseArrays, curve: LimitCurve, n_seg: int, tol: float) -> Violations:
     """Worst violation of v <= vlim in each segment: cruises by range minimum, transitions by
     dense samples (close enough that v between them is within tol/2 of linear) plus the exact
-    speed at the grid samples inside them."""
+    speed at the grid samples inside them. Transition samples are only taken where a coarse
+    bound allows an excess above tol/4, so a segment's excess (and where) is exact when it is
+    above tol/4 and otherwise only known to be at most tol/4."""
     exc = np.full(n_seg, -np.inf)
     loc = np.zeros(n_seg)
     plen = np.zeros(n_seg)

@@ -71,6 +71,7 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
       its worst point (below vlim there), or, once split MAX_SPLIT_DEPTH times, is flattened
       (node speeds <= min vlim over it: safe by construction). After FLATTEN_ROUNDS more rounds
       every segment is flattened, so the loop ends after a bounded number of rounds.
+    Segments a round leaves unchanged are not planned or checked again (see _Memo).
     s_mm may start anywhere; the profile's s runs from s_mm[0] to s_mm[-1]. On any result but OK
     the profile is empty.
     """
