@@ -141,6 +141,11 @@ class _Memo:
 _last_memo: list[_Memo] = []  # the previous call's memo (at most one)
 
 
+def clear_memo() -> None:
+    """Forget segment results kept from earlier calls (for benchmarks of cold planning)."""
+    _last_memo.clear()
+
+
 def _memo_for(curve: LimitCurve, accel: float, tol: float) -> _Memo:
     key = (accel, tol, curve.spacing_mm, float(curve.vlim_mm_s.max()))
     for m in _last_memo:

@@ -12,7 +12,7 @@ from controller.feed_planner import FeedPlan, plan_feed
 
 
 def _cold(*args: object, raise_cruises: bool = True) -> FeedPlan:
-    fp._last_memo.clear()
+    fp.clear_memo()
     return plan_feed(*args, raise_cruises=raise_cruises)
 
 
@@ -41,7 +41,7 @@ def test_memo_across_calls_plans_like_cold(case: tuple, where: float, factor: fl
     cold_a_raised = _cold(s, vlim, accel, v0, v1)
     cold_b = _cold(s, changed, accel, v0, v1)
     # The generator's pattern: a plan, the same input with raise_cruises, a local change.
-    fp._last_memo.clear()
+    fp.clear_memo()
     _assert_same(plan_feed(s, vlim, accel, v0, v1, raise_cruises=False), cold_a)
     _assert_same(plan_feed(s, vlim, accel, v0, v1), cold_a_raised)
     _assert_same(plan_feed(s, changed, accel, v0, v1), cold_b)
