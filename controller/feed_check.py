@@ -155,7 +155,7 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     gk = np.clip(np.searchsorted(s0, curve.s_mm[g], side="right") - 1, 0, len(s0) - 1)
     in_kept = ch.keep[ch.chunk_of(curve.s_mm[g], gk)]
     g, gk = g[in_kept], gk[in_kept]
-    tg = np.interp(curve.s_mm[g], s, tau) if len(g) else np.empty(0)
+    tg = _seed_tau(curve.s_mm[g], gk, k, s, tau)
     for _ in range(3):
         sg = s0[gk] + bernstein6_distance(tg, dur[gk], vs[gk], ve[gk])
         vg = np.maximum(quintic_speed(tg, vs[gk], ve[gk]), 1e-12) * dur[gk]
@@ -164,6 +164,24 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     seg = ph.seg[mask]
     ln = lengths[mask]
     return (seg[k], e, s, ln[k]), (seg[gk], ge, curve.s_mm[g], ln[gk])
+
+
+
+def _seed_tau(x: np.ndarray, gk: np.ndarray, k: np.ndarray, s: np.ndarray,
+              tau: np.ndarray) -> np.ndarray:
+    """tau at x by linear interpolation between samples of its own transition gk (as np.interp
+    does inside it; np.interp over all samples may take a neighbour's sample where two
+    transitions meet at x, rounding making s step back there), held within their taus."""
+    first = np.searchsorted(k, gk, side="left")
+    last = np.searchsorted(k, gk, side="right") - 1
+    j = np.minimum(np.maximum(np.searchsorted(s, x, side="right") - 1, first),
+                   np.maximum(last - 1, first))
+    j1 = np.minimum(j + 1, last)
+    ds = s[j1] - s[j]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (tau[j1] - tau[j]) / ds * (x - s[j]) + tau[j]
+    t = np.where((x == s[j]) | (ds == 0.0), tau[j], t)
+    return np.minimum(np.maximum(t, tau[first]), tau[last])
 
 
 @dataclass(frozen=True, eq=False)
