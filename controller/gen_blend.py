@@ -31,9 +31,10 @@ def _blend(a: Piece, b: Piece, cut_mm: float) -> PhQuintic:
 
 
 def _polyline(a: Piece, b: Piece, cut_mm: float, n: int = 64) -> np.ndarray:
-    """The programmed path the blend replaces: the end of a and the start of b."""
-    s_a = np.linspace(a.length_mm - cut_mm, a.length_mm, n)
-    s_b = np.linspace(0.0, cut_mm, n)
+    """The programmed path the blend replaces: the end of a and the start of b (a line needs
+    only its two ends)."""
+    s_a = np.linspace(a.length_mm - cut_mm, a.length_mm, 2 if a.kind == PieceKind.LINE else n)
+    s_b = np.linspace(0.0, cut_mm, 2 if b.kind == PieceKind.LINE else n)
     pa = a.curve.evaluate(a.u_at(s_a), 0)[0]
     pb = b.curve.evaluate(b.u_at(s_b), 0)[0]
     return np.vstack([pa, pb])

@@ -59,7 +59,14 @@ class PhQuintic:
         dp = p5 - p0
         if dp == 0:
             raise ValueError("PH Hermite data with coincident end points")
-        return min(_candidates(complex(p0), complex(dp), complex(d0), complex(d1)), key=_rank)
+        candidates = _candidates(complex(p0), complex(dp), complex(d0), complex(d1))
+        if _tame(d0 / dp) and _tame(d1 / dp):
+            # Both end derivatives within 80 degrees of the chord and 0.5-2 chords long: the
+            # canonical (+,+) solution is then the best (ALGORITHMS.md 1.2; checked by
+            # tests/test_ph_quintic.py), so skip ranking (root finding and energy quadrature
+            # cost ~1 ms per corner blend).
+            return candidates[0]
+        return min(candidates, key=_rank)
 
     # --- Bernstein data -------------------------------------------------------------------------
     @cached_property
@@ -184,6 +191,16 @@ class PhQuintic:
             f = self.curvature(x) ** 2 * self.sigma(x)
         value = 0.5 * float(f @ _GL_W)
         return value if math.isfinite(value) else math.inf
+
+
+TAME_ANGLE_RAD = math.radians(80.0)
+
+
+def _tame(d_canonical: complex) -> bool:
+    """An end derivative in the canonical frame within TAME_ANGLE_RAD of the chord and of a
+    length comparable with it (longer ones make (+,+) loop: |d| = 5 |chord| did)."""
+    return (0.5 <= abs(d_canonical) <= 2.0
+            and abs(cmath.phase(d_canonical)) <= TAME_ANGLE_RAD)
 
 
 def _candidates(p0: complex, dp: complex, d0: complex, d1: complex) -> list[PhQuintic]:

@@ -102,3 +102,19 @@ def test_rotation_index_of_cusp_and_s_shapes() -> None:
     assert loop.absolute_rotation_index() == pytest.approx(0.0, abs=1e-12)  # collinear cusps
     s = PhQuintic.hermite(0, 1, 3 * cmath.exp(1j), 3 * cmath.exp(-1j))
     assert s.absolute_rotation_index() < 0.5
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(-1.39, 1.39), st.floats(-1.39, 1.39), st.floats(0.5, 2.0), st.floats(0.5, 2.0))
+def test_tame_data_fast_path_picks_the_best_of_the_four(a0: float, a1: float, m0: float,
+                                                        m1: float) -> None:
+    """Tangents within 80 degrees of the chord, 0.5-2 chords long: (+,+) is the best."""
+    import cmath
+
+    d0, d1 = m0 * cmath.exp(1j * a0), m1 * cmath.exp(1j * a1)
+    ph = PhQuintic.hermite(0j, 1 + 0j, d0, d1)
+    ranked = min(_candidates(0j, 1 + 0j, d0, d1),
+                 key=lambda c: (round(c.absolute_rotation_index(), 9),
+                                round(c.bending_energy(), 9)))
+    assert ph.absolute_rotation_index() <= ranked.absolute_rotation_index() + 1e-9
+    assert ph.bending_energy() <= ranked.bending_energy() * (1 + 1e-9)
