@@ -18,6 +18,7 @@ from controller.blocks import (
     PathMode,
 )
 from controller.config import MachineConfig
+from controller.errors import PlanningError
 from controller.feed_planner import plan_feed
 from controller.gen_geometry import BlockCurve, block_curve
 from controller.gen_run import (
@@ -214,11 +215,29 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
     yield from flush()
 
 
+TRAVEL_SLACK_MM = 1e-6  # rounding only: the programs were checked against travel beforehand
+
+
+def check_travel(chunk: RefChunk, config: MachineConfig) -> None:
+    """Last line of defence (soft limits, as LinuxCNC's planner also enforces them): no
+    reference point may leave the machine's travel, whatever the checks before missed."""
+    for i, axis in enumerate(config.axes):
+        lo, hi = axis.travel_mm
+        col = chunk.pos_mm[:, i]
+        bad = np.flatnonzero((col < lo - TRAVEL_SLACK_MM) | (col > hi + TRAVEL_SLACK_MM))
+        if bad.size:
+            k = int(bad[0])
+            raise PlanningError(f"line {int(chunk.line[k])}: {axis.name.upper()} reference "
+                                f"{col[k]:.4f} mm outside travel [{lo:g}, {hi:g}] mm")
+
+
 def generate_reference(blocks: Iterable[NcBlock], config: MachineConfig,
                        algorithm: Algorithm | str = Algorithm.PH_LOOKAHEAD) -> Iterator[RefChunk]:
-    """The generator process's stream: chunks of reference points, the last one marked final."""
+    """The generator process's stream: chunks of reference points, the last one marked final;
+    a chunk leaving the travel raises PlanningError instead of being sent."""
     previous: RefChunk | None = None
     for step in plan_program(blocks, config, algorithm):
+        check_travel(step.chunk, config)
         if previous is not None:
             yield previous
         previous = step.chunk

@@ -30,10 +30,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def check_program(path: str, config: Any) -> None:
-    """The whole program through the interpreter, no motion: raises NcError at the first error."""
-    from controller.interpreter import read_program
-    for _ in read_program(path, config):
-        pass
+    """The whole program through `cncctl check` (syntax, travel limits, feeds), no motion:
+    raises NcError at the first error."""
+    from controller.check_cmd import check_program as check_whole_program
+
+    check_whole_program(path, config)
 
 
 def _view(args: argparse.Namespace, lines: list[str]) -> Any:

@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 
+from controller.check_cmd import check_program
 from controller.config import MachineConfig, load_config
 from controller.errors import CncError, NcError
 from controller.generator import Algorithm
@@ -39,9 +40,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _check_whole_program(path: str, config: MachineConfig) -> None:
-    """Read everything first: no planning starts on a program with an error."""
-    for _ in read_program(path, config):
-        pass
+    """`cncctl check` first (syntax, travel limits, feeds): no planning on a program with an
+    error."""
+    check_program(path, config)
 
 
 def _one(path: str, config: MachineConfig, algorithm: str) -> tuple[dict, Trajectory]:

@@ -152,3 +152,14 @@ def test_linuxcnc_programs_plan_within_the_limits(name: str) -> None:
     assert r["contour_error_um"]["max"] <= MILL.interpolator.contour_error_limit_mm * 1000
     assert r["max_tangential_accel_mm_s2"] <= MILL.interpolator.max_accel_mm_s2 * (1 + 1e-6)
     assert r["max_feed_mm_s"] <= MILL.interpolator.rapid_feed_mm_s * (1 + 1e-9)
+
+
+def test_reference_outside_travel_is_never_streamed(tmp_path: Path) -> None:
+    """Defence in depth: blocks that were not checked cannot make the generator leave travel."""
+    from controller.errors import PlanningError
+
+    prog = tmp_path / "far.nc"
+    prog.write_text("G21 G90 F600\nG1 X10\nG1 X500\nM2\n", encoding="utf-8")
+    stream = generate_reference(read_program(str(prog), CFG), CFG)
+    with pytest.raises(PlanningError, match=r"line 3: X reference .* outside travel"):
+        list(stream)

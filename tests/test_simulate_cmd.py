@@ -58,3 +58,15 @@ def test_bad_program_is_rejected_before_planning(capsys: pytest.CaptureFixture[s
     assert captured.out == ""
     assert captured.err.startswith(f"{bad}:3:")
     assert "error:" in captured.err
+
+
+def test_run_and_simulate_reject_a_program_beyond_travel(capsys: pytest.CaptureFixture[str],
+                                                         tmp_path: Path) -> None:
+    far = tmp_path / "far.nc"
+    far.write_text("G21 G90 F600\nG1 X10\nG1 X500\nM2\n", encoding="utf-8")
+    for command in (["run", str(far), "--virtual-time", "--json"], ["simulate", str(far)]):
+        assert main(command) == 2
+        captured = capsys.readouterr()
+        assert "error: X travel limit exceeded" in captured.err
+        assert captured.err.startswith(f"{far}:3:")
+        assert '"event": "start"' not in captured.out  # nothing was started, nothing moved
