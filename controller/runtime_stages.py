@@ -25,13 +25,14 @@ GenerateFn = Callable[[Iterable[Any], MachineConfig], Iterable[RefChunk]]
 
 
 def blocks_source(path: str, config: MachineConfig) -> Iterator[Any]:
-    """The interpreter stage (helper A's read_program; the lead wires nc_fifo in here)."""
+    """The interpreter stage: read_program, block by block (its process is interpreter_main;
+    nc_fifo.NcFifo does the same job standalone and batches blocks, not used here yet)."""
     from controller.interpreter import read_program
     yield from read_program(path, config)
 
 
 def reference_source(blocks: Iterable[Any], config: MachineConfig) -> Iterator[RefChunk]:
-    """The generator stage: the lead's look-ahead reference-point generator."""
+    """The generator stage: the look-ahead reference-point generator (controller.generator)."""
     from controller.generator import generate_reference
     yield from generate_reference(blocks, config)
 
