@@ -129,12 +129,14 @@ def _contour(blocks: list[NcBlock], config: MachineConfig, algorithm: Algorithm,
 
 
 def _window(blocks: list[NcBlock], config: MachineConfig, t0_s: float,
-            cont: Continuation | None) -> tuple[PlannedStep, Continuation | None]:
+            cont: Continuation | None) -> tuple[PlannedStep | None, Continuation | None]:
     """Plan a look-ahead window to rest, then keep only what precedes its last cruise sample
     before the overlap; the rest is planned again with the next blocks (no stop between).
 
     Without such a cruise sample the whole window is kept and the machine stops at its end."""
     curves = _curves(blocks, config)
+    if not curves:  # nothing moves in XY (all blocks shorter than a micrometre): keep going
+        return None, cont
     start = np.array(blocks[0].start[:2]) if cont is None else cont.xy_mm
     run = plan_contour_run(curves, start, config, PH_LOOKAHEAD, cont)
     cut = continuation_cut(run, curves[-1].blend_tolerance_mm, blocks[-1].end, config, cont)
