@@ -129,12 +129,11 @@ class Continuation:
 
 
 def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: MachineConfig,
-             settings: RunSettings, cache: dict, raise_cruises: bool,
-             cont: Continuation | None) -> _Attempt:
+             settings: RunSettings, cache: dict, cont: Continuation | None) -> _Attempt:
     """Modules 3 and 4 once: plan the feed, interpolate, predict the contour error."""
     T = config.sample_period_s  # noqa: N806
     v0 = 0.0 if cont is None else cont.v_mm_s
-    feed = plan_path_feed(geo.path, inp, cache, raise_cruises, v0)
+    feed = plan_path_feed(geo.path, inp, cache, v_start_mm_s=v0)
     if feed.result != PlanResult.OK:
         return _Attempt(feed)
     samples = interpolate(geo.path, feed.profile, T, settings.interpolation)
@@ -150,9 +149,7 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
     """Modules 1-4 on one run of XY blocks to rest (Figure 4's loop), from rest or from where
     the previous look-ahead window was cut.
 
-    Rounds plan without the planner's cruise-raising pass (cheaper); once a round meets the
-    contour limit, one more attempt with it is kept if it meets the limit too. If a later round
-    cannot be planned, the last plan is returned with its status."""
+    If a later round cannot be planned, the last plan is returned with its status."""
     cpu0 = time.process_time()
     ip = config.interpolator
     zones = find_corners(curves, ip.kappa_threshold_per_mm)
@@ -168,16 +165,13 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
         geo = build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph, fit_cache,
                          prefix, tol)
         inp = _feed_input(config, settings, reductions)
-        att = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, False, cont)
+        att = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, cont)
         if att.samples is None:
             status = RunStatus.FEED_PLAN_FAILED
             break
         good = (geo, att)
         if not att.violations:
             status = RunStatus.OK
-            faster = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, True, cont)
-            if faster.samples is not None and not faster.violations:
-                good = (geo, faster)
             break
         if rounds == ip.max_dynamics_rounds:
             break
