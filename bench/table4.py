@@ -17,6 +17,7 @@ sys.path.insert(0, str(REPO / "bench"))
 from time_bound import arc_length_samples  # noqa: E402
 
 from controller.config import load_config  # noqa: E402
+from controller.feed_planner import clear_memo  # noqa: E402
 from controller.generator import Algorithm  # noqa: E402
 from controller.interpreter import read_program  # noqa: E402
 from controller.sim_report import report, simulate  # noqa: E402
@@ -54,6 +55,13 @@ def markdown(program: str, results: list[dict], paper: bool) -> str:
     return "\n".join(lines)
 
 
+def _cold_report(program: str, config: object, algorithm: str) -> dict:
+    """Simulate with the feed planner's memo emptied first: planning CPU from cold."""
+    clear_memo()
+    return report(simulate(read_program(program, config), config, algorithm), program,
+                  algorithm, config)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("programs", nargs="*", default=[str(p) for p in PROGRAMS])
@@ -61,8 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     config = load_config()
     for program in args.programs:
-        results = [report(simulate(read_program(program, config), config, a.value), program,
-                          a.value, config) for a in Algorithm]
+        results = [_cold_report(program, config, a.value) for a in Algorithm]
         if args.markdown:
             print(markdown(program, results, paper="naca" in program))
         else:
