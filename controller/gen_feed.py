@@ -137,6 +137,18 @@ def _concat(profiles: list[FeedProfile]) -> FeedProfile:
     return FeedProfile(tuple(phases))
 
 
+def _section(s: np.ndarray, vlim: np.ndarray, a: float,
+             b: float) -> tuple[np.ndarray, np.ndarray]:
+    """The grid of [a, b], its ends exactly a and b: a grid point a rounding error past b
+    (49.50000000000001 for 49.5) would otherwise be dropped and the plan end short of b."""
+    eps = 1e-9 * max(1.0, abs(b))
+    keep = (s >= a - eps) & (s <= b + eps)
+    s_sec, v_sec = s[keep].copy(), vlim[keep]
+    s_sec[0], s_sec[-1] = a, b
+    inner = np.r_[True, np.diff(s_sec) > 0]  # drop points squeezed onto the ends
+    return s_sec[inner], v_sec[inner]
+
+
 def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None,
                    raise_cruises: bool = True, v_start_mm_s: float = 0.0) -> FeedOutput:
     """Module 3: vlim on a fine grid, then a quintic plan per section, ending at rest.
@@ -150,9 +162,9 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
     profiles: list[FeedProfile] = []
     result = PlanResult.OK
     for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-        mask = (s >= a) & (s <= b)
+        s_sec, v_sec = _section(s, vlim, a, b)
         v0 = v_start_mm_s if a == 0.0 else 0.0
-        plan = plan_feed(s[mask] - a, np.maximum(vlim[mask], 1e-6), inp.max_accel_mm_s2, v0,
+        plan = plan_feed(s_sec - a, np.maximum(v_sec, 1e-6), inp.max_accel_mm_s2, v0,
                          raise_cruises=raise_cruises)
         if plan.result != PlanResult.OK:
             result = plan.result

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import StrEnum
 
 import numpy as np
@@ -33,7 +33,7 @@ from controller.gen_window import continuation_cut
 from controller.refpoints import RefChunk
 
 MAX_RUN_BLOCKS = 500  # baselines: a longer contour is planned in pieces, stopping between
-IN_POSITION_S = 0.04  # wait after a rapid: the servo model settles to 2 % in 32 ms
+IN_POSITION_S = 0.04  # wait at rest before the next move: the servo settles to 2 % in 32 ms
 WINDOW_BLOCKS = 200  # ph-lookahead: new blocks per look-ahead window (cut and continued)
 
 
@@ -51,6 +51,7 @@ class PlannedStep:
     chunk: RefChunk
     run: RunPlan | None = None
     rapid: bool = False  # a G0 move (and its in-position wait): not part of any contour
+    phi_rad: np.ndarray | None = None  # exact path tangent angle per sample, where known
 
 
 def _pos_row(config: MachineConfig, xy: np.ndarray, z_mm: float) -> np.ndarray:
@@ -76,14 +77,17 @@ def _straight_move(block: LineBlock, config: MachineConfig, t0_s: float) -> RefC
     s, v, _ = plan.profile.evaluate(np.minimum(np.arange(1, k + 1) * T, plan.profile.duration_s))
     pos = start + (s / length)[:, None] * (end - start)
     pos[-1] = end
-    if block.rapid:
-        # In-position check after a rapid (as Fanuc does by default): hold until the servo has
-        # settled, so the next contour does not start with the rapid's residual error.
-        hold = int(round(IN_POSITION_S / T))
-        pos = np.vstack([pos, np.repeat(pos[-1:], hold, axis=0)])
-        v = np.r_[v, np.zeros(hold)]
     line = np.full(len(pos), block.source.first_line, np.int32)
     return RefChunk(t0_s + T, pos, v, line)
+
+
+def _in_position_hold(last: PlannedStep, config: MachineConfig, t_s: float) -> PlannedStep:
+    """IN_POSITION_S of samples holding the last step's end point."""
+    k = int(round(IN_POSITION_S / config.sample_period_s))
+    rows = np.repeat(last.chunk.pos_mm[-1:], k, axis=0)
+    line = np.full(k, last.chunk.line[-1], np.int32)
+    chunk = RefChunk(t_s + config.sample_period_s, rows, np.zeros(k), line)
+    return PlannedStep(chunk, rapid=last.rapid)
 
 
 def _dwell(block: DwellBlock, config: MachineConfig, t0_s: float) -> RefChunk | None:
@@ -125,7 +129,8 @@ def _contour(blocks: list[NcBlock], config: MachineConfig, algorithm: Algorithm,
     run, xy, v, line = plan_run(curves, start, config, algorithm, cont)
     xy[-1] = end[:2]  # the programmed end point exactly, not a curve evaluation
     pos = _pos_row(config, xy, end[2])
-    return PlannedStep(RefChunk(t0_s + config.sample_period_s, pos, v, line), run)
+    phi = None if run is None else run.samples.phi_rad
+    return PlannedStep(RefChunk(t0_s + config.sample_period_s, pos, v, line), run, phi_rad=phi)
 
 
 def _window(blocks: list[NcBlock], config: MachineConfig, t0_s: float,
@@ -147,12 +152,12 @@ def _window(blocks: list[NcBlock], config: MachineConfig, t0_s: float,
         xy[-1] = blocks[-1].end[:2]
         chunk = RefChunk(t0_s + config.sample_period_s, _pos_row(config, xy, z), s.v_mm_s,
                          s.line)
-        return PlannedStep(chunk, run), None
+        return PlannedStep(chunk, run, phi_rad=s.phi_rad), None
     k, nxt = cut
     s = run.samples
     chunk = RefChunk(t0_s + config.sample_period_s, _pos_row(config, s.xy_mm[:k + 1], z),
                      s.v_mm_s[:k + 1], s.line[:k + 1])
-    return PlannedStep(chunk, run), nxt
+    return PlannedStep(chunk, run, phi_rad=s.phi_rad[:k + 1]), nxt
 
 
 def _is_contour_block(block: NcBlock) -> bool:
@@ -174,11 +179,24 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
     pending: list[NcBlock] = []
     cont: Continuation | None = None
 
-    def emit(step: PlannedStep | None) -> Iterator[PlannedStep]:
-        nonlocal t_s
-        if step is not None and len(step.chunk):
-            t_s = step.chunk.t0_s + (len(step.chunk) - 1) * T
-            yield step
+    settle_after: PlannedStep | None = None  # the last step, if it came to rest moving
+
+    def emit(step: PlannedStep | None, at_rest: bool = True,
+             dwell: bool = False) -> Iterator[PlannedStep]:
+        nonlocal t_s, settle_after
+        if step is None or not len(step.chunk):
+            return
+        if settle_after is not None and not dwell:
+            # In-position check between moves that stop (exact stop, rapids, Z moves), as
+            # Fanuc does: the next move starts once the servo has settled, so it does not
+            # begin with the residual error of the last one (the dynamics module assumes rest).
+            hold = _in_position_hold(settle_after, config, t_s)
+            yield hold
+            t_s += len(hold.chunk) * T
+            step = replace(step, chunk=replace(step.chunk, t0_s=t_s + T))
+        t_s = step.chunk.t0_s + (len(step.chunk) - 1) * T
+        yield step
+        settle_after = step if at_rest and not dwell else None
 
     def flush() -> Iterator[PlannedStep]:
         nonlocal cont
@@ -194,7 +212,7 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
         run_blocks = list(pending)
         pending.clear()
         step, cont = _window(run_blocks, config, t_s, cont)
-        yield from emit(step)
+        yield from emit(step, at_rest=cont is None)
 
     for block in blocks:
         if _is_contour_block(block):
@@ -213,7 +231,7 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
             yield from emit(PlannedStep(chunk, rapid=block.rapid) if chunk is not None else None)
         elif isinstance(block, DwellBlock):
             chunk = _dwell(block, config, t_s)
-            yield from emit(PlannedStep(chunk) if chunk is not None else None)
+            yield from emit(PlannedStep(chunk) if chunk is not None else None, dwell=True)
     yield from flush()
 
 

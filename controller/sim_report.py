@@ -12,7 +12,7 @@ from controller.blocks import NcBlock
 from controller.config import MachineConfig
 from controller.gen_dynamics import SETTLE_S, axis_servos
 from controller.gen_run import RunPlan, RunStatus
-from controller.generator import Algorithm, plan_program
+from controller.generator import Algorithm, PlannedStep, plan_program
 from controller.servo import contour_error_mm, tracking_error_mm
 
 
@@ -44,6 +44,19 @@ def tangent_angles(xy: np.ndarray) -> np.ndarray:
     return phi[idx]
 
 
+def _exact_where_known(phi: np.ndarray, steps: list[PlannedStep]) -> np.ndarray:
+    """Eq. 28 wants the path tangent: the generator's exact one where it has it (contour runs),
+    central differences of the reference elsewhere (straight moves, holds)."""
+    k = 0
+    for step in steps:
+        n = len(step.chunk)
+        if step.phi_rad is not None:
+            phi[k:k + n] = step.phi_rad
+        k += n
+    phi[k:] = phi[k - 1] if k else phi[k:]
+    return phi
+
+
 def simulate(blocks: Iterable[NcBlock], config: MachineConfig,
              algorithm: Algorithm | str) -> Trajectory:
     """Plan the program, then run the reference through both axis models from X0 Y0 at rest."""
@@ -64,7 +77,7 @@ def simulate(blocks: Iterable[NcBlock], config: MachineConfig,
     servos = axis_servos(config)
     ex = tracking_error_mm(servos[0], v[:, 0])
     ey = tracking_error_mm(servos[1], v[:, 1])
-    phi = tangent_angles(pos[1:, :2])
+    phi = _exact_where_known(tangent_angles(pos[1:, :2]), steps)
     n = len(ref)
     act = ref.copy()
     act[:, 0] -= ex[:n]
