@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -51,7 +51,6 @@ class Geometry:
     path: Path
     corners: tuple[CornerInfo, ...]
     ph_pieces: tuple[Piece, ...]
-    stops_at_mm: tuple[float, ...] = field(default=())
     g1_blends: int = 0
 
 
@@ -192,4 +191,4 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
     chained = chain(pieces)
     stop_s = tuple(chained[k].s0_mm for k in stops)
     ph = tuple(p for p in chained if p.kind == PieceKind.PH)
-    return Geometry(Path(chained, stop_s), tuple(infos), ph, stop_s, blends)
+    return Geometry(Path(chained, stop_s), tuple(infos), ph, blends)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
@@ -188,7 +188,3 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
     assert att.samples is not None and att.prediction is not None
     return RunPlan(att.samples, start_xy_mm, geo, att.prediction, rounds, status,
                    att.feed.result, time.process_time() - cpu0)
-
-
-def with_status(plan: RunPlan, status: RunStatus) -> RunPlan:
-    return replace(plan, status=status)

@@ -77,33 +77,12 @@ class Path:
         assert out is not None
         return out
 
-    def curvature(self, s_mm: np.ndarray) -> np.ndarray:
-        """Unsigned curvature at path arc lengths (1/mm)."""
-        return self._per_piece(s_mm, lambda p, s: p.curve.curvature(p.u_at(s)))
-
     def feed_cap(self, s_mm: np.ndarray) -> np.ndarray:
         """Programmed feed of the piece at each arc length."""
         return self._per_piece(s_mm, lambda p, s: np.full(s.shape, p.feed_mm_s))
 
     def line_at(self, s_mm: np.ndarray) -> np.ndarray:
         return self._per_piece(s_mm, lambda p, s: np.full(s.shape, p.line, dtype=np.int32))
-
-    def points(self, s_mm: np.ndarray) -> np.ndarray:
-        """Exact points (N, 2) at path arc lengths."""
-        return self._per_piece(s_mm, lambda p, s: p.curve.evaluate(p.u_at(s), 0)[0])
-
-    def tangent_angle(self, s_mm: np.ndarray) -> np.ndarray:
-        """Angle of the path tangent with the x axis at path arc lengths (rad)."""
-        def angle(p: Piece, s: np.ndarray) -> np.ndarray:
-            d = p.curve.evaluate(p.u_at(s), 1)[1]
-            sign = 1.0 if p.u1 >= p.u0 else -1.0
-            return np.arctan2(sign * d[:, 1], sign * d[:, 0])
-        return self._per_piece(s_mm, angle)
-
-    @property
-    def start_xy(self) -> np.ndarray:
-        p = self.pieces[0]
-        return p.curve.evaluate(np.array([p.u0]), 0)[0, 0]
 
     @property
     def end_xy(self) -> np.ndarray:

@@ -118,13 +118,13 @@ def _block_matrices(b: np.ndarray, a: np.ndarray, n_block: int) -> tuple[np.ndar
     lag = idx[:, None] - idx[None, :]
     toeplitz = np.where(lag >= 0, impulse[np.clip(lag, 0, None)], 0.0)
     reach = np.column_stack([powers[n_block - 1 - k] @ g for k in range(n_block)])  # (n, L)
-    return obs, toeplitz, powers[n_block], reach
+    return obs, toeplitz, powers[n_block], reach, f
 
 
 def filter_block(servo: DiscreteServo, u: np.ndarray, state: np.ndarray) -> tuple[np.ndarray,
                                                                                  np.ndarray]:
     """Run the filter over u from state; vectorised in blocks of BLOCK samples."""
-    obs, toeplitz, f_block, reach = servo._blocks
+    obs, toeplitz, f_block, reach, f = servo._blocks
     out = np.empty(len(u))
     x = state.copy()
     for k0 in range(0, len(u), BLOCK):
@@ -135,17 +135,12 @@ def filter_block(servo: DiscreteServo, u: np.ndarray, state: np.ndarray) -> tupl
             x = f_block @ x + reach @ chunk
         else:
             out[k0:k0 + m] = obs[:m] @ x + toeplitz[:m, :m] @ chunk
-            x = _advance(servo, x, chunk)
+            x = _advance(f, x, chunk)
     return out, x
 
 
-def _advance(servo: DiscreteServo, x: np.ndarray, chunk: np.ndarray) -> np.ndarray:
+def _advance(f: np.ndarray, x: np.ndarray, chunk: np.ndarray) -> np.ndarray:
     """State after a partial block (sample by sample: at most BLOCK-1 steps)."""
-    a = servo.a
-    n = len(a) - 1
-    f = np.zeros((n, n))
-    f[0, :] = -a[1:]
-    f[1:, :-1] = np.eye(n - 1)
     for v in chunk:
         x = f @ x
         x[0] += v
