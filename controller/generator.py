@@ -127,10 +127,20 @@ def _contour(blocks: list[NcBlock], config: MachineConfig, algorithm: Algorithm,
     start = np.array(blocks[0].start[:2]) if cont is None else cont.xy_mm
     end = blocks[-1].end if blocks else cont.end_mm  # type: ignore[union-attr]
     run, xy, v, line = plan_run(curves, start, config, algorithm, cont)
-    xy[-1] = end[:2]  # the programmed end point exactly, not a curve evaluation
-    pos = _pos_row(config, xy, end[2])
-    phi = None if run is None else run.samples.phi_rad
-    return PlannedStep(RefChunk(t0_s + config.sample_period_s, pos, v, line), run, phi_rad=phi)
+    return _run_step(xy, v, line, run, t0_s, config, end[2], end[:2])
+
+
+def _run_step(xy: np.ndarray, v: np.ndarray, line: np.ndarray, run: RunPlan | None, t0_s: float,
+              config: MachineConfig, z_mm: float,
+              end_xy: tuple[float, ...] | None = None) -> PlannedStep:
+    """Samples of a run (or its first part) as one chunk; end_xy, for a run to rest, replaces
+    the last point by the programmed end point exactly, not a curve evaluation."""
+    if end_xy is not None:
+        xy = xy.copy()
+        xy[-1] = end_xy
+    phi = None if run is None else run.samples.phi_rad[:len(xy)]
+    chunk = RefChunk(t0_s + config.sample_period_s, _pos_row(config, xy, z_mm), v, line)
+    return PlannedStep(chunk, run, phi_rad=phi)
 
 
 def _window(blocks: list[NcBlock], config: MachineConfig, t0_s: float,
@@ -145,19 +155,12 @@ def _window(blocks: list[NcBlock], config: MachineConfig, t0_s: float,
     start = np.array(blocks[0].start[:2]) if cont is None else cont.xy_mm
     run = plan_contour_run(curves, start, config, PH_LOOKAHEAD, cont)
     cut = continuation_cut(run, curves[-1].blend_tolerance_mm, blocks[-1].end, config, cont)
-    z = blocks[-1].end[2]
+    end, s = blocks[-1].end, run.samples
     if cut is None or run.status != RunStatus.OK:
-        s = run.samples
-        xy = s.xy_mm.copy()
-        xy[-1] = blocks[-1].end[:2]
-        chunk = RefChunk(t0_s + config.sample_period_s, _pos_row(config, xy, z), s.v_mm_s,
-                         s.line)
-        return PlannedStep(chunk, run, phi_rad=s.phi_rad), None
+        return _run_step(s.xy_mm, s.v_mm_s, s.line, run, t0_s, config, end[2], end[:2]), None
     k, nxt = cut
-    s = run.samples
-    chunk = RefChunk(t0_s + config.sample_period_s, _pos_row(config, s.xy_mm[:k + 1], z),
-                     s.v_mm_s[:k + 1], s.line[:k + 1])
-    return PlannedStep(chunk, run, phi_rad=s.phi_rad[:k + 1]), nxt
+    return _run_step(s.xy_mm[:k + 1], s.v_mm_s[:k + 1], s.line[:k + 1], run, t0_s, config,
+                     end[2]), nxt
 
 
 def _is_contour_block(block: NcBlock) -> bool:
