@@ -31,7 +31,9 @@ class Curve(Protocol):
 
     def s_of_u(self, u: ArrayLike) -> np.ndarray: ...
 
-    def u_of_s(self, s_mm: ArrayLike) -> np.ndarray: ...
+    def u_of_s(self, s_mm: ArrayLike, tol_mm: float = 1e-11) -> np.ndarray:
+        """Parameter whose arc length is within tol_mm of s_mm (exact curves ignore tol_mm)."""
+        ...
 
     def derivatives_scalar(self, u: float) -> tuple[float, float, float, float]: ...
 
@@ -81,7 +83,7 @@ class _ConstantSpeed:
     def s_of_u(self, u: ArrayLike) -> np.ndarray:
         return _as_u(u) * self.length_mm
 
-    def u_of_s(self, s_mm: ArrayLike) -> np.ndarray:
+    def u_of_s(self, s_mm: ArrayLike, tol_mm: float = 1e-11) -> np.ndarray:
         return _as_u(s_mm) / self.length_mm
 
 

@@ -7,6 +7,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from controller.arclength import INVERSE_TOL_MM
 from controller.feed_profile import FeedProfile
 from controller.interpolators import ph_interpolate, taylor_interpolate
 from controller.path import Path, Piece, PieceKind
@@ -49,7 +50,7 @@ def _points_exact_or_ph(piece: Piece, s: np.ndarray) -> tuple[np.ndarray, np.nda
     if piece.kind == PieceKind.PH:
         u, _ = ph_interpolate(piece.curve, s - piece.s0_mm)  # type: ignore[arg-type]
     else:
-        u = piece.u_at(s)
+        u = piece.u_at(s, INVERSE_TOL_MM)
     d = piece.curve.evaluate(u, 1)
     return d[0], np.arctan2(d[1, :, 1], d[1, :, 0])
 

@@ -149,7 +149,7 @@ class Nurbs:
     @cached_property
     def arc_length_table(self) -> ArcLengthTable:
         inner = self.knots[self.degree : self.knots.size - self.degree]
-        return ArcLengthTable.build(self.speed, inner)
+        return ArcLengthTable.build(self.speed, inner, derivs=lambda u: self.evaluate(u, 2))
 
     @property
     def length_mm(self) -> float:
@@ -158,8 +158,8 @@ class Nurbs:
     def s_of_u(self, u: ArrayLike) -> np.ndarray:
         return self.arc_length_table.s_of_u(u)
 
-    def u_of_s(self, s_mm: ArrayLike) -> np.ndarray:
-        return self.arc_length_table.u_of_s(s_mm)
+    def u_of_s(self, s_mm: ArrayLike, tol_mm: float = 1e-11) -> np.ndarray:
+        return self.arc_length_table.u_of_s(s_mm, tol_mm)
 
     @cached_property
     def _power_form(self) -> tuple[list[float], list[list[tuple[float, ...]]]]:

@@ -168,7 +168,7 @@ class PhQuintic:
     def s_of_u(self, xi: ArrayLike) -> np.ndarray:
         return self.arc_length(xi)
 
-    def u_of_s(self, s_mm: ArrayLike) -> np.ndarray:
+    def u_of_s(self, s_mm: ArrayLike, tol_mm: float = 1e-11) -> np.ndarray:
         from controller.interpolators import ph_interpolate  # late: interpolators imports us
 
         return ph_interpolate(self, np.atleast_1d(np.asarray(s_mm, dtype=float)))[0]
