@@ -35,7 +35,12 @@ def sample_grid(curve: Curve, samples_per_span: int = 64) -> np.ndarray:
 
 
 def _kappa(curve: Curve, u: float) -> float:
-    return float(curve.curvature(u)[0])
+    """Unsigned curvature at one u, without numpy (root finding calls this one point at a time)."""
+    dx, dy, ddx, ddy = curve.derivatives_scalar(u)
+    speed2 = dx * dx + dy * dy
+    if speed2 == 0.0:
+        return float(curve.curvature(u)[0])  # the vectorised form's handling of a stop
+    return abs(dx * ddy - dy * ddx) / speed2**1.5
 
 
 def _dkappa(curve: Curve, u: float) -> float:

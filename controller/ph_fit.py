@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from controller.curves import Curve
 from controller.ph_quintic import PhQuintic
@@ -31,24 +32,51 @@ def _complex(xy: np.ndarray) -> complex:
 
 def hermite_on_zone(curve: Curve, u_start: float, u_end: float) -> PhQuintic:
     """ALGORITHMS 1.3: p0 = C(u_s), p5 = C(u_e), d = C'(u) (u_e - u_s) (xi-derivatives)."""
-    d = curve.evaluate(np.array([u_start, u_end]), 1)
-    du = u_end - u_start
-    return PhQuintic.hermite(_complex(d[0, 0]), _complex(d[0, 1]),
-                             _complex(d[1, 0]) * du, _complex(d[1, 1]) * du)
+    return _hermite_all(curve, np.array([u_start]), np.array([u_end]))[0]
 
 
-def foot_distances(curve: Curve, u_start: float, u_end: float, pts: np.ndarray,
+def _hermite_all(curve: Curve, u_start: np.ndarray, u_end: np.ndarray) -> list[PhQuintic]:
+    """hermite_on_zone for many zones, with one curve evaluation for all their ends."""
+    d = curve.evaluate(np.concatenate((u_start, u_end)), 1)
+    n, du = len(u_start), u_end - u_start
+    return [PhQuintic.hermite(_complex(d[0, i]), _complex(d[0, n + i]),
+                              _complex(d[1, i]) * du[i], _complex(d[1, n + i]) * du[i])
+            for i in range(n)]
+
+
+def foot_distances(curve: Curve, u_start: ArrayLike, u_end: ArrayLike, pts: np.ndarray,
                    u_guess: np.ndarray) -> np.ndarray:
-    """Distance from each point to the curve on [u_start, u_end]: Newton on C'.(C - P) = 0."""
+    """Distance from each point to the curve on [u_start, u_end] (per point or shared): Newton
+    on C'.(C - P) = 0, stopped once no step moves u by more than ~1e-13 of its range."""
     u = u_guess.copy()
+    lo, hi = np.broadcast_to(u_start, u.shape), np.broadcast_to(u_end, u.shape)
+    settled = 1e-13 * np.maximum(hi - lo, 1e-300)
     for _ in range(_FOOT_NEWTON_SWEEPS):
         d = curve.evaluate(u, 2)
         diff = d[0] - pts
         f = np.einsum("ni,ni->n", d[1], diff)
         fp = np.einsum("ni,ni->n", d[1], d[1]) + np.einsum("ni,ni->n", d[2], diff)
         step = np.where(fp > 0, f / np.where(fp > 0, fp, 1.0), 0.0)
-        u = np.clip(u - step, u_start, u_end)
+        u_new = np.clip(u - step, lo, hi)
+        moved = np.abs(u_new - u)
+        u = u_new
+        if not np.any(moved > settled):
+            break
     return np.linalg.norm(curve.evaluate(u, 0)[0] - pts, axis=1)
+
+
+def _fit_all(curve: Curve, u_start: np.ndarray, u_end: np.ndarray) -> list[PhSegment]:
+    """fit_single for many zones at once: one batch of foot-point sweeps for all their samples."""
+    phs = _hermite_all(curve, u_start, u_end)
+    xi = np.linspace(0.0, 1.0, _ERROR_SAMPLES)
+    z = np.concatenate([ph.point(xi) for ph in phs])
+    lo, hi = np.repeat(u_start, xi.size), np.repeat(u_end, xi.size)
+    dist = foot_distances(curve, lo, hi, np.column_stack((z.real, z.imag)),
+                          lo + np.tile(xi, len(phs)) * (hi - lo)).reshape(len(phs), xi.size)
+    rms = np.sqrt(np.mean(dist**2, axis=1))
+    worst = dist.max(axis=1)
+    return [PhSegment(float(u_start[i]), float(u_end[i]), phs[i], float(rms[i]), float(worst[i]))
+            for i in range(len(phs))]
 
 
 def fit_error_mm(curve: Curve, u_start: float, u_end: float, ph: PhQuintic) -> tuple[float, float]:
@@ -62,20 +90,28 @@ def fit_error_mm(curve: Curve, u_start: float, u_end: float, ph: PhQuintic) -> t
 
 def fit_single(curve: Curve, u_start: float, u_end: float) -> PhSegment:
     """One PH quintic on the whole zone: the 'without division' column of Table I."""
-    ph = hermite_on_zone(curve, u_start, u_end)
-    rms, worst = fit_error_mm(curve, u_start, u_end, ph)
-    return PhSegment(u_start, u_end, ph, rms, worst)
+    return _fit_all(curve, np.array([u_start]), np.array([u_end]))[0]
 
 
 def fit_zone(curve: Curve, u_start: float, u_end: float, error_limit_mm: float,
              max_depth: int = DEFAULT_MAX_DEPTH) -> list[PhSegment]:
-    """Bisect the zone in u until every piece's RMS error is <= error_limit_mm (Table I)."""
-    seg = fit_single(curve, u_start, u_end)
-    if seg.fit_rms_mm <= error_limit_mm or max_depth <= 0:
-        return [seg]
-    mid = 0.5 * (u_start + u_end)
-    return (fit_zone(curve, u_start, mid, error_limit_mm, max_depth - 1)
-            + fit_zone(curve, mid, u_end, error_limit_mm, max_depth - 1))
+    """Bisect the zone in u until every piece's RMS error is <= error_limit_mm (Table I).
+
+    Breadth first: all pieces of one bisection level are fitted in one batch."""
+    done: list[PhSegment] = []
+    lo, hi = np.array([u_start]), np.array([u_end])
+    for depth in range(max_depth + 1):
+        segs = _fit_all(curve, lo, hi)
+        split = [seg for seg in segs if seg.fit_rms_mm > error_limit_mm and depth < max_depth]
+        done += [seg for seg in segs if not (seg.fit_rms_mm > error_limit_mm
+                                              and depth < max_depth)]
+        if not split:
+            break
+        a = np.array([seg.u_start for seg in split])
+        b = np.array([seg.u_end for seg in split])
+        mid = 0.5 * (a + b)
+        lo, hi = np.concatenate((a, mid)), np.concatenate((mid, b))
+    return sorted(done, key=lambda seg: seg.u_start)
 
 
 @dataclass(frozen=True)
