@@ -15,7 +15,8 @@ from controller.feed_profile import (
     transition_length_mm,
 )
 
-PEAK_BISECTIONS = 12
+PEAK_RESOLUTION_BITS = 12  # the cruise-speed search narrows its bracket to 2^-12
+PEAK_ROWS_PER_CALL = 256  # segments x levels per _window call in that search
 REST_FRACTION = 1e-7  # of max vlim: node speeds this low never wait (cruise) before moving on
 CRUISE_LEVELS = 12  # candidate cruise speeds when waiting at a node speed is involved
 SHAPE_SAMPLES = 33  # samples of a transition's v(s) when fitting it under vlim
@@ -146,12 +147,23 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     todo = np.flatnonzero(~ok & ~flat & (high > safe))
     lo_v, hi_v = safe[todo], high[todo]
     lo_e0, lo_d0 = np.full(len(todo), np.nan), np.full(len(todo), np.nan)  # window at lo_v
-    for _ in range(PEAK_BISECTIONS if len(todo) else 0):
-        mid = 0.5 * (lo_v + hi_v)
-        m0, m1 = _window(win, vi[todo], vj[todo], mid, todo, accel, reach)
-        good = m0 <= m1
-        lo_v, hi_v = np.where(good, mid, lo_v), np.where(good, hi_v, mid)
-        lo_e0, lo_d0 = np.where(good, m0, lo_e0), np.where(good, m1, lo_d0)
+    levels, stages = _peak_search_shape(len(todo))
+    for _ in range(stages if len(todo) else 0):
+        # levels - 1 cruise speeds per segment in one _window call: few segments try many at
+        # once (numpy's per-call cost dominates), many segments few (their samples dominate).
+        frac = np.arange(1, levels) / levels
+        mid = (lo_v[:, None] + (hi_v - lo_v)[:, None] * frac).ravel()
+        kk = np.repeat(np.arange(len(todo)), levels - 1)
+        m0, m1 = _window(win, vi[todo][kk], vj[todo][kk], mid, todo[kk], accel, reach)
+        good = (m0 <= m1).reshape(len(todo), levels - 1)
+        # Feasibility is monotone in V: count the good levels from the bottom.
+        n_good = np.argmin(np.column_stack((good, np.zeros(len(todo), bool))), axis=1)
+        found = n_good > 0
+        pick = np.arange(len(todo)) * (levels - 1) + np.maximum(n_good - 1, 0)
+        width = hi_v - lo_v
+        hi_v = lo_v + width * (n_good + 1) / levels
+        lo_v = np.where(found, lo_v + width * n_good / levels, lo_v)
+        lo_e0, lo_d0 = np.where(found, m0[pick], lo_e0), np.where(found, m1[pick], lo_d0)
     vp = np.where(ok, high, safe)
     vp[todo] = lo_v
     # Only segments that never found a good mid still need their window (at the safe speed).
@@ -168,6 +180,13 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     e0 = np.where(bad, a + sa, e0)
     d0 = np.where(bad, np.maximum(b - sd, a + sa), d0)
     return SegmentPlan(a, b, vi, vj, vp, e0, d0)
+
+
+def _peak_search_shape(n_segments: int) -> tuple[int, int]:
+    """(levels per stage, stages): a 2^b-ary search, b from 1 (bisection) to 4, resolving
+    PEAK_RESOLUTION_BITS bits."""
+    bits = int(np.clip(np.floor(np.log2(PEAK_ROWS_PER_CALL / max(n_segments, 1) + 1)), 1, 4))
+    return 2**bits, -(-PEAK_RESOLUTION_BITS // bits)
 
 
 def _prefer_no_wait(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, safe: np.ndarray,
