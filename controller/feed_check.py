@@ -17,10 +17,15 @@ class LimitCurve:
 
     s_mm: np.ndarray
     vlim_mm_s: np.ndarray
+    step_mm: float | None = None  # the grid's typical step, when the caller knows it
 
     @property
     def spacing_mm(self) -> float:
-        """Smallest grid step (floored so a degenerate grid cannot explode the sample count)."""
+        """The typical grid step if given, else the smallest (floored so a degenerate grid cannot
+        explode the sample count). A given step keeps the planner's memo valid when pieces of
+        the path change and, with them, the odd short step where two pieces meet."""
+        if self.step_mm is not None:
+            return self.step_mm
         ds = np.diff(self.s_mm)
         return float(max(ds.min(), 1e-7 * (self.s_mm[-1] - self.s_mm[0])))
 

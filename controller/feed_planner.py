@@ -58,7 +58,7 @@ class _Nodes:
 
 def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
               v_start_mm_s: float = 0.0, v_end_mm_s: float = 0.0,
-              raise_cruises: bool = True) -> FeedPlan:
+              raise_cruises: bool = True, grid_step_mm: float | None = None) -> FeedPlan:
     """Plan v(t) from s=0 at v_start to s=L at v_end, with v <= vlim(s) and |a| <= accel.
 
     The profile passes every node with zero acceleration. Nodes: the ends, the local minima of
@@ -72,15 +72,15 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
       (node speeds <= min vlim over it: safe by construction). After FLATTEN_ROUNDS more rounds
       every segment is flattened, so the loop ends after a bounded number of rounds.
     Segments a round leaves unchanged are not planned or checked again (see _Memo).
-    s_mm may start anywhere; the profile's s runs from s_mm[0] to s_mm[-1]. On any result but OK
-    the profile is empty.
+    s_mm may start anywhere; the profile's s runs from s_mm[0] to s_mm[-1]. grid_step_mm is the
+    grid's typical step (default: its smallest); on any result but OK the profile is empty.
     """
     s = np.asarray(s_mm, float)
     vlim = np.asarray(vlim_mm_s, float)
     bad = _input_error(s, vlim, v_start_mm_s, v_end_mm_s)
     if bad is not None:
         return FeedPlan(FeedProfile(()), bad)
-    curve = LimitCurve(s - s[0], vlim)
+    curve = LimitCurve(s - s[0], vlim, grid_step_mm)
     nodes = _initial_nodes(curve, v_start_mm_s, v_end_mm_s, accel_mm_s2)
     tol = LIMIT_TOLERANCE * float(vlim.max())
     memo = _memo_for(curve, accel_mm_s2, tol)
@@ -125,8 +125,9 @@ def _result(best: tuple[float, PhaseArrays, int] | None, s0: float, failed: Plan
 @dataclass(eq=False)
 class _Memo:
     """Segment results (cruise speed, end of the acceleration, start of the braking, excess,
-    where, phase length) by segment: its ends, node speeds, flat flag and the vlim samples it
-    depends on (the grid inside and one sample either side). A segment is planned and checked on
+    where, phase length) by segment: its length, node speeds, flat flag and the vlim samples it
+    depends on (the grid inside and one sample either side), positions relative to the segment's
+    start (so are the kept positions). A segment is planned and checked on
     its own, so one that a round leaves unchanged keeps its result, and so does one that a later
     call with the same globals (accel, tolerance, grid step, vlim maximum) sees again: the
     generator's raise_cruises attempt repeats its previous call, and its dynamics rounds change
@@ -161,16 +162,15 @@ def _plan_round(nodes: _Nodes, v: np.ndarray, curve: LimitCurve, accel: float, t
     """Plan every segment between the nodes and check it against vlim (new segments only)."""
     win = SegmentWindows.build(curve, nodes.s)
     vi, vj = v[:-1], v[1:]
-    s, vl = curve.s_mm, curve.vlim_mm_s
-    keys = [(a, b, v0, v1, f, s[lo - 1:hi + 2].tobytes(), vl[lo - 1:hi + 2].tobytes())
-            for a, b, v0, v1, f, lo, hi in zip(win.a.tolist(), win.b.tolist(), vi.tolist(),
-                                               vj.tolist(), nodes.flat.tolist(),
-                                               win.lo.tolist(), win.hi.tolist(), strict=True)]
+    keys = _segment_keys(win, vi, vj, nodes.flat)
     known = np.array([key in memo.rows for key in keys], bool)
     new = np.flatnonzero(~known)
     out = np.empty((len(keys), 6))
     if new.size < len(keys):
         out[known] = [memo.rows[key] for key, kn in zip(keys, known.tolist(), strict=True) if kn]
+    # Rows hold positions relative to their segment's start: a segment that moved along the
+    # path unchanged (a zone before it was widened) keeps its result.
+    out[:, _POSITION_COLUMNS] += win.a[:, None]
     sp = memo.planner(win.take(new), vi[new], vj[new], nodes.flat[new], accel)
     out[new, 0], out[new, 1], out[new, 2] = sp.vp, sp.acc_end, sp.dec_start
     ph = segment_phases(SegmentPlan(win.a, win.b, vi, vj, out[:, 0], out[:, 1], out[:, 2]),
@@ -178,10 +178,29 @@ def _plan_round(nodes: _Nodes, v: np.ndarray, curve: LimitCurve, accel: float, t
     viol = check_phases(ph.take(~known[ph.seg]), curve, len(keys), tol)
     out[new, 3], out[new, 4], out[new, 5] = (viol.excess_mm_s[new], viol.s_mm[new],
                                               viol.phase_len_mm[new])
-    for i, row in zip(new.tolist(), out[new].tolist(), strict=True):
+    rel = out[new]
+    rel[:, _POSITION_COLUMNS] -= win.a[new, None]
+    for i, row in zip(new.tolist(), rel.tolist(), strict=True):
         memo.rows[keys[i]] = tuple(row)
-        memo.key_bytes += len(keys[i][5]) + len(keys[i][6])
+        memo.key_bytes += len(keys[i][4]) + len(keys[i][5])
     return ph, Violations(out[:, 3], out[:, 4], out[:, 5])
+
+
+_POSITION_COLUMNS = [1, 2, 4]  # acc_end, dec_start, where the excess is: stored relative
+KEY_DECIMALS = 10  # positions in memo keys, relative to the segment start, rounded to 1e-10 mm
+
+
+def _segment_keys(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray,
+                  flat: np.ndarray) -> list[tuple]:
+    """Per segment: its length, node speeds, flat flag and the vlim samples it depends on (the
+    grid inside and one either side), positions relative to the segment start."""
+    s, vl = win.curve.s_mm, win.curve.vlim_mm_s
+    rel_b = np.round(win.b - win.a, KEY_DECIMALS).tolist()
+    return [(b, v0, v1, f, np.round(s[lo - 1:hi + 2] - a, KEY_DECIMALS).tobytes(),
+             vl[lo - 1:hi + 2].tobytes())
+            for a, b, v0, v1, f, lo, hi in zip(win.a.tolist(), rel_b, vi.tolist(), vj.tolist(),
+                                               flat.tolist(), win.lo.tolist(), win.hi.tolist(),
+                                               strict=True)]
 
 
 def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanResult | None:

@@ -266,8 +266,13 @@ def segment_phases(sp: SegmentPlan, accel: float) -> PhaseArrays:
     sd = transition_length_mm(sp.vp, sp.vj, accel)
     acc0, dec1 = sp.acc_end - sa, sp.dec_start + sd
     s0 = np.column_stack([sp.a, acc0, sp.acc_end, sp.dec_start, dec1])
-    lengths = np.maximum(np.column_stack([acc0 - sp.a, sa, sp.dec_start - sp.acc_end, sd,
-                                          sp.b - dec1]), 0.0)
+    lengths = np.column_stack([acc0 - sp.a, sa, sp.dec_start - sp.acc_end, sd, sp.b - dec1])
+    # Rounding residues of the positions (a memo row is kept relative to its segment's start and
+    # moved back by adding it) are no cruises: below 1e-12 of the path scale a cruise is empty.
+    # (Transitions stay, however short: they join the speeds exactly.)
+    eps = 1e-12 * max(1.0, float(np.abs(sp.b).max(initial=0.0)))
+    cruise = np.array([True, False, True, False, True])
+    lengths = np.where(cruise & (lengths <= eps), 0.0, np.maximum(lengths, 0.0))
     vs = np.column_stack([sp.vi, sp.vi, sp.vp, sp.vp, sp.vj])
     ve = np.column_stack([sp.vi, sp.vp, sp.vp, sp.vj, sp.vj])
     # A cruise at zero speed can only be a rounding residue (waiting at rest is never planned).

@@ -12,7 +12,7 @@ from controller.feed_planner import PlanResult, plan_feed
 from controller.feed_profile import FeedPhase, FeedProfile
 from controller.path import Path, Piece
 
-GRID_POINTS = 20000  # feed-limit samples per run (spacing clamped below)
+GRID_POINTS = 5000  # feed-limit samples per run (spacing clamped below)
 MIN_SPACING_MM = 0.002
 MAX_SPACING_MM = 0.02
 
@@ -72,11 +72,16 @@ def _piece_samples(p: Piece, n: int) -> tuple[np.ndarray, np.ndarray]:
     return s, kappa
 
 
+def grid_step_mm(path: Path) -> float:
+    """Target spacing of the feed-limit grid (each piece's own step is at most this)."""
+    return float(np.clip(path.length_mm / GRID_POINTS, MIN_SPACING_MM, MAX_SPACING_MM))
+
+
 def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(s, kappa) on a fine grid, each piece sampled in its own parameter (no inversion needed).
 
     At a joint both sides are sampled and the larger curvature is kept (curvature may jump)."""
-    spacing = float(np.clip(path.length_mm / GRID_POINTS, MIN_SPACING_MM, MAX_SPACING_MM))
+    spacing = grid_step_mm(path)
     cache = {} if cache is None else cache
     s_parts, k_parts = [], []
     for p in path.pieces:
@@ -165,7 +170,7 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
         s_sec, v_sec = _section(s, vlim, a, b)
         v0 = v_start_mm_s if a == 0.0 else 0.0
         plan = plan_feed(s_sec - a, np.maximum(v_sec, 1e-6), inp.max_accel_mm_s2, v0,
-                         raise_cruises=raise_cruises)
+                         raise_cruises=raise_cruises, grid_step_mm=grid_step_mm(path))
         if plan.result != PlanResult.OK:
             result = plan.result
         profiles.append(plan.profile)

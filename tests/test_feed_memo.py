@@ -73,3 +73,37 @@ def test_memo_tells_segments_apart_by_their_vlim() -> None:
     for name in ("duration_s", "s0_mm", "vs_mm_s", "ve_mm_s", "seg"):
         np.testing.assert_array_equal(getattr(ph_warm, name), getattr(ph_cold, name))
     np.testing.assert_array_equal(viol_warm.excess_mm_s, viol_cold.excess_mm_s)
+
+
+def test_memo_keeps_segments_that_only_moved_along_the_path() -> None:
+    """A longer stretch early in the path shifts every later segment: the warm plan reuses their
+    results (fewer segments planned) and still equals the cold plan."""
+    def vlim_of(s: np.ndarray, first_dip_mm: float) -> np.ndarray:
+        dips = [(first_dip_mm, 0.3), (first_dip_mm + 3.0, 0.5), (first_dip_mm + 6.0, 0.4)]
+        out = np.full(s.shape, 50.0)
+        for at, depth in dips:
+            out *= 1.0 - depth * np.exp(-0.5 * ((s - at) / 0.2) ** 2)
+        return out
+
+    step = 0.005
+    s_a = np.arange(0.0, 10.0 + step / 2, step)
+    s_b = np.arange(0.0, 10.5 + step / 2, step)  # same grid, 0.5 mm longer before the dips
+    a, b = vlim_of(s_a, 1.5), vlim_of(s_b, 2.0)
+    planned: list[int] = []
+    real = fp.plan_segments
+
+    def counting(win: object, vi: np.ndarray, *args: object) -> object:
+        planned.append(len(vi))
+        return real(win, vi, *args)
+
+    fp.clear_memo()
+    cold_b = plan_feed(s_b, b, 800.0, grid_step_mm=step)
+    fp.clear_memo()
+    plan_feed(s_a, a, 800.0, grid_step_mm=step)
+    try:
+        fp.plan_segments = counting
+        warm_b = plan_feed(s_b, b, 800.0, grid_step_mm=step)
+    finally:
+        fp.plan_segments = real
+    _assert_same(warm_b, cold_b)
+    assert sum(planned) < len(warm_b.profile.phases) // 2  # most segments came from the memo
