@@ -82,26 +82,45 @@ def brentq(f: Callable[[float], float], lo: float, hi: float, xtol: float = _XTO
 
 
 def _bisect_all(f: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.ndarray,
-                xtol: float = _XTOL) -> np.ndarray:
-    """Roots of f in every bracket [lo_i, hi_i] at once (f(lo) > 0 >= f(hi)): vectorised
-    bisection, one curve evaluation per halving for all brackets together."""
+                xtol: float = _XTOL, f_lo: np.ndarray | None = None,
+                f_hi: np.ndarray | None = None) -> np.ndarray:
+    """Roots of f in every bracket [lo_i, hi_i] at once (f(lo) > 0 >= f(hi)): the Illinois
+    method vectorised (both ends move, so every bracket shrinks to xtol in a handful of
+    steps), one curve evaluation per step for all brackets together. f_lo and f_hi, when
+    known, save the first evaluation."""
     lo, hi = lo.astype(float).copy(), hi.astype(float).copy()
+    if not lo.size:
+        return lo
+    f_lo = f(lo) if f_lo is None else np.asarray(f_lo, float).copy()
+    f_hi = f(hi) if f_hi is None else np.asarray(f_hi, float).copy()
     # Relative to the parameter's size too: knots in the hundreds cannot be split to 1e-13.
     tol = xtol * np.maximum(1.0, np.maximum(np.abs(lo), np.abs(hi)))
+    side = np.zeros(lo.size)  # +1: hi moved last, -1: lo moved last
     for _ in range(200):
-        if not lo.size or np.all(hi - lo <= tol):
+        open_ = hi - lo > tol
+        if not np.any(open_):
             break
-        mid = 0.5 * (lo + hi)
-        positive = f(mid) > 0
-        lo = np.where(positive, mid, lo)
-        hi = np.where(positive, hi, mid)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+        x = np.where((x > lo) & (x < hi), x, 0.5 * (lo + hi))
+        fx = f(x)
+        exact = fx == 0.0
+        right = (fx <= 0.0) & open_  # the root is left of x: x becomes hi
+        left = (fx > 0.0) & open_
+        f_lo = np.where(right & (side == 1), 0.5 * f_lo, f_lo)  # Illinois: halve the stale end
+        f_hi = np.where(left & (side == -1), 0.5 * f_hi, f_hi)
+        hi, f_hi = np.where(right, x, hi), np.where(right, fx, f_hi)
+        lo, f_lo = np.where(left, x, lo), np.where(left, fx, f_lo)
+        lo = np.where(exact & open_, x, lo)
+        side = np.where(right, 1, np.where(left, -1, side))
     return 0.5 * (lo + hi)
 
 
 def _peaks(curve: Curve, grid: np.ndarray, dk: np.ndarray) -> list[float]:
     """Local maxima of kappa: dkappa/du = 0 going + to - (eq. 13), or at an end."""
     i = np.nonzero((dk[:-1] > 0) & (dk[1:] <= 0))[0]
-    peaks = _bisect_all(curve.curvature_derivative, grid[i], grid[i + 1]).tolist()
+    peaks = _bisect_all(curve.curvature_derivative, grid[i], grid[i + 1], f_lo=dk[i],
+                        f_hi=dk[i + 1]).tolist()
     if dk[0] < 0:
         peaks.insert(0, float(grid[0]))
     if dk[-1] > 0:
