@@ -9,7 +9,7 @@ import numpy as np
 
 from controller.arclength import INVERSE_TOL_MM
 from controller.feed_profile import FeedProfile
-from controller.interpolators import ph_interpolate, taylor_interpolate
+from controller.interpolators import ph_interpolate, ph_interpolate_many, taylor_interpolate
 from controller.path import Path, Piece, PieceKind
 
 
@@ -80,7 +80,17 @@ def interpolate(path: Path, profile: FeedProfile, sample_period_s: float,
     idx = path.piece_index(s)
     xy = np.empty((s.size, 2))
     phi = np.empty(s.size)
-    for i in np.unique(idx):
+    present = np.unique(idx)
+    kinds = np.array([path.pieces[i].kind == PieceKind.PH for i in present.tolist()], bool)
+    ph_pieces = present[kinds]
+    if ph_pieces.size:  # every PH corner's samples in one vectorised Newton iteration
+        rows = np.flatnonzero(np.isin(idx, ph_pieces))
+        which = np.searchsorted(ph_pieces, idx[rows])
+        s0 = np.array([path.pieces[i].s0_mm for i in ph_pieces.tolist()])
+        xy[rows], phi[rows] = ph_interpolate_many(
+            [path.pieces[i].curve for i in ph_pieces.tolist()],  # type: ignore[misc]
+            which, s[rows] - s0[which])
+    for i in present[~kinds].tolist():
         piece = path.pieces[i]
         rows = idx == i
         xy_exact, phi[rows] = _points_exact_or_ph(piece, s[rows])

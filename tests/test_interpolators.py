@@ -15,6 +15,7 @@ from controller.interpolators import (
     NEWTON_TOL_MM,
     feed_fluctuation,
     ph_interpolate,
+    ph_interpolate_many,
     taylor_interpolate,
     taylor_step,
 )
@@ -34,6 +35,26 @@ def test_ph_newton_residual(dp: complex, d0: complex, d1: complex, step_mm: floa
     assert residual.max() < NEWTON_TOL_MM
     assert np.all(np.diff(xi) >= 0) and xi[0] == 0.0 and xi[-1] <= 1.0
     np.testing.assert_allclose(ph.arc_length(xi), targets, atol=NEWTON_TOL_MM)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(cplx, cplx, cplx), min_size=1, max_size=5), st.integers(0, 2**31))
+def test_ph_interpolate_many_matches_one_at_a_time(data: list, seed: int) -> None:
+    """Samples on several quintics at once: the same points and tangents as one at a time."""
+    phs = [PhQuintic.hermite(0j, dp, d0, d1) for dp, d0, d1 in data]
+    rng = np.random.default_rng(seed)
+    which = rng.integers(0, len(phs), 200)
+    s = rng.uniform(0.0, 1.0, 200) * np.array([ph.length_mm for ph in phs])[which]
+    xy, phi = ph_interpolate_many(phs, which, s)
+    for i, ph in enumerate(phs):
+        rows = which == i
+        xi, _ = ph_interpolate(ph, s[rows])
+        d = ph.evaluate(xi, 1)
+        np.testing.assert_allclose(xy[rows], d[0], atol=1e-9 * max(1.0, ph.length_mm))
+        dphi = np.angle(np.exp(1j * (phi[rows] - np.arctan2(d[1, :, 1], d[1, :, 0]))))
+        assert np.all(np.abs(dphi) < 1e-9)
+        np.testing.assert_allclose(ph.arc_length(ph_interpolate(ph, s[rows])[0]), s[rows],
+                                   atol=NEWTON_TOL_MM)
 
 
 def test_ph_calgo_quintic_feed_ticks() -> None:
