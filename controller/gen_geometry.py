@@ -13,7 +13,7 @@ from controller.curves import ArcCurve, Curve, LineCurve
 from controller.gen_blend import blend_joint
 from controller.nurbs import Nurbs
 from controller.path import Path, Piece, PieceKind, chain, make_piece
-from controller.ph_fit import PhSegment, fit_zone
+from controller.ph_fit import PhSegment, fit_zones
 
 # Joints whose tangents turn by less than this are treated as smooth (CAM output jitter).
 SMOOTH_JOINT_RAD = math.radians(0.5)
@@ -107,11 +107,17 @@ def widen(curves: list[BlockCurve], zones: dict[int, list[CornerZone]], block: i
 FitCache = dict[tuple[int, float, float, float], list[PhSegment]]
 
 
-def _fit(curve: Curve, z: CornerZone, error_limit_mm: float, cache: FitCache) -> list[PhSegment]:
-    key = (id(curve), z.u_start, z.u_end, error_limit_mm)
-    if key not in cache:
-        cache[key] = fit_zone(curve, z.u_start, z.u_end, error_limit_mm)
-    return cache[key]
+def _fits(curve: Curve, zones: list[CornerZone], error_limit_mm: float,
+          cache: FitCache) -> list[list[PhSegment]]:
+    """The PH fit of every zone, the ones not in the cache fitted together in one batch."""
+    keys = [(id(curve), z.u_start, z.u_end, error_limit_mm) for z in zones]
+    missing = [i for i, k in enumerate(keys) if k not in cache]
+    if missing:
+        fitted = fit_zones(curve, [(zones[i].u_start, zones[i].u_end) for i in missing],
+                           error_limit_mm)
+        for i, segs in zip(missing, fitted, strict=True):
+            cache[keys[i]] = segs
+    return [cache[k] for k in keys]
 
 
 def _nurbs_pieces(bc: BlockCurve, block: int, zones: list[CornerZone], error_limit_mm: float,
@@ -119,32 +125,50 @@ def _nurbs_pieces(bc: BlockCurve, block: int, zones: list[CornerZone], error_lim
                   cache: FitCache) -> tuple[list[Piece], list[CornerInfo]]:
     """Split one NURBS into Taylor parts and PH corners (module 2)."""
     curve = bc.curve
-    pieces: list[Piece] = []
+    # NURBS spans (u0, u1, corner) in path order, PH fits in their place (None: a NURBS span).
+    spans: list[tuple[float, float, int] | list[PhSegment]] = []
     infos: list[CornerInfo] = []
+    fits = _fits(curve, zones, error_limit_mm, cache) if use_ph and zones else []
+    peaks = curve.evaluate(np.array([z.u_peak for z in zones]), 0)[0] if zones else []
     u = curve.u_start
     for k, z in enumerate(zones):
         if z.u_start > u + 1e-12:
-            pieces.append(make_piece(PieceKind.NURBS, curve, u, z.u_start, 0.0, bc.feed_mm_s,
-                                     bc.line))
-        peak = curve.evaluate(np.array([z.u_peak]), 0)[0, 0]
+            spans.append((u, z.u_start, -1))
+        peak = peaks[k]
         if use_ph:
-            segs = _fit(curve, z, error_limit_mm, cache)
-            for seg in segs:
-                pieces.append(Piece(PieceKind.PH, seg.ph, 0.0, 1.0, 0.0, seg.ph.length_mm,
-                                    bc.feed_mm_s, bc.line, corner_base + k))
+            segs = fits[k]
+            spans.append(segs)
             rms = float(np.sqrt(np.mean([s.fit_rms_mm**2 for s in segs])))
             worst = max(s.fit_max_mm for s in segs)
             infos.append(CornerInfo(block, z, len(segs), rms, worst, float(peak[0]),
                                     float(peak[1])))
         else:
-            pieces.append(make_piece(PieceKind.NURBS, curve, z.u_start, z.u_end, 0.0,
-                                     bc.feed_mm_s, bc.line, corner_base + k))
+            spans.append((z.u_start, z.u_end, corner_base + k))
             infos.append(CornerInfo(block, z, 0, 0.0, 0.0, float(peak[0]), float(peak[1])))
         u = z.u_end
     if curve.u_end > u + 1e-12:
-        pieces.append(make_piece(PieceKind.NURBS, curve, u, curve.u_end, 0.0, bc.feed_mm_s,
-                                 bc.line))
-    return pieces, infos
+        spans.append((u, curve.u_end, -1))
+    return _materialise(bc, spans, corner_base), infos
+
+
+def _materialise(bc: BlockCurve, spans: list, corner_base: int) -> list[Piece]:
+    """Pieces from _nurbs_pieces' spans, every NURBS span's length from one arc-length call."""
+    ends = [u for sp in spans if isinstance(sp, tuple) for u in sp[:2]]
+    s = bc.curve.s_of_u(np.array(ends)) if ends else np.empty(0)
+    pieces: list[Piece] = []
+    j, corner = 0, corner_base
+    for sp in spans:
+        if isinstance(sp, tuple):
+            u0, u1, c = sp
+            pieces.append(Piece(PieceKind.NURBS, bc.curve, u0, u1, 0.0, float(s[j + 1] - s[j]),
+                                bc.feed_mm_s, bc.line, c))
+            j += 2
+        else:
+            pieces += [Piece(PieceKind.PH, seg.ph, 0.0, 1.0, 0.0, seg.ph.length_mm,
+                             bc.feed_mm_s, bc.line, corner) for seg in sp]
+        if not isinstance(sp, tuple) or sp[2] >= 0:
+            corner += 1
+    return pieces
 
 
 def _tangent(piece: Piece, at_end: bool) -> np.ndarray:

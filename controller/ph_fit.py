@@ -95,23 +95,30 @@ def fit_single(curve: Curve, u_start: float, u_end: float) -> PhSegment:
 
 def fit_zone(curve: Curve, u_start: float, u_end: float, error_limit_mm: float,
              max_depth: int = DEFAULT_MAX_DEPTH) -> list[PhSegment]:
-    """Bisect the zone in u until every piece's RMS error is <= error_limit_mm (Table I).
+    """Bisect the zone in u until every piece's RMS error is <= error_limit_mm (Table I)."""
+    return fit_zones(curve, [(u_start, u_end)], error_limit_mm, max_depth)[0]
 
-    Breadth first: all pieces of one bisection level are fitted in one batch."""
-    done: list[PhSegment] = []
-    lo, hi = np.array([u_start]), np.array([u_end])
+
+def fit_zones(curve: Curve, zones: list[tuple[float, float]], error_limit_mm: float,
+              max_depth: int = DEFAULT_MAX_DEPTH) -> list[list[PhSegment]]:
+    """fit_zone for several zones of one curve, breadth first: all pieces of one bisection
+    level, of every zone, are fitted in one batch."""
+    done: list[list[PhSegment]] = [[] for _ in zones]
+    lo = np.array([z[0] for z in zones], float)
+    hi = np.array([z[1] for z in zones], float)
+    owner = np.arange(len(zones))
     for depth in range(max_depth + 1):
-        segs = _fit_all(curve, lo, hi)
-        split = [seg for seg in segs if seg.fit_rms_mm > error_limit_mm and depth < max_depth]
-        done += [seg for seg in segs if not (seg.fit_rms_mm > error_limit_mm
-                                              and depth < max_depth)]
-        if not split:
+        if owner.size == 0:
             break
-        a = np.array([seg.u_start for seg in split])
-        b = np.array([seg.u_end for seg in split])
+        segs = _fit_all(curve, lo, hi)
+        split = np.array([seg.fit_rms_mm > error_limit_mm and depth < max_depth
+                          for seg in segs], bool)
+        for i in np.flatnonzero(~split).tolist():
+            done[owner[i]].append(segs[i])
+        a, b, owner = lo[split], hi[split], owner[split]
         mid = 0.5 * (a + b)
-        lo, hi = np.concatenate((a, mid)), np.concatenate((mid, b))
-    return sorted(done, key=lambda seg: seg.u_start)
+        lo, hi, owner = np.concatenate((a, mid)), np.concatenate((mid, b)), np.tile(owner, 2)
+    return [sorted(d, key=lambda seg: seg.u_start) for d in done]
 
 
 @dataclass(frozen=True)
