@@ -193,14 +193,23 @@ KEY_DECIMALS = 10  # positions in memo keys, relative to the segment start, roun
 def _segment_keys(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray,
                   flat: np.ndarray) -> list[tuple]:
     """Per segment: its length, node speeds, flat flag and the vlim samples it depends on (the
-    grid inside and one either side), positions relative to the segment start."""
+    grid inside and one either side), positions relative to the segment start. All windows are
+    gathered and rounded in one go; each key slices the two byte strings."""
     s, vl = win.curve.s_mm, win.curve.vlim_mm_s
+    first = win.lo - 1
+    count = np.maximum(win.hi + 2, first) - first  # a slice s[lo - 1:hi + 2], as numpy clips it
+    first = np.clip(first, 0, len(s))
+    count = np.clip(np.minimum(first + count, len(s)) - first, 0, None)
+    idx = np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count,
+                                                                       count)
+    rel = np.round(s[idx] - np.repeat(win.a, count), KEY_DECIMALS).tobytes()
+    vals = vl[idx].tobytes()
+    ends = (np.cumsum(count) * 8).tolist()
+    starts = [0, *ends[:-1]]
     rel_b = np.round(win.b - win.a, KEY_DECIMALS).tolist()
-    return [(b, v0, v1, f, np.round(s[lo - 1:hi + 2] - a, KEY_DECIMALS).tobytes(),
-             vl[lo - 1:hi + 2].tobytes())
-            for a, b, v0, v1, f, lo, hi in zip(win.a.tolist(), rel_b, vi.tolist(), vj.tolist(),
-                                               flat.tolist(), win.lo.tolist(), win.hi.tolist(),
-                                               strict=True)]
+    return [(b, v0, v1, f, rel[i:j], vals[i:j])
+            for b, v0, v1, f, i, j in zip(rel_b, vi.tolist(), vj.tolist(), flat.tolist(), starts,
+                                          ends, strict=True)]
 
 
 def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanResult | None:
