@@ -106,33 +106,51 @@ class Nurbs:
                                        j) / factorial(j)
         return table
 
-    def homogeneous_derivatives(self, u: ArrayLike, order: int = 2) -> np.ndarray:
-        """[A, A', ..., A^(order)] of the homogeneous curve, shape (order+1, N, 3)."""
+    @cached_property
+    def _taylor_rows(self) -> np.ndarray:
+        """_taylor_table as (p+1, 3, n): one gather by span gives contiguous coefficient rows."""
+        return np.ascontiguousarray(self._taylor_table.transpose(1, 2, 0))
+
+    def _homogeneous_rows(self, u: ArrayLike, order: int) -> np.ndarray:
+        """[A, A', ..., A^(order)] as (order+1, 3, N): x, y and w rows, each contiguous.
+
+        One pass of Horner's scheme over the span's Taylor coefficients carries the value and
+        the derivatives divided by j! (the scheme derivatives_scalar uses), in place."""
         uu = np.atleast_1d(np.asarray(u, dtype=float))
         span = self._spans(uu)
-        coef = self._taylor_table[span]  # (N, p+1, 3)
-        h = (uu - self.knots[span])[:, None]
+        coef = self._taylor_rows[:, :, span]  # (p+1, 3, N)
+        h = uu - self.knots[span]
         p = self.degree
-        out = np.zeros((order + 1, uu.size, 3))
-        for j in range(min(order, p) + 1):
-            # d^j/dh^j of sum_k coef_k h^k = sum_{k>=j} k!/(k-j)! coef_k h^(k-j), by Horner.
-            acc = coef[:, p] * (factorial(p) / factorial(p - j))
-            for k in range(p - 1, j - 1, -1):
-                acc = acc * h + coef[:, k] * (factorial(k) / factorial(k - j))
-            out[j] = acc
+        top = min(order, p)
+        out = np.zeros((order + 1, 3, uu.size))
+        out[0] = coef[p]
+        for k in range(p - 1, -1, -1):
+            for j in range(min(top, p - k), 0, -1):  # d_j = d_j h + d_(j-1)
+                out[j] *= h
+                out[j] += out[j - 1]
+            out[0] *= h
+            out[0] += coef[k]
+        for j in range(2, top + 1):
+            out[j] *= factorial(j)
         return out
+
+    def homogeneous_derivatives(self, u: ArrayLike, order: int = 2) -> np.ndarray:
+        """[A, A', ..., A^(order)] of the homogeneous curve, shape (order+1, N, 3)."""
+        return self._homogeneous_rows(u, order).transpose(0, 2, 1)
 
     def evaluate(self, u: ArrayLike, order: int = 2) -> np.ndarray:
         """[C, C', ..., C^(order)] of shape (order+1, N, 2), by Leibniz on A = w C."""
-        a = self.homogeneous_derivatives(u, order)
-        w = a[:, :, 2:3]
-        c = np.empty((order + 1, a.shape[1], 2))
+        a = self._homogeneous_rows(u, order)
+        w = a[:, 2]
+        inv_w = 1.0 / w[0]
+        c = np.empty((order + 1, 2, a.shape[2]))
         for k in range(order + 1):
-            acc = a[k, :, :2].copy()
+            acc = a[k, :2].copy()
             for i in range(1, k + 1):
-                acc -= comb(k, i) * w[i] * c[k - i]
-            c[k] = acc / w[0]
-        return c
+                acc -= (comb(k, i) * w[i]) * c[k - i]
+            acc *= inv_w
+            c[k] = acc
+        return c.transpose(0, 2, 1)
 
     def curvature(self, u: ArrayLike) -> np.ndarray:
         """Eq. 14 (unsigned), 1/mm."""
