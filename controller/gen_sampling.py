@@ -9,8 +9,8 @@ import numpy as np
 
 from controller.arclength import INVERSE_TOL_MM
 from controller.feed_profile import FeedProfile
-from controller.interpolators import ph_interpolate, ph_interpolate_many, taylor_interpolate
-from controller.path import Path, Piece, PieceKind
+from controller.interpolators import ph_interpolate_many, taylor_interpolate
+from controller.path import Path, PieceKind
 
 
 class Interpolation(StrEnum):
@@ -45,14 +45,34 @@ def sample_profile(profile: FeedProfile, sample_period_s: float) -> tuple[np.nda
     return t, s, v, a
 
 
-def _points_exact_or_ph(piece: Piece, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points and tangent angles at path arc lengths inside one piece."""
-    if piece.kind == PieceKind.PH:
-        u, _ = ph_interpolate(piece.curve, s - piece.s0_mm)  # type: ignore[arg-type]
-    else:
-        u = piece.u_at(s, INVERSE_TOL_MM)
-    d = piece.curve.evaluate(u, 1)
-    return d[0], np.arctan2(d[1, :, 1], d[1, :, 0])
+def _by_curve(path: Path, pieces: np.ndarray) -> list[list[int]]:
+    """Piece indices grouped by the curve they lie on (a NURBS split by its corner zones)."""
+    groups: dict[int, list[int]] = {}
+    for i in pieces.tolist():
+        groups.setdefault(id(path.pieces[i].curve), []).append(i)
+    return list(groups.values())
+
+
+def _points_on_curve(path: Path, pieces: list[int], idx: np.ndarray,
+                     s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, points, tangent angles) of the samples on pieces of one curve: one arc-length
+    inversion and one evaluation for all of them."""
+    ps = [path.pieces[i] for i in pieces]
+    curve = ps[0].curve
+    rows = [np.flatnonzero(idx == i) for i in pieces]
+    count = np.array([r.size for r in rows])
+    offset = curve.s_of_u(np.array([p.u0 for p in ps])) - np.array([p.s0_mm for p in ps])
+    length = np.array([p.length_mm for p in ps])
+    start = np.array([p.s0_mm for p in ps])
+    all_rows = np.concatenate(rows)
+    k = np.repeat(np.arange(len(ps)), count)
+    local = np.clip(s[all_rows] - start[k], 0.0, length[k])
+    u = curve.u_of_s(local + start[k] + offset[k], INVERSE_TOL_MM)
+    lo = np.array([min(p.u0, p.u1) for p in ps])
+    hi = np.array([max(p.u0, p.u1) for p in ps])
+    u = np.clip(u, lo[k], hi[k])
+    d = curve.evaluate(u, 1)
+    return all_rows, d[0], np.arctan2(d[1, :, 1], d[1, :, 0])
 
 
 def _sequential_taylor(path: Path, idx: np.ndarray, v: np.ndarray, a: np.ndarray,
@@ -90,11 +110,11 @@ def interpolate(path: Path, profile: FeedProfile, sample_period_s: float,
         xy[rows], phi[rows] = ph_interpolate_many(
             [path.pieces[i].curve for i in ph_pieces.tolist()],  # type: ignore[misc]
             which, s[rows] - s0[which])
-    for i in present[~kinds].tolist():
-        piece = path.pieces[i]
-        rows = idx == i
-        xy_exact, phi[rows] = _points_exact_or_ph(piece, s[rows])
-        if piece.kind != PieceKind.NURBS or method == Interpolation.PH_AND_EXACT_ARC_LENGTH:
+    for pieces in _by_curve(path, present[~kinds]):
+        rows, xy_exact, phi_exact = _points_on_curve(path, pieces, idx, s)
+        phi[rows] = phi_exact
+        if path.pieces[pieces[0]].kind != PieceKind.NURBS or \
+                method == Interpolation.PH_AND_EXACT_ARC_LENGTH:
             xy[rows] = xy_exact
     if method == Interpolation.SEQUENTIAL_TAYLOR:
         _sequential_taylor(path, idx, v, a, xy, sample_period_s)
