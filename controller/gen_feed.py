@@ -12,9 +12,12 @@ from controller.feed_planner import PlanResult, plan_feed
 from controller.feed_profile import FeedPhase, FeedProfile
 from controller.path import Path, Piece
 
-GRID_POINTS = 5000  # feed-limit samples per run (spacing clamped below)
+# Feed-limit samples per run, their spacing clamped: at most 35 um, under the 58 um a sample
+# period covers at full feed. Measured over 17 programs, 35 um planned 0.05 % less motion time
+# than 20 um (and fewer dynamics rounds), with half the samples on the long ones.
+GRID_POINTS = 5000
 MIN_SPACING_MM = 0.002
-MAX_SPACING_MM = 0.02
+MAX_SPACING_MM = 0.035
 
 
 class LimitPolicy(StrEnum):
