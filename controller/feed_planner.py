@@ -109,6 +109,11 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
         failed = _repair(nodes, viol, curve, 0.5 * tol, last=rnd > MAX_SPLIT_DEPTH)
         if failed is not None:
             return _result(best, s[0], failed, rnd)
+        # Cruises that vlim lets rise later are raised in the same round as the repairs (the
+        # next round plans both), which saves a round on the common case of both at once.
+        if raise_cruises and raises < MAX_CRUISE_RAISES and rnd <= MAX_SPLIT_DEPTH \
+                and _raise_cruises(nodes, ph, curve):
+            raises += 1
     return _result(best, s[0], PlanResult.LIMIT_VIOLATED, rnd)
 
 
