@@ -66,7 +66,7 @@ class PhQuintic:
             # tests/test_ph_quintic.py), so skip ranking (root finding and energy quadrature
             # cost ~1 ms per corner blend).
             return candidates[0]
-        return min(candidates, key=_rank)
+        return _best(candidates)
 
     # --- Bernstein data -------------------------------------------------------------------------
     @cached_property
@@ -215,9 +215,28 @@ def _candidates(p0: complex, dp: complex, d0: complex, d1: complex) -> list[PhQu
     return out
 
 
-def _rank(ph: PhQuintic) -> tuple[float, float]:
-    # Rounded so that equal rotation indices fall through to the energy, then to list order.
-    return (round(ph.absolute_rotation_index(), 9), round(ph.bending_energy(), 9))
+def _best(candidates: list[PhQuintic]) -> PhQuintic:
+    """Least absolute rotation index (rounded so that equal ones tie), then least bending
+    energy, then list order; the energy (a quadrature) only for the tied ones."""
+    rot = [round(c.absolute_rotation_index(), 9) for c in candidates]
+    tied = [c for c, r in zip(candidates, rot, strict=True) if r == min(rot)]
+    if len(tied) == 1:
+        return tied[0]
+    return min(tied, key=lambda c: round(c.bending_energy(), 9))
+
+
+def _quadratic_roots(a: complex, b: complex, c: complex) -> list[complex]:
+    """Roots of a x^2 + b x + c in closed form, as np.roots gives them (a leading zero drops
+    the degree), without its companion-matrix eigenvalues; the stable form avoids cancellation."""
+    if a == 0:
+        return [] if b == 0 else [-c / b]
+    disc = cmath.sqrt(b * b - 4 * a * c)
+    if (b.conjugate() * disc).real < 0:
+        disc = -disc
+    q = -0.5 * (b + disc)
+    if q == 0:
+        return [0j, 0j]
+    return [q / a, c / q]
 
 
 def _abs_rotation_index(w0: complex, w1: complex, w2: complex) -> float:
@@ -227,14 +246,15 @@ def _abs_rotation_index(w0: complex, w1: complex, w2: complex) -> float:
     if abs(lead) <= 1e-14 * scale:
         roots = [] if abs(mid) <= 1e-14 * scale else [-w0 / mid]
     else:
-        roots = list(np.roots([lead, mid, w0]))
+        roots = _quadratic_roots(lead, mid, w0)
     # A real root of w is a double root of r' = w^2: zero speed but no turning, so it drops out.
     roots = [z for z in roots if abs(z.imag) > _REAL_ROOT_TOL]
     cuts = [0.0, 1.0]
     if len(roots) == 2:  # inflections: b1((x-a2)^2+b2^2) + b2((x-a1)^2+b1^2) = 0
         (a1, b1), (a2, b2) = [(z.real, z.imag) for z in roots]
         quad = [b1 + b2, -2 * (b1 * a2 + b2 * a1), b1 * (a2**2 + b2**2) + b2 * (a1**2 + b1**2)]
-        cuts += [r.real for r in np.roots(quad) if abs(r.imag) < 1e-12 and 0 < r.real < 1]
+        cuts += [r.real for r in _quadratic_roots(*(complex(q) for q in quad))
+                 if abs(r.imag) < 1e-12 and 0 < r.real < 1]
     cuts = np.sort(cuts)
     theta = sum(2 * np.arctan2(-z.imag, cuts - z.real) for z in roots)
     return float(np.abs(np.diff(theta)).sum() / (2 * np.pi)) if roots else 0.0

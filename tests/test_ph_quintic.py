@@ -120,3 +120,26 @@ def test_tame_data_fast_path_picks_the_best_of_the_four(a0: float, a1: float, m0
                                 round(c.bending_energy(), 9)))
     assert ph.absolute_rotation_index() <= ranked.absolute_rotation_index() + 1e-9
     assert ph.bending_energy() <= ranked.bending_energy() * (1 + 1e-9)
+
+
+_coef = st.one_of(st.just(0j), st.complex_numbers(min_magnitude=1e-3, max_magnitude=1e3,
+                                                  allow_nan=False, allow_infinity=False))
+
+
+@settings(max_examples=200, deadline=None)
+@given(_coef, _coef, _coef)
+def test_quadratic_roots_match_numpy(a: complex, b: complex, c: complex) -> None:
+    """The closed-form roots used for the rotation index are np.roots' (as a set)."""
+    from controller.ph_quintic import _quadratic_roots
+
+    ours = _quadratic_roots(a, b, c)
+    if a == 0 and b == 0:
+        assert ours == []
+        return
+    ref = np.roots([a, b, c]) if a != 0 else np.roots([b, c])
+    assert len(ours) == len(ref)
+    scale = max(1.0, *(abs(z) for z in ref))
+    for z in ours:  # each of ours is a root of numpy's within round-off
+        assert min(abs(z - r) for r in ref) <= 1e-6 * scale
+    for z in ref:
+        assert min(abs(z - r) for r in ours) <= 1e-6 * scale
