@@ -8,7 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller.curves import Curve
+from controller.curves import (
+    Curve,
+    curvature_derivative_from_derivatives,
+    curvature_from_derivatives,
+)
 
 _XTOL = 1e-13
 
@@ -32,6 +36,12 @@ def sample_grid(curve: Curve, samples_per_span: int = 64) -> np.ndarray:
     frac = np.arange(samples_per_span) / samples_per_span
     grid = (inner[:-1, None] + np.diff(inner)[:, None] * frac[None, :]).ravel()
     return np.append(grid, inner[-1])
+
+
+def _kappa_and_slope(curve: Curve, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """kappa and dkappa/du on a grid from one evaluation of the first three derivatives."""
+    d = curve.evaluate(u, 3)
+    return curvature_from_derivatives(d), curvature_derivative_from_derivatives(d)
 
 
 def _kappa(curve: Curve, u: float) -> float:
@@ -164,8 +174,7 @@ def detect_sharp_corners(curve: Curve, kappa_th_per_mm: float,
                          samples_per_span: int = 64) -> list[CornerZone]:
     """Curvature maxima above kappa_th (eqs. 13, 15), each with its zone where kappa > kappa_th."""
     grid = sample_grid(curve, samples_per_span)
-    kappa = curve.curvature(grid)
-    dk = curve.curvature_derivative(grid)
+    kappa, dk = _kappa_and_slope(curve, grid)
     zones = []
     for u_peak in _peaks(curve, grid, dk):
         k_peak = _kappa(curve, u_peak)
@@ -201,7 +210,7 @@ def widen_zone(curve: Curve, zone: CornerZone, kappa_level: float,
                samples_per_span: int = 64) -> CornerZone:
     """The interval around u_peak where kappa > kappa_level, never past a kappa local minimum."""
     grid = sample_grid(curve, samples_per_span)
-    kappa, dk = curve.curvature(grid), curve.curvature_derivative(grid)
+    kappa, dk = _kappa_and_slope(curve, grid)
     u0 = _widen_side(curve, grid, kappa, dk, zone.u_start, kappa_level, -1)
     u1 = _widen_side(curve, grid, kappa, dk, zone.u_end, kappa_level, +1)
     return CornerZone(min(u0, zone.u_start), max(u1, zone.u_end), zone.u_peak,
