@@ -133,6 +133,9 @@ def feed_limit_mm_s(path: Path, s: np.ndarray, kappa: np.ndarray, inp: FeedInput
 
 def _concat(profiles: list[FeedProfile]) -> FeedProfile:
     """Chain section profiles end to end in time and arc length."""
+    if len(profiles) == 1 and profiles[0].t0_s == 0.0 and \
+            (not profiles[0].phases or profiles[0].phases[0].s0_mm == 0.0):
+        return profiles[0]  # one section (no stops): already chained
     phases: list[FeedPhase] = []
     t0 = s0 = 0.0
     for prof in profiles:
