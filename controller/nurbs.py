@@ -180,14 +180,11 @@ class Nurbs:
         return self.arc_length_table.u_of_s(s_mm, tol_mm)
 
     @cached_property
-    def _power_form(self) -> tuple[list[float], list[list[tuple[float, ...]]]]:
+    def _power_form(self) -> tuple[list[float], list[list[list[float]]]]:
         """Per-span Taylor coefficients A^(k)(u_i)/k! of the homogeneous curve, as Python floats."""
-        p = self.degree
-        left = self.knots[p : self.knots.size - p - 1]
-        a = self.homogeneous_derivatives(left, p)  # span of u = knots[i] is i for non-empty spans
-        coeffs = [[tuple(float(v) / factorial(k) for v in a[k, i]) for k in range(p, -1, -1)]
-                  for i in range(left.size)]
-        return [float(x) for x in left], coeffs
+        p, n = self.degree, self.control_points.shape[0]
+        left = self.knots[p:n]  # span i starts at knots[i]; an empty one is never looked up
+        return left.tolist(), self._taylor_table[p:n, ::-1].tolist()  # highest power first
 
     def derivatives_scalar(self, u: float) -> tuple[float, float, float, float]:
         """(x', y', x'', y'') at one u without numpy: Horner on the span's power form."""
