@@ -129,8 +129,23 @@ def _bisect_all(f: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.nd
 def _peaks(curve: Curve, grid: np.ndarray, dk: np.ndarray) -> list[float]:
     """Local maxima of kappa: dkappa/du = 0 going + to - (eq. 13), or at an end."""
     i = np.nonzero((dk[:-1] > 0) & (dk[1:] <= 0))[0]
-    peaks = _bisect_all(curve.curvature_derivative, grid[i], grid[i + 1], f_lo=dk[i],
-                        f_hi=dk[i + 1]).tolist()
+    lo, hi, f_lo, f_hi = grid[i], grid[i + 1], dk[i], dk[i + 1].copy()
+    # dkappa/du jumps at a knot (the third derivative does); the grid holds the knots and dk
+    # there is the value from the right. Seen from the left, a knot where dkappa/du is still
+    # rising is a kink peak: the maximum is the knot itself. Elsewhere the left value is the
+    # bracket's end value.
+    knots = getattr(curve, "knots", None)
+    at_knot = np.flatnonzero(np.isin(hi, knots)) if knots is not None else np.empty(0, int)
+    kink = np.zeros(i.size, bool)
+    if at_knot.size:
+        left = curve.curvature_derivative(np.nextafter(hi[at_knot], -np.inf))
+        kink[at_knot] = left > 0
+        f_hi[at_knot] = np.where(left > 0, f_hi[at_knot], left)
+    roots = hi.copy()
+    smooth = ~kink
+    roots[smooth] = _bisect_all(curve.curvature_derivative, lo[smooth], hi[smooth],
+                                f_lo=f_lo[smooth], f_hi=f_hi[smooth])
+    peaks = roots.tolist()
     if dk[0] < 0:
         peaks.insert(0, float(grid[0]))
     if dk[-1] > 0:
