@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
               f"ratio {ph['motion_time_s'] / bound:.4f}; contour max "
               f"{ph['contour_error_um']['max']:.2f} um; max feed {ph['max_feed_mm_s']:.4f} "
               f"mm/s; max tangential accel {ph['max_tangential_accel_mm_s2']:.1f} mm/s^2; "
-              f"{ph['dynamics_rounds']} dynamics rounds; planning CPU over {len(cpu)} cold runs: "
+              f"dynamics rounds {ph['dynamics_rounds']}; planning CPU over {len(cpu)} cold runs: "
               f"median {median * 1e3:.1f} ms (real-time factor "
               f"{ph['motion_time_s'] / median:.0f}), best {cpu[0] * 1e3:.1f} ms (real-time "
               f"factor {ph['motion_time_s'] / cpu[0]:.0f})\n")
