@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -66,9 +67,11 @@ def quintic_accel(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray,
     return np.where(duration_s > 0.0, (ve - vs) / safe_t * 30.0 * w * w, 0.0)
 
 
-@dataclass(frozen=True)
-class FeedPhase:
-    """One phase of a feed profile: a quintic transition, or a cruise when the speeds are equal."""
+class FeedPhase(NamedTuple):
+    """One phase of a feed profile: a quintic transition, or a cruise when the speeds are equal.
+
+    A named tuple, not a dataclass: a plan has thousands of phases, made by the tuple's cheap
+    constructor, and the profile's array is built from the tuples in one call."""
 
     t0_s: float
     duration_s: float
@@ -89,8 +92,7 @@ class FeedProfile:
     _arr: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        arr = np.array([[p.t0_s, p.duration_s, p.s0_mm, p.v_start_mm_s, p.v_end_mm_s]
-                        for p in self.phases], dtype=float).reshape(-1, 5)
+        arr = np.array(self.phases, dtype=float).reshape(-1, 5)
         object.__setattr__(self, "_arr", arr)
 
     @classmethod
@@ -102,7 +104,7 @@ class FeedProfile:
         rows = zip(t0.tolist(), dur.tolist(), np.asarray(s0_mm, float).tolist(),
                    np.asarray(v_start_mm_s, float).tolist(),
                    np.asarray(v_end_mm_s, float).tolist(), strict=True)
-        return cls(tuple(FeedPhase(*r) for r in rows))
+        return cls(tuple(map(FeedPhase._make, rows)))
 
     @property
     def t0_s(self) -> float:

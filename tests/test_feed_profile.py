@@ -21,7 +21,9 @@ from controller.feed_profile import (
 
 VMAX = 3500.0 / 60.0
 AMAX = 2450.0
-speeds = st.floats(0.0, 300.0)
+# Speeds like 2e-313 mm/s make the transition's duration underflow and the peak acceleration
+# lose digits; no feed is that small, so rest or at least 1e-9 mm/s.
+speeds = st.one_of(st.just(0.0), st.floats(1e-9, 300.0))
 
 
 @settings(max_examples=40, deadline=None)
