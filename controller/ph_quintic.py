@@ -6,6 +6,7 @@ import cmath
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -255,6 +256,8 @@ def _abs_rotation_index(w0: complex, w1: complex, w2: complex) -> float:
         quad = [b1 + b2, -2 * (b1 * a2 + b2 * a1), b1 * (a2**2 + b2**2) + b2 * (a1**2 + b1**2)]
         cuts += [r.real for r in _quadratic_roots(*(complex(q) for q in quad))
                  if abs(r.imag) < 1e-12 and 0 < r.real < 1]
-    cuts = np.sort(cuts)
-    theta = sum(2 * np.arctan2(-z.imag, cuts - z.real) for z in roots)
-    return float(np.abs(np.diff(theta)).sum() / (2 * np.pi)) if roots else 0.0
+    if not roots:
+        return 0.0
+    cuts.sort()  # at most four: plain Python floats are faster than numpy here
+    theta = [sum(2 * math.atan2(-z.imag, c - z.real) for z in roots) for c in cuts]
+    return sum(abs(b - a) for a, b in pairwise(theta)) / (2 * math.pi)
