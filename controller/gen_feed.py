@@ -96,7 +96,14 @@ def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.nda
         s_parts.append(p.s0_mm + s_local)
         k_parts.append(kappa)
     s, kappa = np.concatenate(s_parts), np.concatenate(k_parts)
-    order = np.lexsort((-kappa, s))  # by s, larger curvature first among equal s
+    # The pieces follow each other: each one's first sample is the previous one's last point.
+    # Keep the larger curvature there, drop the duplicate, then anything not strictly ahead.
+    first = np.cumsum([len(part) for part in s_parts])[:-1]
+    kappa[first - 1] = np.maximum(kappa[first - 1], kappa[first])
+    s, kappa = np.delete(s, first), np.delete(kappa, first)
+    if np.all(np.diff(s) > 1e-12):
+        return s, kappa
+    order = np.lexsort((-kappa, s))  # a degenerate piece: by s, larger curvature first
     s, kappa = s[order], kappa[order]
     keep = np.r_[True, np.diff(s) > 1e-12]
     return s[keep], kappa[keep]
