@@ -8,7 +8,6 @@ import numpy as np
 
 from controller.feed_check import LimitCurve, PhaseArrays
 from controller.feed_profile import (
-    bernstein6_sum,
     bernstein6_weights,
     quintic_speed,
     transition_duration_s,
@@ -24,7 +23,12 @@ REST_FRACTION = 1e-7  # of max vlim: node speeds this low never wait (cruise) be
 CRUISE_LEVELS = 6  # candidate cruise speeds when waiting at a node speed is involved
 SHAPE_SAMPLES = 17  # samples of a transition's v(s) when fitting it under vlim
 _SHAPE_TAU = np.linspace(0.0, 1.0, SHAPE_SAMPLES)
-_SHAPE_WEIGHTS = bernstein6_weights(_SHAPE_TAU)
+# bernstein6_sum is linear in (vs, ve): distance = T/6 (vs A(tau) + ve B(tau)), speed =
+# vs + (ve - vs) C(tau); A, B, C at the shape samples, once.
+_W = bernstein6_weights(_SHAPE_TAU)
+_SHAPE_A = (_W[0] + 2.0 * _W[1] + 3.0 * (_W[2] + _W[3] + _W[4] + _W[5])) / 6.0
+_SHAPE_B = (_W[3] + 2.0 * _W[4] + 3.0 * _W[5]) / 6.0
+_SHAPE_C = quintic_speed(_SHAPE_TAU, 0.0, 1.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -270,9 +274,12 @@ def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray,
 
 def _shape(vs: np.ndarray, ve: np.ndarray, accel: float) -> tuple[np.ndarray, np.ndarray]:
     """Samples (distance from start, speed) of the transitions vs -> ve, one row each."""
-    dur = transition_duration_s(vs, ve, accel)[:, None]
-    v0, v1 = vs[:, None], ve[:, None]
-    return bernstein6_sum(_SHAPE_WEIGHTS, dur, v0, v1), quintic_speed(_SHAPE_TAU, v0, v1)
+    dur = transition_duration_s(vs, ve, accel)
+    x = np.outer(dur * vs, _SHAPE_A)
+    x += np.outer(dur * ve, _SHAPE_B)
+    v = np.outer(ve - vs, _SHAPE_C)
+    v += vs[:, None]
+    return x, v
 
 
 def segment_phases(sp: SegmentPlan, accel: float) -> PhaseArrays:
