@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller.feed_profile import bernstein6_distance, quintic_speed
+from controller.feed_profile import quintic_distance, quintic_speed
 
 CHUNK_SAMPLES = 16  # check-sample intervals per chunk of the coarse pass over transitions
 
@@ -151,7 +151,7 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     k = np.repeat(ch.k[c], cnt)
     j = np.repeat(ch.j0[c], cnt) + np.arange(len(k)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
     tau = j / (n[k] - 1.0)
-    s = s0[k] + bernstein6_distance(tau, dur[k], vs[k], ve[k])
+    s = s0[k] + quintic_distance(tau, dur[k], vs[k], ve[k])
     v = quintic_speed(tau, vs[k], ve[k])
     e = v - curve.at(s)
     # Grid samples inside transitions (where vlim may kink): exact v, by Newton on s(tau) from
@@ -162,7 +162,7 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     g, gk = g[in_kept], gk[in_kept]
     tg = _seed_tau(curve.s_mm[g], gk, k, s, tau)
     for _ in range(3):
-        sg = s0[gk] + bernstein6_distance(tg, dur[gk], vs[gk], ve[gk])
+        sg = s0[gk] + quintic_distance(tg, dur[gk], vs[gk], ve[gk])
         vg = np.maximum(quintic_speed(tg, vs[gk], ve[gk]), 1e-12) * dur[gk]
         tg = np.clip(tg - (sg - curve.s_mm[g]) / vg, 0.0, 1.0)
     ge = quintic_speed(tg, vs[gk], ve[gk]) - curve.vlim_mm_s[g]
@@ -213,7 +213,7 @@ class _Chunks:
         cb = np.arange(len(kb)) - np.repeat(first + np.arange(len(n)), m + 1)
         jb = np.minimum(cb * CHUNK_SAMPLES, n[kb] - 1)
         tau = jb / (n[kb] - 1.0)
-        sb = s0[kb] + bernstein6_distance(tau, dur[kb], vs[kb], ve[kb])
+        sb = s0[kb] + quintic_distance(tau, dur[kb], vs[kb], ve[kb])
         vb = quintic_speed(tau, vs[kb], ve[kb])
         last = np.zeros(len(kb), bool)
         last[np.cumsum(m + 1) - 1] = True

@@ -14,6 +14,7 @@ from controller.feed_profile import (
     FeedProfile,
     bernstein6_distance,
     quintic_accel,
+    quintic_distance,
     quintic_speed,
     transition_duration_s,
     transition_length_mm,
@@ -106,3 +107,13 @@ def test_profile_exact_at_joints() -> None:
 
 def test_feed_phase_length() -> None:
     assert FeedPhase(0.0, 2.0, 0.0, 1.0, 3.0).length_mm == 4.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(vs=speeds, ve=speeds, tau=st.floats(0.0, 1.0))
+def test_power_form_distance_matches_bernstein_form(vs: float, ve: float, tau: float) -> None:
+    """The planner's checks use the power form; the profile's own evaluation the Bernstein form."""
+    dur = max(float(transition_duration_s(vs, ve, AMAX)), 1e-3)
+    t = np.array([tau])
+    assert float(quintic_distance(t, dur, vs, ve)[0]) == pytest.approx(
+        float(bernstein6_distance(t, dur, vs, ve)[0]), abs=1e-12 * (1.0 + max(vs, ve)))
