@@ -89,10 +89,9 @@ class ArcLengthTable:
         inv = self._inverse
         inv.ensure(s)
         u, idx = inv.hermite(s)
-        if tol_mm >= INVERSE_TOL_MM and np.all(inv.rows[idx, 8] > 0):
+        if tol_mm >= INVERSE_TOL_MM and inv.checked(idx):
             return u
-        lo, hi = inv.rows[idx, 0], inv.rows[idx, 1]
-        s_lo = inv.rows[idx, 2]
+        lo, hi, s_lo = inv.interval(idx)
         a, b, u_node = lo.copy(), hi.copy(), lo
         for _ in range(_NEWTON_SWEEPS):
             err = s_lo + _gauss_integrals(self.speed, u_node, u) - s

@@ -49,6 +49,14 @@ class InverseTable:
         self.rows = rows[np.argsort(rows[:, 2], kind="stable")]
         self.built[need] = True
 
+    def interval(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(u0, u1, s0) of sub-intervals idx."""
+        return self.rows[idx, 0], self.rows[idx, 1], self.rows[idx, 2]
+
+    def checked(self, idx: np.ndarray) -> bool:
+        """Whether every sub-interval idx passed its midpoint check."""
+        return bool(np.all(self.rows[idx, 8] > 0))
+
     def hermite(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(u, sub-interval index) of arc lengths s (ensured) by quintic Hermite."""
         r = self.rows

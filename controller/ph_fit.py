@@ -30,13 +30,9 @@ def _complex(xy: np.ndarray) -> complex:
     return complex(xy[0], xy[1])
 
 
-def hermite_on_zone(curve: Curve, u_start: float, u_end: float) -> PhQuintic:
-    """ALGORITHMS 1.3: p0 = C(u_s), p5 = C(u_e), d = C'(u) (u_e - u_s) (xi-derivatives)."""
-    return _hermite_all(curve, np.array([u_start]), np.array([u_end]))[0]
-
-
 def _hermite_all(curve: Curve, u_start: np.ndarray, u_end: np.ndarray) -> list[PhQuintic]:
-    """hermite_on_zone for many zones, with one curve evaluation for all their ends."""
+    """ALGORITHMS 1.3 for each zone: p0 = C(u_s), p5 = C(u_e), d = C'(u) (u_e - u_s)
+    (xi-derivatives), with one curve evaluation for all the zones' ends."""
     d = curve.evaluate(np.concatenate((u_start, u_end)), 1)
     n, du = len(u_start), u_end - u_start
     return [PhQuintic.hermite(_complex(d[0, i]), _complex(d[0, n + i]),
@@ -78,15 +74,6 @@ def _fit_all(curve: Curve, u_start: np.ndarray, u_end: np.ndarray) -> list[PhSeg
     worst = dist.max(axis=1)
     return [PhSegment(float(u_start[i]), float(u_end[i]), phs[i], float(rms[i]), float(worst[i]))
             for i in range(len(phs))]
-
-
-def fit_error_mm(curve: Curve, u_start: float, u_end: float, ph: PhQuintic) -> tuple[float, float]:
-    """RMS and max distance from densely sampled PH points to the curve zone."""
-    xi = np.linspace(0.0, 1.0, _ERROR_SAMPLES)
-    z = ph.point(xi)
-    dist = foot_distances(curve, u_start, u_end, np.column_stack((z.real, z.imag)),
-                          u_start + xi * (u_end - u_start))
-    return float(np.sqrt(np.mean(dist**2))), float(dist.max())
 
 
 def fit_single(curve: Curve, u_start: float, u_end: float) -> PhSegment:
