@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from controller.arclength_inverse import INVERSE_TOL_MM, DerivsFn, InverseTable, SpeedFn
+from controller.sorted_unique import sorted_unique
 
 __all__ = ["INVERSE_TOL_MM", "ArcLengthTable"]
 
@@ -48,7 +49,7 @@ class ArcLengthTable:
     def build(cls, speed: SpeedFn, breaks: ArrayLike, rel_tol: float = 1e-12,
               derivs: DerivsFn | None = None) -> ArcLengthTable:
         """Double the sub-intervals per knot span until two successive totals agree to rel_tol."""
-        brk = np.unique(np.asarray(breaks, dtype=float))
+        brk = sorted_unique(np.asarray(breaks, dtype=float))
         m, previous = 2, None
         while True:
             u_nodes = _subdivide(brk, m)

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from controller.sorted_unique import sorted_unique
+
 SpeedFn = Callable[[np.ndarray], np.ndarray]  # |C'(u)| for an array of u
 DerivsFn = Callable[[np.ndarray], np.ndarray]  # [C, C', C''] (3, N, 2) for an array of u
 IntegralFn = Callable[[SpeedFn, np.ndarray, np.ndarray], np.ndarray]  # speed over [a_i, b_i]
@@ -40,7 +42,7 @@ class InverseTable:
     def ensure(self, s: np.ndarray) -> None:
         """Build the sub-intervals covering every arc length in s (in place)."""
         base = np.clip(np.searchsorted(self.base_s, s, side="right") - 1, 0, self.built.size - 1)
-        need = np.unique(base[~self.built[base]])
+        need = sorted_unique(base[~self.built[base]])
         if need.size == 0:
             return
         new = _refine(self, self.base_u[need], self.base_u[need + 1], self.base_s[need],

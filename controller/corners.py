@@ -13,6 +13,7 @@ from controller.curves import (
     curvature_derivative_from_derivatives,
     curvature_from_derivatives,
 )
+from controller.sorted_unique import is_in_sorted, sorted_unique
 
 _XTOL = 1e-13
 
@@ -32,7 +33,7 @@ def sample_grid(curve: Curve, samples_per_span: int = 64) -> np.ndarray:
     knots = getattr(curve, "knots", None)
     if knots is None:
         return np.linspace(curve.u_start, curve.u_end, 8 * samples_per_span + 1)
-    inner = np.unique(knots[(knots >= curve.u_start) & (knots <= curve.u_end)])
+    inner = sorted_unique(knots[(knots >= curve.u_start) & (knots <= curve.u_end)])
     frac = np.arange(samples_per_span) / samples_per_span
     grid = (inner[:-1, None] + np.diff(inner)[:, None] * frac[None, :]).ravel()
     return np.append(grid, inner[-1])
@@ -135,7 +136,7 @@ def _peaks(curve: Curve, grid: np.ndarray, dk: np.ndarray) -> list[float]:
     # rising is a kink peak: the maximum is the knot itself. Elsewhere the left value is the
     # bracket's end value.
     knots = getattr(curve, "knots", None)
-    at_knot = np.flatnonzero(np.isin(hi, knots)) if knots is not None else np.empty(0, int)
+    at_knot = np.flatnonzero(is_in_sorted(hi, knots)) if knots is not None else np.empty(0, int)
     kink = np.zeros(i.size, bool)
     if at_knot.size:
         left = curve.curvature_derivative(np.nextafter(hi[at_knot], -np.inf))

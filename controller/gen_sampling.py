@@ -11,6 +11,7 @@ from controller.arclength import INVERSE_TOL_MM
 from controller.feed_profile import FeedProfile
 from controller.interpolators import ph_interpolate_many, taylor_interpolate
 from controller.path import Path, PieceKind
+from controller.sorted_unique import is_in_sorted, sorted_unique
 
 
 class Interpolation(StrEnum):
@@ -84,7 +85,7 @@ def _sequential_taylor(path: Path, idx: np.ndarray, v: np.ndarray, a: np.ndarray
             continue
         done.add(id(piece.curve))
         same = [j for j, p in enumerate(path.pieces) if p.curve is piece.curve]
-        rows = np.flatnonzero(np.isin(idx, same))
+        rows = np.flatnonzero(is_in_sorted(idx, same))
         if rows.size == 0:
             continue
         u0 = piece.u0 if rows[0] == 0 else float(path.pieces[i].u_at(
@@ -100,11 +101,11 @@ def interpolate(path: Path, profile: FeedProfile, sample_period_s: float,
     idx = path.piece_index(s)
     xy = np.empty((s.size, 2))
     phi = np.empty(s.size)
-    present = np.unique(idx)
+    present = sorted_unique(idx)
     kinds = np.array([path.pieces[i].kind == PieceKind.PH for i in present.tolist()], bool)
     ph_pieces = present[kinds]
     if ph_pieces.size:  # every PH corner's samples in one vectorised Newton iteration
-        rows = np.flatnonzero(np.isin(idx, ph_pieces))
+        rows = np.flatnonzero(is_in_sorted(idx, ph_pieces))
         which = np.searchsorted(ph_pieces, idx[rows])
         s0 = np.array([path.pieces[i].s0_mm for i in ph_pieces.tolist()])
         xy[rows], phi[rows] = ph_interpolate_many(

@@ -8,6 +8,7 @@ from enum import StrEnum
 import numpy as np
 
 from controller.curves import Curve
+from controller.sorted_unique import sorted_unique
 
 
 class PieceKind(StrEnum):
@@ -68,7 +69,7 @@ class Path:
         s = np.asarray(s_mm, float)
         idx = self.piece_index(s)
         out: np.ndarray | None = None
-        for i in np.unique(idx):
+        for i in sorted_unique(idx):
             mask = idx == i
             val = fn(self.pieces[i], s[mask])
             if out is None:
