@@ -99,7 +99,8 @@ class DiscreteServo:
 
 
 def _block_matrices(b: np.ndarray, a: np.ndarray, n_block: int) -> tuple[np.ndarray, ...]:
-    """State space (F, G, H, J) of b/a and its block form: y = O x + T u, x' = FL x + R u."""
+    """State space (F, G, H, J) of b/a and its block form: y = O x + T u, x' = F^L x + R u,
+    with all powers F^0..F^L kept for a partial block."""
     n = len(a) - 1
     bb = np.r_[b, np.zeros(len(a) - len(b))] if len(b) < len(a) else np.asarray(b, float)
     j = bb[0]
@@ -109,42 +110,32 @@ def _block_matrices(b: np.ndarray, a: np.ndarray, n_block: int) -> tuple[np.ndar
     g = np.zeros(n)
     g[0] = 1.0
     h = bb[1:] - j * a[1:]
-    powers = [np.eye(n)]
-    for _ in range(n_block):
-        powers.append(f @ powers[-1])
-    obs = np.array([h @ powers[k] for k in range(n_block)])  # (L, n)
-    impulse = np.r_[j, [h @ powers[k] @ g for k in range(n_block - 1)]]
+    powers = np.empty((n_block + 1, n, n))
+    powers[0] = np.eye(n)
+    for k in range(n_block):
+        powers[k + 1] = f @ powers[k]
+    obs = h @ powers[:n_block]  # (L, n): row k is h F^k
+    impulse = np.r_[j, (obs[:n_block - 1] @ g)]  # h F^k g
     idx = np.arange(n_block)
     lag = idx[:, None] - idx[None, :]
     toeplitz = np.where(lag >= 0, impulse[np.clip(lag, 0, None)], 0.0)
-    reach = np.column_stack([powers[n_block - 1 - k] @ g for k in range(n_block)])  # (n, L)
-    return obs, toeplitz, powers[n_block], reach, f
+    reach = (powers[n_block - 1::-1] @ g).T  # (n, L): column k is F^(L-1-k) g
+    return obs, toeplitz, reach, powers
 
 
 def filter_block(servo: DiscreteServo, u: np.ndarray, state: np.ndarray) -> tuple[np.ndarray,
                                                                                  np.ndarray]:
     """Run the filter over u from state; vectorised in blocks of BLOCK samples."""
-    obs, toeplitz, f_block, reach, f = servo._blocks
+    obs, toeplitz, reach, powers = servo._blocks
     out = np.empty(len(u))
     x = state.copy()
     for k0 in range(0, len(u), BLOCK):
         chunk = u[k0:k0 + BLOCK]
         m = len(chunk)
-        if m == BLOCK:
-            out[k0:k0 + m] = obs @ x + toeplitz @ chunk
-            x = f_block @ x + reach @ chunk
-        else:
-            out[k0:k0 + m] = obs[:m] @ x + toeplitz[:m, :m] @ chunk
-            x = _advance(f, x, chunk)
+        out[k0:k0 + m] = obs[:m] @ x + toeplitz[:m, :m] @ chunk
+        # After m samples: F^m x + sum_k F^(m-1-k) g u_k, the last m columns of the reach.
+        x = powers[m] @ x + reach[:, BLOCK - m:] @ chunk
     return out, x
-
-
-def _advance(f: np.ndarray, x: np.ndarray, chunk: np.ndarray) -> np.ndarray:
-    """State after a partial block (sample by sample: at most BLOCK-1 steps)."""
-    for v in chunk:
-        x = f @ x
-        x[0] += v
-    return x
 
 
 @lru_cache(maxsize=64)
