@@ -149,11 +149,17 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     allk = np.arange(len(a))
     # Where waiting at vi may last, where waiting at vj may start: fixed for the segment.
     reach = (win.last_reach(vi, allk), win.first_reach(vj, allk))
-    e0, d0 = _window(win, vi, vj, high, allk, accel, reach)
+    # The windows at the highest and at the safe cruise, in one call (numpy's per-call cost).
+    n = len(a)
+    both = np.r_[allk, allk]
+    e_both, d_both = _window(win, np.r_[vi, vi], np.r_[vj, vj], np.r_[high, safe], both, accel,
+                             reach)
+    e0, d0 = e_both[:n], d_both[:n]
     ok = (e0 <= d0) & ~flat
     todo = np.flatnonzero(~ok & ~flat & (high > safe))
     lo_v, lo_e0, lo_d0 = _peak_search(win, vi[todo], vj[todo], todo, safe[todo], high[todo],
-                                      _gap(e0[todo], d0[todo]), accel, reach)
+                                      _gap(e0[todo], d0[todo]), accel, reach,
+                                      (e_both[n:][todo], d_both[n:][todo]))
     vp = np.where(ok, high, safe)
     vp[todo] = lo_v
     e0[todo], d0[todo] = lo_e0, lo_d0
@@ -177,13 +183,14 @@ def _gap(e0: np.ndarray, d0: np.ndarray) -> np.ndarray:
 
 def _peak_search(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, k: np.ndarray,
                  safe: np.ndarray, high: np.ndarray, gap_high: np.ndarray, accel: float,
-                 reach: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, ...]:
+                 reach: tuple[np.ndarray, np.ndarray],
+                 at_safe: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, ...]:
     """Highest cruise speed in [safe, high] whose window is not empty (the gap d0 - e0 falls
     with the speed; it is negative at high), to 2^-PEAK_RESOLUTION_BITS of the bracket, with
     the window there: the Illinois method on the gap for all segments at once (bisection where
     the gap is infinite), one _window call per step. Where even safe has no window, safe."""
     lo, hi = safe.copy(), high.copy()
-    e_lo, d_lo = _window(win, vi, vj, lo, k, accel, reach)
+    e_lo, d_lo = at_safe[0].copy(), at_safe[1].copy()  # the window at safe
     g_lo, g_hi = _gap(e_lo, d_lo), gap_high.copy()
     tol = np.ldexp(hi - lo, -PEAK_RESOLUTION_BITS)
     side = np.zeros(lo.size)  # +1: lo moved last, -1: hi moved last
