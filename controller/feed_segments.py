@@ -188,7 +188,8 @@ def _peak_search(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, k: np.ndar
     """Highest cruise speed in [safe, high] whose window is not empty (the gap d0 - e0 falls
     with the speed; it is negative at high), to 2^-PEAK_RESOLUTION_BITS of the bracket, with
     the window there: the Illinois method on the gap for all segments at once (bisection where
-    the gap is infinite), one _window call per step. Where even safe has no window, safe."""
+    the gap is infinite), one _window call per step, from at_safe (the windows at safe, which
+    the caller has). Where even safe has no window, safe."""
     lo, hi = safe.copy(), high.copy()
     e_lo, d_lo = at_safe[0].copy(), at_safe[1].copy()  # the window at safe
     g_lo, g_hi = _gap(e_lo, d_lo), gap_high.copy()
