@@ -5,7 +5,7 @@ from __future__ import annotations
 import cmath
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from itertools import pairwise
 
 import numpy as np
@@ -22,14 +22,19 @@ def _xi(xi: ArrayLike) -> np.ndarray:
     return np.atleast_1d(np.asarray(xi, dtype=float))
 
 
-def bernstein_to_power(b: np.ndarray) -> np.ndarray:
-    """Power-basis coefficients (lowest first) of sum_k b_k B_k^n(x)."""
-    n = b.size - 1
-    out = np.zeros(n + 1, dtype=b.dtype)
+@lru_cache(maxsize=16)
+def _bernstein_to_power_matrix(n: int) -> np.ndarray:
+    """M with power coefficients = M @ Bernstein coefficients, degree n."""
+    m = np.zeros((n + 1, n + 1))
     for k in range(n + 1):
         for j in range(k, n + 1):  # B_k^n = C(n,k) sum_j C(n-k, j-k) (-1)^(j-k) x^j
-            out[j] += b[k] * math.comb(n, k) * math.comb(n - k, j - k) * (-1) ** (j - k)
-    return out
+            m[j, k] = math.comb(n, k) * math.comb(n - k, j - k) * (-1) ** (j - k)
+    return m
+
+
+def bernstein_to_power(b: np.ndarray) -> np.ndarray:
+    """Power-basis coefficients (lowest first) of sum_k b_k B_k^n(x)."""
+    return _bernstein_to_power_matrix(b.size - 1) @ b
 
 
 def _horner(coeffs_low_first: tuple[float, ...] | tuple[complex, ...],
