@@ -46,7 +46,7 @@ def test_bound_matches_reference(curves: dict, name: str, length_mm: float,
 
 def test_naca_plan_close_to_bound(curves: dict) -> None:
     s, kappa = curves["naca2415"]
-    s, kappa = s[::2], kappa[::2]  # ~20,000 points, the generator's grid size
+    s, kappa = s[::2], kappa[::2]  # ~20,000 points (the generator uses 5000 on this curve)
     vlim = path_feed_limit_mm_s(kappa, T, DELTA, AMAX, VMAX)
     t0 = time.perf_counter()
     plan = plan_feed(s, vlim, AMAX)
