@@ -17,10 +17,10 @@ from controller.sorted_unique import is_in_sorted, sorted_unique
 class Interpolation(StrEnum):
     # PH corners by Newton on the closed-form arc length (eq. 12); NURBS parts by the checked
     # inverse of their arc-length table (arclength_inverse). The second-order Taylor step
-    # (eq. 5), even re-anchored on
-    # the exact parameter every sample, left single-step errors of 0.5 um next to the NACA leading
-    # edge (fast-changing parametric speed), i.e. finite-difference tangential accelerations of
-    # 3350 mm/s^2 > Amax: measured, so the NURBS parts are arc-length exact too.
+    # (eq. 5), even re-anchored on the exact parameter every sample, left single-step errors of
+    # 0.5 um next to the NACA leading edge (fast-changing parametric speed), i.e. finite-
+    # difference tangential accelerations of 3350 mm/s^2 > Amax: measured, so the NURBS parts
+    # are arc-length exact too.
     PH_AND_EXACT_ARC_LENGTH = "ph+exact-arc-length"
     # Plain sequential Taylor (Tsai et al. 2008): its errors accumulate along each NURBS block.
     SEQUENTIAL_TAYLOR = "sequential-taylor"
