@@ -125,7 +125,7 @@ def _nurbs_pieces(bc: BlockCurve, block: int, zones: list[CornerZone], error_lim
                   cache: FitCache) -> tuple[list[Piece], list[CornerInfo]]:
     """Split one NURBS into Taylor parts and PH corners (module 2)."""
     curve = bc.curve
-    # NURBS spans (u0, u1, corner) in path order, PH fits in their place (None: a NURBS span).
+    # In path order: NURBS spans as (u0, u1, corner or -1), corner zones as their PH fits.
     spans: list[tuple[float, float, int] | list[PhSegment]] = []
     infos: list[CornerInfo] = []
     fits = _fits(curve, zones, error_limit_mm, cache) if use_ph and zones else []

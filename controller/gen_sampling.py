@@ -63,13 +63,13 @@ def _points_on_curve(path: Path, pieces: list[int], idx: np.ndarray,
     curve = ps[0].curve
     rows = [np.flatnonzero(idx == i) for i in pieces]
     count = np.array([r.size for r in rows])
-    offset = curve.s_of_u(np.array([p.u0 for p in ps])) - np.array([p.s0_mm for p in ps])
+    curve_s0 = curve.s_of_u(np.array([p.u0 for p in ps]))  # each piece's offset in its curve
     length = np.array([p.length_mm for p in ps])
     start = np.array([p.s0_mm for p in ps])
     all_rows = np.concatenate(rows)
     k = np.repeat(np.arange(len(ps)), count)
     local = np.clip(s[all_rows] - start[k], 0.0, length[k])
-    u = curve.u_of_s(local + start[k] + offset[k], INVERSE_TOL_MM)
+    u = curve.u_of_s(local + curve_s0[k], INVERSE_TOL_MM)
     lo = np.array([min(p.u0, p.u1) for p in ps])
     hi = np.array([max(p.u0, p.u1) for p in ps])
     u = np.clip(u, lo[k], hi[k])

@@ -37,10 +37,10 @@ class Piece:
         """Arc length of the curve before u0 (the piece's offset inside its curve)."""
         return float(self.curve.s_of_u(np.array([self.u0]))[0])
 
-    def u_at(self, s_path_mm: np.ndarray, tol_mm: float = 1e-11) -> np.ndarray:
-        """Curve parameters at path arc lengths inside this piece (arc length within tol_mm)."""
+    def u_at(self, s_path_mm: np.ndarray) -> np.ndarray:
+        """Exact curve parameters at path arc lengths inside this piece."""
         local = np.clip(s_path_mm - self.s0_mm, 0.0, self.length_mm)
-        u = self.curve.u_of_s(local + self.curve_s0_mm, tol_mm)
+        u = self.curve.u_of_s(local + self.curve_s0_mm)
         return np.clip(u, min(self.u0, self.u1), max(self.u0, self.u1))
 
 
