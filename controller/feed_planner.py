@@ -201,10 +201,8 @@ def _segment_keys(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray,
     grid inside and one either side), positions relative to the segment start. All windows are
     gathered and rounded in one go; each key slices the two byte strings."""
     s, vl = win.curve.s_mm, win.curve.vlim_mm_s
-    first = win.lo - 1
-    count = np.maximum(win.hi + 2, first) - first  # a slice s[lo - 1:hi + 2], as numpy clips it
-    first = np.clip(first, 0, len(s))
-    count = np.clip(np.minimum(first + count, len(s)) - first, 0, None)
+    first = win.lo - 1  # each key holds s[lo - 1:hi + 2] (lo >= 1: a node is never before s[0])
+    count = np.maximum(np.minimum(win.hi + 2, len(s)) - first, 0)
     idx = np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count,
                                                                        count)
     rel = np.round(s[idx] - np.repeat(win.a, count), KEY_DECIMALS).tobytes()
