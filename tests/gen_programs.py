@@ -29,10 +29,19 @@ def naca_points(code: str, chord_mm: float, n: int = 200) -> np.ndarray:
     return pts
 
 
+def naca_loop_points(code: str, chord_mm: float, start: int = 50, n: int = 200) -> np.ndarray:
+    """The section as a closed loop through its trailing edge: from point `start` of the upper
+    surface on (counted from the TE), round the LE and the TE back to it, moved to the origin."""
+    pts = naca_points(code, chord_mm, n)[:-1]  # the TE once
+    loop = np.vstack([pts[start:], pts[:start + 1]])
+    return loop - loop[0]
+
+
 def lsq_nurbs(points: np.ndarray, n_ctrl: int = 40) -> tuple[np.ndarray, np.ndarray]:
     """Cubic least-squares B-spline (centripetal parameters, quantile knots): (ctrl, knots)."""
     d = np.sqrt(np.linalg.norm(np.diff(points, axis=0), axis=1))
-    u = np.concatenate([[0.0], np.cumsum(d)]) / d.sum()
+    u = np.concatenate([[0.0], np.cumsum(d)])
+    u /= u[-1]  # exactly 1 at the end (dividing by d.sum() can round just past the last knot)
     inner = np.quantile(u[1:-1], np.linspace(0, 1, n_ctrl - 2)[1:-1])
     knots = np.r_[[0.0] * 4, inner, [1.0] * 4]
     spline = make_lsq_spline(u, points, knots, k=3)
@@ -58,10 +67,12 @@ def lobed_nurbs(seed: int, lobes: int = 5, n_ctrl: int = 24) -> tuple[np.ndarray
 
 
 def write_g62(path: Path, ctrl: np.ndarray, knots: np.ndarray,
-              weights: np.ndarray | None = None, feed_mm_min: float = 3500.0) -> Path:
+              weights: np.ndarray | None = None, feed_mm_min: float = 3500.0,
+              comment: str | None = None) -> Path:
     """A G6.2 program (order 4) starting at X0 Y0, like the benchmark files."""
     w = np.ones(len(ctrl)) if weights is None else weights
-    lines = ["G17 G21 G90", f"F{feed_mm_min:g}"]
+    lines = [] if comment is None else [f"({comment})"]
+    lines += ["G17 G21 G90", f"F{feed_mm_min:g}"]
     for i, (p, wi) in enumerate(zip(ctrl, w, strict=True)):
         head = "G6.2 P4 " if i == 0 else "     "
         lines.append(f"{head}X{p[0]:.6f} Y{p[1]:.6f} R{wi:.4f} K{knots[i]:.9f}")
@@ -69,3 +80,13 @@ def write_g62(path: Path, ctrl: np.ndarray, knots: np.ndarray,
     lines += ["M2", ""]
     path.write_text("\n".join(lines), encoding="utf-8")
     return path
+
+
+def generated_program(folder: Path, name: str) -> Path:
+    """A program by name: nacaCODE_CHORD (a section, e.g. naca0012_20) or lobed_SEED."""
+    kind, arg = name.split("_")
+    if kind.startswith("naca"):
+        ctrl, knots = lsq_nurbs(naca_points(kind[4:], float(arg)))
+        return write_g62(folder / f"{name}.nc", ctrl, knots)
+    ctrl, weights, knots = lobed_nurbs(int(arg))
+    return write_g62(folder / f"{name}.nc", ctrl, knots, weights)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gen_programs import lobed_nurbs, lsq_nurbs, naca_points, write_g62
+from gen_programs import generated_program, lobed_nurbs, lsq_nurbs, naca_points, write_g62
 from scipy.spatial import cKDTree
 
 from controller.blocks import NurbsBlock
@@ -21,6 +21,7 @@ from controller.time_bound import time_optimal_bound_s
 REPO = Path(__file__).resolve().parents[1]
 NACA = str(REPO / "nc_programs/naca2415.nc")
 BUTTERFLY = str(REPO / "nc_programs/butterfly.nc")
+NACA_LOOP = str(REPO / "nc_programs/naca2415_loop.nc")  # the paper's airfoil: bench/naca_loop.py
 CFG = load_config()
 IP = CFG.interpolator
 LIMIT_UM = IP.contour_error_limit_mm * 1000.0
@@ -69,7 +70,7 @@ def _check_limits(program: str) -> dict:
     return r
 
 
-@pytest.mark.parametrize("program", [NACA, BUTTERFLY])
+@pytest.mark.parametrize("program", [NACA, BUTTERFLY, NACA_LOOP])
 def test_benchmarks_meet_every_limit_and_the_time_target(program: str) -> None:
     r = _check_limits(program)
     assert r["motion_time_s"] <= 1.10 * _bound_s(_nurbs_of(program))
@@ -91,8 +92,9 @@ def _table(program: str) -> dict[str, dict]:
                             a.value, CFG) for a in Algorithm}
 
 
-def test_table_iv_qualitative_result_on_the_butterfly() -> None:
-    t = _table(BUTTERFLY)
+def _assert_table_iv_qualitative_result(t: dict[str, dict]) -> None:
+    """Section 5.1: both formula feeds exceed the limit, both look-ahead algorithms keep it, and
+    ph-lookahead is the faster of those two."""
     assert t["adaptive"]["contour_error_um"]["max"] > LIMIT_UM
     assert t["curvature"]["contour_error_um"]["max"] > LIMIT_UM
     assert t["nurbs-lookahead"]["contour_error_um"]["max"] <= LIMIT_UM
@@ -100,7 +102,31 @@ def test_table_iv_qualitative_result_on_the_butterfly() -> None:
     assert t["ph-lookahead"]["motion_time_s"] < t["nurbs-lookahead"]["motion_time_s"]
 
 
+@pytest.mark.parametrize("program", [BUTTERFLY, NACA_LOOP])
+def test_table_iv_qualitative_result_on_the_benchmarks(program: str) -> None:
+    _assert_table_iv_qualitative_result(_table(program))
+
+
+def test_naca_loop_reproduces_the_papers_formula_feed_times() -> None:
+    """The paper's adaptive and curvature baselines took 1.0295 s and 1.1395 s: the chord of the
+    loop was fitted to the first, the second follows from the geometry (its total turning)."""
+    t = _table(NACA_LOOP)
+    assert t["adaptive"]["motion_time_s"] == pytest.approx(1.0295, abs=0.002)
+    assert t["curvature"]["motion_time_s"] == pytest.approx(1.1395, abs=0.005)
+    assert t["ph-lookahead"]["sharp_corners"] == 2  # the leading and the trailing edge
+
+
+@pytest.mark.parametrize("name", ["naca0012_20", "naca6409_30", "lobed_1", "lobed_5"])
+def test_table_iv_qualitative_result_on_generated_programs(tmp_path: Path, name: str) -> None:
+    """Sharper sections than the corpus airfoil and lobed NURBS (bench/table4_generated.py lists
+    a wider sweep, where the curvature feed's margin over the limit is measured)."""
+    _assert_table_iv_qualitative_result(_table(str(generated_program(tmp_path, name))))
+
+
 def test_table_iv_on_the_naca() -> None:
+    """The corpus airfoil starts and ends at its trailing edge, so it turns half as far as the
+    paper's loop: the curvature feed stays just under the limit here (28.9 um), and is not
+    asserted."""
     t = _table(NACA)
     assert t["adaptive"]["contour_error_um"]["max"] > LIMIT_UM
     assert t["nurbs-lookahead"]["contour_error_um"]["max"] <= LIMIT_UM
