@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from controller.arclength_inverse import INVERSE_TOL_MM, DerivsFn, InverseTable, SpeedFn
+from controller.clamp import clamp
 from controller.sorted_unique import sorted_unique
 
 __all__ = ["INVERSE_TOL_MM", "ArcLengthTable"]
@@ -68,11 +69,11 @@ class ArcLengthTable:
 
     def _interval(self, u: np.ndarray) -> np.ndarray:
         idx = np.searchsorted(self.u_nodes, u, side="right") - 1
-        return np.clip(idx, 0, self.u_nodes.size - 2)
+        return clamp(idx, 0, self.u_nodes.size - 2)
 
     def s_of_u(self, u: ArrayLike) -> np.ndarray:
         """Arc length from the curve start to u (Gauss-Legendre on [u_node, u])."""
-        uu = np.clip(np.atleast_1d(np.asarray(u, dtype=float)), self.u_nodes[0], self.u_nodes[-1])
+        uu = clamp(np.atleast_1d(np.asarray(u, dtype=float)), self.u_nodes[0], self.u_nodes[-1])
         idx = self._interval(uu)
         return self.s_nodes[idx] + _gauss_integrals(self.speed, self.u_nodes[idx], uu)
 
@@ -86,7 +87,7 @@ class ArcLengthTable:
         """Inverse: quintic Hermite on the inverse table (built where first asked), then, when
         tol_mm is below INVERSE_TOL_MM or a sub-interval could not be checked, safeguarded
         Newton (bisection when a step leaves the bracket) to tol_mm."""
-        s = np.clip(np.atleast_1d(np.asarray(s_mm, dtype=float)), 0.0, self.total_length_mm)
+        s = clamp(np.atleast_1d(np.asarray(s_mm, dtype=float)), 0.0, self.total_length_mm)
         inv = self._inverse
         inv.ensure(s)
         u, idx = inv.hermite(s)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from controller.clamp import clamp
 from controller.sorted_unique import sorted_unique
 
 SpeedFn = Callable[[np.ndarray], np.ndarray]  # |C'(u)| for an array of u
@@ -41,7 +42,7 @@ class InverseTable:
 
     def ensure(self, s: np.ndarray) -> None:
         """Build the sub-intervals covering every arc length in s (in place)."""
-        base = np.clip(np.searchsorted(self.base_s, s, side="right") - 1, 0, self.built.size - 1)
+        base = clamp(np.searchsorted(self.base_s, s, side="right") - 1, 0, self.built.size - 1)
         need = sorted_unique(base[~self.built[base]])
         if need.size == 0:
             return
@@ -62,10 +63,10 @@ class InverseTable:
     def hermite(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(u, sub-interval index) of arc lengths s (ensured) by quintic Hermite."""
         r = self.rows
-        idx = np.clip(np.searchsorted(r[:, 2], s, side="right") - 1, 0, len(r) - 1)
+        idx = clamp(np.searchsorted(r[:, 2], s, side="right") - 1, 0, len(r) - 1)
         u0, u1, s0, s1, d0, c0, d1, c1 = (r[idx, j] for j in range(8))
         h = np.where(s1 > s0, s1 - s0, 1.0)
-        return np.clip(_quintic(np.clip((s - s0) / h, 0.0, 1.0), h, u0, u1, d0, c0, d1, c1),
+        return clamp(_quintic(clamp((s - s0) / h, 0.0, 1.0), h, u0, u1, d0, c0, d1, c1),
                        u0, u1), idx
 
 
@@ -105,7 +106,7 @@ def _refine(t: InverseTable, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray,
         u_mid = 0.5 * (u0 + u1)
         s_mid = s0 + t.integrate(t.speed, u0, u_mid)
         h = np.where(length > 0, length, 1.0)
-        x = np.clip((s_mid - s0) / h, 0.0, 1.0)
+        x = clamp((s_mid - s0) / h, 0.0, 1.0)
         err = np.abs(_quintic(x, h, u0, u1, d0, c0, d1, c1) - u_mid) / np.where(d0 > 0, d0, 1.0)
         fail = err > 0.5 * INVERSE_TOL_MM
         ok = ~fail
@@ -113,7 +114,7 @@ def _refine(t: InverseTable, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray,
                                      d1[ok], c1[ok], np.ones(int(ok.sum())))))
         if not fail.any():
             break
-        parts = np.clip(np.ceil(1.25 * (err[fail] / INVERSE_TOL_MM) ** (1 / 6)), 2, 64)
+        parts = clamp(np.ceil(1.25 * (err[fail] / INVERSE_TOL_MM) ** (1 / 6)), 2, 64)
         u0, u1, s0, length = _split(t, u0[fail], u1[fail], s0[fail], parts.astype(np.intp))
     return np.concatenate(done)
 

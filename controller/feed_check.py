@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controller.clamp import clamp
 from controller.feed_profile import quintic_distance, quintic_speed
 
 CHUNK_SAMPLES = 16  # check-sample intervals per chunk of the coarse pass over transitions
@@ -110,9 +111,9 @@ def _merge(exc: np.ndarray, loc: np.ndarray, plen: np.ndarray, seg: np.ndarray, 
     """Keep, per segment, the largest excess among candidates sorted by segment (in place)."""
     if len(seg) == 0:
         return
-    starts = np.r_[0, np.flatnonzero(seg[1:] != seg[:-1]) + 1]
+    starts = np.concatenate(([0], np.flatnonzero(seg[1:] != seg[:-1]) + 1))
     gmax = np.maximum.reduceat(e, starts)
-    counts = np.diff(np.r_[starts, len(seg)])
+    counts = np.diff(np.append(starts, len(seg)))
     at_max = np.flatnonzero(e == np.repeat(gmax, counts))
     group = np.searchsorted(starts, at_max, side="right") - 1
     _, first = np.unique(group, return_index=True)
@@ -157,14 +158,14 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     # Grid samples inside transitions (where vlim may kink): exact v, by Newton on s(tau) from
     # the interpolated tau; only those in kept chunks (elsewhere v - vlim <= tol/4 there too).
     g = _grid_inside(curve, s0, s0 + lengths[mask])
-    gk = np.clip(np.searchsorted(s0, curve.s_mm[g], side="right") - 1, 0, len(s0) - 1)
+    gk = clamp(np.searchsorted(s0, curve.s_mm[g], side="right") - 1, 0, len(s0) - 1)
     in_kept = ch.keep[ch.chunk_of(curve.s_mm[g], gk)]
     g, gk = g[in_kept], gk[in_kept]
     tg = _seed_tau(curve.s_mm[g], gk, k, s, tau)
     for _ in range(3):
         sg = s0[gk] + quintic_distance(tg, dur[gk], vs[gk], ve[gk])
         vg = np.maximum(quintic_speed(tg, vs[gk], ve[gk]), 1e-12) * dur[gk]
-        tg = np.clip(tg - (sg - curve.s_mm[g]) / vg, 0.0, 1.0)
+        tg = clamp(tg - (sg - curve.s_mm[g]) / vg, 0.0, 1.0)
     ge = quintic_speed(tg, vs[gk], ve[gk]) - curve.vlim_mm_s[g]
     seg = ph.seg[mask]
     ln = lengths[mask]
@@ -221,14 +222,14 @@ class _Chunks:
         vmax = np.maximum(vb[i0], vb[i0 + 1])
         keep = vmax - curve.span_min(sb[i0], sb[i0 + 1]) > 0.25 * tol
         k = kb[i0]
-        keep_next = np.r_[keep[1:], False] & (np.r_[k[1:], -1] == k)
+        keep_next = np.append(keep[1:], False) & (np.append(k[1:], -1) == k)
         return cls(k, jb[i0], jb[i0 + 1], first, sb[i0], keep, keep_next)
 
     def chunk_of(self, s_mm: np.ndarray, k: np.ndarray) -> np.ndarray:
         """The chunk of transition k holding s (the later one at a shared boundary)."""
         c = np.searchsorted(self.start_s, s_mm, side="right") - 1
-        n_chunks = np.diff(np.r_[self.first, len(self.k)])
-        return np.clip(c, self.first[k], self.first[k] + n_chunks[k] - 1)
+        n_chunks = np.diff(np.append(self.first, len(self.k)))
+        return clamp(c, self.first[k], self.first[k] + n_chunks[k] - 1)
 
 
 def _sample_counts(dur: np.ndarray, vs: np.ndarray, ve: np.ndarray, length: np.ndarray,

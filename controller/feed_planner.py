@@ -232,18 +232,19 @@ def _initial_nodes(curve: LimitCurve, v0: float, v1: float, accel: float) -> _No
     staircase of nodes where vlim binds (see _stair_nodes)."""
     v = curve.vlim_mm_s
     # Runs of equal values: a run is a bottom when both neighbouring runs are higher.
-    start = np.flatnonzero(np.r_[True, v[1:] != v[:-1]])
-    end = np.r_[start[1:] - 1, len(v) - 1]
-    rv = np.r_[np.inf, v[start], np.inf]  # a run at an end is a bottom if its neighbour is higher
+    start = np.flatnonzero(np.concatenate(([True], v[1:] != v[:-1])))
+    end = np.append(start[1:] - 1, len(v) - 1)
+    # A run at an end is a bottom if its neighbour is higher.
+    rv = np.concatenate(([np.inf], v[start], [np.inf]))
     bottom = np.flatnonzero((rv[1:-1] < rv[:-2]) & (rv[1:-1] < rv[2:]))
-    idx = np.r_[start[bottom], end[bottom]]
+    idx = np.concatenate((start[bottom], end[bottom]))
     stair, stair_cap = _stair_nodes(curve, v0, v1, accel)
-    cap = np.r_[v[idx], stair_cap]
-    idx = np.r_[idx, stair]
+    cap = np.concatenate((v[idx], stair_cap))
+    idx = np.concatenate((idx, stair))
     keep = (idx > 0) & (idx < len(v) - 1)
     idx, order = np.unique(idx[keep], return_index=True)
-    s = np.r_[0.0, curve.s_mm[idx], curve.s_mm[-1]]
-    cap = np.r_[v0, cap[keep][order], v1]
+    s = np.concatenate(([0.0], curve.s_mm[idx], curve.s_mm[-1:]))
+    cap = np.concatenate(([v0], cap[keep][order], [v1]))
     n = len(s) - 1
     return _Nodes(s, cap, np.zeros(n, np.intp), np.zeros(n, bool))
 

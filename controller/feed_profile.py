@@ -7,6 +7,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from controller.clamp import clamp
+
 # Peak |a| of the quintic transition is (15/8)|dV|/T (at tau = 1/2); T is chosen so it equals Amax.
 PEAK_ACCEL_FACTOR = 15.0 / 8.0
 
@@ -140,10 +142,10 @@ class FeedProfile:
             z = np.zeros_like(t)
             return z, z.copy(), z.copy()
         arr = self._arr
-        t = np.clip(t, arr[0, 0], arr[-1, 0] + arr[-1, 1])
-        k = np.clip(np.searchsorted(arr[:, 0], t, side="right") - 1, 0, len(arr) - 1)
+        t = clamp(t, arr[0, 0], arr[-1, 0] + arr[-1, 1])
+        k = clamp(np.searchsorted(arr[:, 0], t, side="right") - 1, 0, len(arr) - 1)
         t0, dur, s0, vs, ve = (arr[k, j] for j in range(5))
         # Zero-length phases never get selected unless at the very end; guard the division.
-        tau = np.clip((t - t0) / np.where(dur > 0.0, dur, 1.0), 0.0, 1.0)
+        tau = clamp((t - t0) / np.where(dur > 0.0, dur, 1.0), 0.0, 1.0)
         s = s0 + bernstein6_distance(tau, dur, vs, ve)
         return s, quintic_speed(tau, vs, ve), quintic_accel(tau, dur, vs, ve)

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controller.clamp import clamp
 from controller.feed_check import LimitCurve, PhaseArrays
 from controller.feed_profile import (
     bernstein6_weights,
@@ -58,7 +59,7 @@ class SegmentWindows:
         s, v = curve.s_mm, curve.vlim_mm_s
         lo = np.searchsorted(s, a, side="right")
         hi = np.searchsorted(s, b, side="left") - 1
-        seg = np.clip(np.searchsorted(nodes_s, s, side="right") - 1, 0, len(a) - 1)
+        seg = clamp(np.searchsorted(nodes_s, s, side="right") - 1, 0, len(a) - 1)
         # Offsetting each segment by k * big makes one global accumulate restart per segment.
         big = 2.0 * float(v.max()) + 1.0
         off = seg * big
@@ -151,9 +152,9 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     reach = (win.last_reach(vi, allk), win.first_reach(vj, allk))
     # The windows at the highest and at the safe cruise, in one call (numpy's per-call cost).
     n = len(a)
-    both = np.r_[allk, allk]
-    e_both, d_both = _window(win, np.r_[vi, vi], np.r_[vj, vj], np.r_[high, safe], both, accel,
-                             reach)
+    both = np.concatenate((allk, allk))
+    e_both, d_both = _window(win, np.concatenate((vi, vi)), np.concatenate((vj, vj)),
+                             np.concatenate((high, safe)), both, accel, reach)
     e0, d0 = e_both[:n], d_both[:n]
     ok = (e0 <= d0) & ~flat
     todo = np.flatnonzero(~ok & ~flat & (high > safe))
@@ -203,7 +204,7 @@ def _peak_search(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, k: np.ndar
         secant = np.isfinite(gb) & (ga > gb) & (step % 4 != 3)  # every 4th step bisects
         with np.errstate(divide="ignore", invalid="ignore"):
             x = np.where(secant, a + (b - a) * (ga / (ga - gb)), 0.5 * (a + b))
-        x = np.clip(x, a + 0.5 * tol[live], b - 0.5 * tol[live])
+        x = clamp(x, a + 0.5 * tol[live], b - 0.5 * tol[live])
         e, d = _window(win, vi[live], vj[live], x, k[live], accel, reach)
         g = _gap(e, d)
         good = g >= 0.0
@@ -283,9 +284,9 @@ def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray,
 def _shape(vs: np.ndarray, ve: np.ndarray, accel: float) -> tuple[np.ndarray, np.ndarray]:
     """Samples (distance from start, speed) of the transitions vs -> ve, one row each."""
     dur = transition_duration_s(vs, ve, accel)
-    x = np.outer(dur * vs, _SHAPE_A)
-    x += np.outer(dur * ve, _SHAPE_B)
-    v = np.outer(ve - vs, _SHAPE_C)
+    x = (dur * vs)[:, None] * _SHAPE_A
+    x += (dur * ve)[:, None] * _SHAPE_B
+    v = (ve - vs)[:, None] * _SHAPE_C
     v += vs[:, None]
     return x, v
 

@@ -8,6 +8,7 @@ from enum import StrEnum
 import numpy as np
 
 from controller.arclength import INVERSE_TOL_MM
+from controller.clamp import clamp
 from controller.feed_profile import FeedProfile
 from controller.interpolators import ph_interpolate_many, taylor_interpolate
 from controller.path import Path, PieceKind
@@ -68,11 +69,11 @@ def _points_on_curve(path: Path, pieces: list[int], idx: np.ndarray,
     start = np.array([p.s0_mm for p in ps])
     all_rows = np.concatenate(rows)
     k = np.repeat(np.arange(len(ps)), count)
-    local = np.clip(s[all_rows] - start[k], 0.0, length[k])
+    local = clamp(s[all_rows] - start[k], 0.0, length[k])
     u = curve.u_of_s(local + curve_s0[k], INVERSE_TOL_MM)
     lo = np.array([min(p.u0, p.u1) for p in ps])
     hi = np.array([max(p.u0, p.u1) for p in ps])
-    u = np.clip(u, lo[k], hi[k])
+    u = clamp(u, lo[k], hi[k])
     d = curve.evaluate(u, 1)
     return all_rows, d[0], np.arctan2(d[1, :, 1], d[1, :, 0])
 

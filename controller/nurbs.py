@@ -12,6 +12,7 @@ from numpy.typing import ArrayLike
 
 from controller.arclength import ArcLengthTable
 from controller.blocks import NurbsBlock
+from controller.clamp import clamp
 from controller.curves import curvature_derivative_from_derivatives, curvature_from_derivatives
 
 
@@ -78,7 +79,7 @@ class Nurbs:
 
     def _spans(self, u: np.ndarray) -> np.ndarray:
         n, p = self.control_points.shape[0], self.degree
-        return np.clip(np.searchsorted(self.knots, u, side="right") - 1, p, n - 1)
+        return clamp(np.searchsorted(self.knots, u, side="right") - 1, p, n - 1)
 
     def de_boor_derivatives(self, u: ArrayLike, order: int = 2) -> np.ndarray:
         """[A, A', ..., A^(order)] of the homogeneous curve by de Boor, shape (order+1, N, 3)."""

@@ -7,6 +7,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from controller.clamp import clamp
 from controller.curves import Curve
 from controller.sorted_unique import sorted_unique
 
@@ -39,9 +40,9 @@ class Piece:
 
     def u_at(self, s_path_mm: np.ndarray) -> np.ndarray:
         """Exact curve parameters at path arc lengths inside this piece."""
-        local = np.clip(s_path_mm - self.s0_mm, 0.0, self.length_mm)
+        local = clamp(s_path_mm - self.s0_mm, 0.0, self.length_mm)
         u = self.curve.u_of_s(local + self.curve_s0_mm)
-        return np.clip(u, min(self.u0, self.u1), max(self.u0, self.u1))
+        return clamp(u, min(self.u0, self.u1), max(self.u0, self.u1))
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,7 +63,7 @@ class Path:
 
     def piece_index(self, s_mm: np.ndarray) -> np.ndarray:
         """Which piece each arc length falls in (the last piece owns the end point)."""
-        return np.clip(np.searchsorted(self.breaks_mm, s_mm, side="right") - 1, 0,
+        return clamp(np.searchsorted(self.breaks_mm, s_mm, side="right") - 1, 0,
                        len(self.pieces) - 1)
 
     def _per_piece(self, s_mm: np.ndarray, fn) -> np.ndarray:  # noqa: ANN001

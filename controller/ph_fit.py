@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from controller.clamp import clamp
 from controller.curves import Curve
 from controller.ph_quintic import PhQuintic
 
@@ -53,7 +54,7 @@ def foot_distances(curve: Curve, u_start: ArrayLike, u_end: ArrayLike, pts: np.n
         f = np.einsum("ni,ni->n", d[1], diff)
         fp = np.einsum("ni,ni->n", d[1], d[1]) + np.einsum("ni,ni->n", d[2], diff)
         step = np.where(fp > 0, f / np.where(fp > 0, fp, 1.0), 0.0)
-        u_new = np.clip(u - step, lo, hi)
+        u_new = clamp(u - step, lo, hi)
         if not np.any(np.abs(u_new - u) > settled):
             # Settled: the last step moves the foot by ~1e-13 of the range, so the distance
             # at u (already evaluated) is the distance at the foot to well below a nanometre.
