@@ -57,7 +57,9 @@ class FeedOutput:
     result: PlanResult
 
 
-PieceSamples = dict[tuple[int, float, float, int], tuple[np.ndarray, np.ndarray]]
+# Keyed by id(curve), so each entry keeps its curve: a curve freed between dynamics rounds (a
+# blend rebuilt) may hand its id to a new one, which must not find the old one's samples.
+PieceSamples = dict[tuple[int, float, float, int], tuple[object, np.ndarray, np.ndarray]]
 
 
 def _piece_samples(p: Piece, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -91,9 +93,10 @@ def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.nda
     for p in path.pieces:
         n = max(int(np.ceil(p.length_mm / spacing)), 8) + 1
         key = (id(p.curve), p.u0, p.u1, n)
-        if key not in cache:
-            cache[key] = _piece_samples(p, n)
-        s_local, kappa = cache[key]
+        hit = cache.get(key)
+        if hit is None or hit[0] is not p.curve:
+            hit = cache[key] = (p.curve, *_piece_samples(p, n))
+        _, s_local, kappa = hit
         s_parts.append(p.s0_mm + s_local)
         k_parts.append(kappa)
     s, kappa = np.concatenate(s_parts), np.concatenate(k_parts)
