@@ -7,6 +7,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from controller.curves import Curve
 from controller.feed_limits import chord_error_feed_mm_s, corner_feed_mm_s
 from controller.feed_planner import PlanResult, plan_feed
 from controller.feed_profile import FeedPhase, FeedProfile
@@ -59,7 +60,7 @@ class FeedOutput:
 
 # Keyed by id(curve), so each entry keeps its curve: a curve freed between dynamics rounds (a
 # blend rebuilt) may hand its id to a new one, which must not find the old one's samples.
-PieceSamples = dict[tuple[int, float, float, int], tuple[object, np.ndarray, np.ndarray]]
+PieceSamples = dict[tuple[int, float, float, int], tuple[Curve, np.ndarray, np.ndarray]]
 
 
 def _piece_samples(p: Piece, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -34,13 +34,13 @@ M2
 """
 
 
-def _path(curve: LineCurve | ArcCurve) -> Path:
-    return Path(chain([make_piece(PieceKind.LINE, curve, 0.0, 1.0, 0.0, 50.0, 1)]))
+def _path(kind: PieceKind, curve: LineCurve | ArcCurve) -> Path:
+    return Path(chain([make_piece(kind, curve, 0.0, 1.0, 0.0, 50.0, 1)]))
 
 
 def test_a_cache_entry_of_another_curve_under_the_same_id_is_not_used() -> None:
-    line = _path(LineCurve((0.0, 0.0), (10.0, 0.0)))
-    arc = _path(ArcCurve((0.0, 5.0), 5.0, -np.pi / 2, np.pi / 2))
+    line = _path(PieceKind.LINE, LineCurve((0.0, 0.0), (10.0, 0.0)))
+    arc = _path(PieceKind.ARC, ArcCurve((0.0, 5.0), 5.0, -np.pi / 2, np.pi / 2))
     fresh_s, fresh_kappa = limit_samples(line)
     cache: dict = {}
     limit_samples(arc, cache)
