@@ -57,6 +57,9 @@ def test_random_programs_plan_within_the_limits(tmp_path: Path, moves: list, pat
     last = [b for b in blocks if hasattr(b, "end")][-1]
     assert np.array_equal(ref[-1], np.array(last.end[:2]))
     traj = simulate(iter(blocks), CFG, "ph-lookahead")
+    # The second plan of the same program in one process is the same plan (per-run caches and
+    # the planner's memo must not leak state from one plan into the next).
+    assert np.array_equal(traj.ref_mm, ref)
     r = report(traj, str(prog), "ph-lookahead", CFG)
     assert r["max_tangential_accel_mm_s2"] <= IP.max_accel_mm_s2 * (1 + 1e-6)
     assert r["max_feed_mm_s"] <= IP.rapid_feed_mm_s * (1 + 1e-9)
