@@ -58,9 +58,9 @@ class FeedOutput:
     result: PlanResult
 
 
-# Keyed by id(curve), so each entry keeps its curve: a curve freed between dynamics rounds (a
-# blend rebuilt) may hand its id to a new one, which must not find the old one's samples.
-PieceSamples = dict[tuple[int, float, float, int], tuple[Curve, np.ndarray, np.ndarray]]
+# Keyed by the curve itself, not id(curve): an id is only unique among live objects, and a
+# blend freed between dynamics rounds would hand its id (and its samples) to the next one.
+PieceSamples = dict[tuple[Curve, float, float, int], tuple[np.ndarray, np.ndarray]]
 
 
 def _piece_samples(p: Piece, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -93,11 +93,10 @@ def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.nda
     s_parts, k_parts = [], []
     for p in path.pieces:
         n = max(int(np.ceil(p.length_mm / spacing)), 8) + 1
-        key = (id(p.curve), p.u0, p.u1, n)
-        hit = cache.get(key)
-        if hit is None or hit[0] is not p.curve:
-            hit = cache[key] = (p.curve, *_piece_samples(p, n))
-        _, s_local, kappa = hit
+        key = (p.curve, p.u0, p.u1, n)
+        if key not in cache:
+            cache[key] = _piece_samples(p, n)
+        s_local, kappa = cache[key]
         s_parts.append(p.s0_mm + s_local)
         k_parts.append(kappa)
     s, kappa = np.concatenate(s_parts), np.concatenate(k_parts)

@@ -104,21 +104,21 @@ def widen(curves: list[BlockCurve], zones: dict[int, list[CornerZone]], block: i
     return grew
 
 
-# Keyed by id(curve), so each entry keeps its curve (an id is only unique among live objects).
-FitCache = dict[tuple[int, float, float, float], tuple[Curve, list[PhSegment]]]
+# Keyed by the curve itself, not id(curve): an id is only unique among live objects.
+FitCache = dict[tuple[Curve, float, float, float], list[PhSegment]]
 
 
 def _fits(curve: Curve, zones: list[CornerZone], error_limit_mm: float,
           cache: FitCache) -> list[list[PhSegment]]:
     """The PH fit of every zone, the ones not in the cache fitted together in one batch."""
-    keys = [(id(curve), z.u_start, z.u_end, error_limit_mm) for z in zones]
-    missing = [i for i, k in enumerate(keys) if k not in cache or cache[k][0] is not curve]
+    keys = [(curve, z.u_start, z.u_end, error_limit_mm) for z in zones]
+    missing = [i for i, k in enumerate(keys) if k not in cache]
     if missing:
         fitted = fit_zones(curve, [(zones[i].u_start, zones[i].u_end) for i in missing],
                            error_limit_mm)
         for i, segs in zip(missing, fitted, strict=True):
-            cache[keys[i]] = (curve, segs)
-    return [cache[k][1] for k in keys]
+            cache[keys[i]] = segs
+    return [cache[k] for k in keys]
 
 
 def _nurbs_pieces(bc: BlockCurve, block: int, zones: list[CornerZone], error_limit_mm: float,

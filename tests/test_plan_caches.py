@@ -1,4 +1,4 @@
-"""The generator's per-run caches are keyed by id(curve): a recycled id must never hit."""
+"""The generator's per-run caches: a curve's entry can never be found by another curve."""
 
 from __future__ import annotations
 
@@ -38,20 +38,19 @@ def _path(kind: PieceKind, curve: LineCurve | ArcCurve) -> Path:
     return Path(chain([make_piece(kind, curve, 0.0, 1.0, 0.0, 50.0, 1)]))
 
 
-def test_a_cache_entry_of_another_curve_under_the_same_id_is_not_used() -> None:
+def test_the_sample_cache_holds_its_curves_so_their_ids_cannot_be_recycled() -> None:
     line = _path(PieceKind.LINE, LineCurve((0.0, 0.0), (10.0, 0.0)))
-    arc = _path(PieceKind.ARC, ArcCurve((0.0, 5.0), 5.0, -np.pi / 2, np.pi / 2))
     fresh_s, fresh_kappa = limit_samples(line)
     cache: dict = {}
-    limit_samples(arc, cache)
-    (entry,) = cache.values()
-    # The arc's samples under the line's key, as if the arc had been freed and its id handed
-    # to the line.
-    p = line.pieces[0]
-    cache = {(id(p.curve), p.u0, p.u1, len(fresh_s)): entry}
+    limit_samples(_path(PieceKind.ARC, ArcCurve((0.0, 5.0), 5.0, -np.pi / 2, np.pi / 2)), cache)
+    # The arc's path is gone; its curve lives on as the cache's key, so no new curve can take
+    # its id, and the line gets samples of its own.
+    ((arc_curve, *_),) = cache.keys()
+    assert isinstance(arc_curve, ArcCurve)
     s, kappa = limit_samples(line, cache)
     np.testing.assert_array_equal(s, fresh_s)
     np.testing.assert_array_equal(kappa, fresh_kappa)
+    assert len(cache) == 2
 
 
 def test_repeated_plans_of_a_blended_program_are_identical_and_within_limits(
