@@ -38,72 +38,95 @@ class SegmentWindows:
 
     The running maximum of vlim from a segment's start (end) is monotone inside the segment;
     shifted by k * big per segment it is monotone over the whole grid, so one searchsorted
-    answers all queries of all segments at once."""
+    answers all queries of all segments at once. Searches from the start (first_reach) and from
+    the end (last_reach) share one pass (reach_pair): per segment and direction, one row of
+    _ends (near end, far end, vlim there, k * big, the answer when never reached) and of _marks
+    (grid index bounds, the index where the search has not moved, and where it found nothing),
+    forward rows first."""
 
     curve: LimitCurve
     a: np.ndarray
     b: np.ndarray
     va: np.ndarray  # vlim at a and at b
     vb: np.ndarray
-    lo: np.ndarray  # first grid index inside the segment
-    hi: np.ndarray  # last grid index inside (hi < lo: none)
-    n_in: np.ndarray  # grid samples inside
-    kbig: np.ndarray  # k * big per segment
     big: float
     fkey: np.ndarray  # running max from each segment's start, + k * big: non-decreasing
     bkey: np.ndarray  # k * big - running max from each segment's end: non-decreasing
+    _ends: np.ndarray  # (2 n, 6) float, see above
+    _marks: np.ndarray  # (2 n, 4) intp: lowest and highest g, g not moved, g found nothing
 
     @classmethod
     def build(cls, curve: LimitCurve, nodes_s: np.ndarray) -> SegmentWindows:
         a, b = nodes_s[:-1], nodes_s[1:]
         s, v = curve.s_mm, curve.vlim_mm_s
-        lo = np.searchsorted(s, a, side="right")
-        hi = np.searchsorted(s, b, side="left") - 1
+        lo = np.searchsorted(s, a, side="right")  # first grid index inside the segment
+        hi = np.searchsorted(s, b, side="left") - 1  # last one (hi < lo: none)
+        n_in = np.maximum(hi - lo + 1, 0)
         seg = clamp(np.searchsorted(nodes_s, s, side="right") - 1, 0, len(a) - 1)
         # Offsetting each segment by k * big makes one global accumulate restart per segment.
         big = 2.0 * float(v.max()) + 1.0
         off = seg * big
         fkey = np.maximum.accumulate(v + off)
         bkey = -np.maximum.accumulate((v - off)[::-1])[::-1]
-        return cls(curve, a, b, curve.at(a), curve.at(b), lo, hi, np.maximum(hi - lo + 1, 0),
-                   np.arange(len(a)) * big, big, fkey, bkey)
+        va, vb = curve.at(a), curve.at(b)
+        kbig = np.arange(len(a)) * big
+        inf = np.full(len(a), np.inf)
+        ends = np.vstack((np.column_stack((a, b, va, vb, kbig, inf)),
+                          np.column_stack((b, a, vb, va, kbig, -inf))))
+        f_end, b_end = lo + n_in, hi - n_in  # one past the far end of the samples inside
+        marks = np.vstack((np.column_stack((lo, f_end, lo, f_end)),
+                           np.column_stack((b_end, hi, hi, b_end))))
+        return cls(curve, a, b, va, vb, big, fkey, bkey, ends, marks)
+
+    @property
+    def lo(self) -> np.ndarray:
+        """First grid index inside each segment."""
+        return self._marks[:len(self.a), 0]
+
+    @property
+    def hi(self) -> np.ndarray:
+        """Last grid index inside each segment (hi < lo: none)."""
+        return self._marks[len(self.a):, 1]
 
     def take(self, k: np.ndarray) -> SegmentWindows:
         """Segments k alone (their searches still use the whole grid's keys)."""
+        rows = np.concatenate((k, k + len(self.a)))
         return SegmentWindows(self.curve, self.a[k], self.b[k], self.va[k], self.vb[k],
-                              self.lo[k], self.hi[k], self.n_in[k], self.kbig[k], self.big,
-                              self.fkey, self.bkey)
+                              self.big, self.fkey, self.bkey, self._ends[rows],
+                              self._marks[rows])
 
     def first_reach(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
         """Smallest s in segment k with vlim(s) >= level (inf when none); level is (len(k),)
         or (len(k), n) for n levels per segment."""
-        return self._reach(level, k, forward=True)
+        return self.reach_pair(level, level[:0], k, k[:0])[0]
 
     def last_reach(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
         """Largest s in segment k with vlim(s) >= level (-inf when none); shapes as first_reach."""
-        return self._reach(level, k, forward=False)
+        return self.reach_pair(level[:0], level, k[:0], k)[1]
 
-    def _reach(self, level: np.ndarray, k: np.ndarray, forward: bool) -> np.ndarray:
+    def reach_pair(self, up: np.ndarray, down: np.ndarray, k_up: np.ndarray,
+                   k_down: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(first_reach(up, k_up), last_reach(down, k_down)) in one pass (numpy's per-call
+        cost); up and down have the same number of dimensions."""
         s, v = self.curve.s_mm, self.curve.vlim_mm_s
+        n_up = len(k_up)
+        rows = np.concatenate((k_up, k_down + len(self.a)))
+        level = np.concatenate((up, down))
         if level.ndim == 2:
-            k = k[:, None]  # per-segment values broadcast over the levels
-        lo, hi, kbig = self.lo[k], self.hi[k], self.kbig[k]
+            rows = rows[:, None]  # per-segment values broadcast over the levels
+        e, m = self._ends[rows], self._marks[rows]
+        near, far, vn, vf, kbig, none = (e[..., i] for i in range(6))
         # g: the first (last) grid sample inside where the running max reaches level, clamped
         # to one past the far end of the samples inside; p: the point before it (toward near).
-        if forward:
-            near, far, vn, vf = self.a[k], self.b[k], self.va[k], self.vb[k]
-            end = lo + self.n_in[k]
-            g = np.searchsorted(self.fkey, level + kbig, side="left")
-            g = np.minimum(np.maximum(g, lo), end)
-            hit, moved = g < end, g > lo
-            qi, pi = np.minimum(g, len(s) - 1), g - 1
-        else:
-            near, far, vn, vf = self.b[k], self.a[k], self.vb[k], self.va[k]
-            end = hi - self.n_in[k]
-            g = np.searchsorted(self.bkey, kbig - level, side="right") - 1
-            g = np.minimum(np.maximum(g, end), hi)
-            hit, moved = g > end, g < hi
-            qi, pi = g, np.minimum(g + 1, len(s) - 1)
+        g = np.empty(level.shape, np.intp)
+        g[:n_up] = np.searchsorted(self.fkey, level[:n_up] + kbig[:n_up], side="left")
+        g[n_up:] = np.searchsorted(self.bkey, kbig[n_up:] - level[n_up:], side="right") - 1
+        g = np.minimum(np.maximum(g, m[..., 0]), m[..., 1])
+        moved, hit = g != m[..., 2], g != m[..., 3]
+        qi = np.minimum(g, len(s) - 1)
+        pi = g.copy()
+        pi[:n_up] -= 1
+        pi[n_up:] = np.minimum(pi[n_up:] + 1, len(s) - 1)
         # Crossing lies between the previous point (grid sample or the near end) and the hit,
         # or between the last sample (or near end) and the far end.
         p_s = np.where(moved, s[pi], near)
@@ -115,7 +138,8 @@ class SegmentWindows:
         x = p_s + frac * (q_s - p_s)
         below = vn < level
         x = np.where(below, x, near)
-        return np.where(below & ~hit & (vf < level), np.inf if forward else -np.inf, x)
+        x = np.where(below & ~hit & (vf < level), none, x)
+        return x[:n_up], x[n_up:]
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,7 +173,8 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     high = np.maximum(np.minimum(vc, win.curve.span_max(a, b)), low)
     allk = np.arange(len(a))
     # Where waiting at vi may last, where waiting at vj may start: fixed for the segment.
-    reach = (win.last_reach(vi, allk), win.first_reach(vj, allk))
+    to_vj, from_vi = win.reach_pair(vj, vi, allk, allk)
+    reach = (from_vi, to_vj)
     # The windows at the highest and at the safe cruise, in one call (numpy's per-call cost).
     n = len(a)
     both = np.concatenate((allk, allk))
@@ -268,13 +293,14 @@ def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray,
     rest = REST_FRACTION * win.big
     # Acceleration: earliest start with every box corner past where vlim reaches its speed.
     xa, ca = _shape(vi, vp, accel)
-    need = win.first_reach(ca[:, 1:], k) - xa[:, :-1]
+    xd, cd = _shape(vp, vj, accel)
+    first, last = win.reach_pair(ca[:, 1:], cd[:, :-1], k, k)
+    need = first - xa[:, :-1]
     start = np.maximum(a, need.max(axis=1))
     start = np.where((vi <= rest) & (start > a), np.inf, start)  # cannot wait at (near) rest
     start = np.where(start > reach[0][k], np.inf, start)
     # Braking: latest end with every box corner before where vlim falls below its speed.
-    xd, cd = _shape(vp, vj, accel)
-    room = win.last_reach(cd[:, :-1], k) + (sd[:, None] - xd[:, 1:])
+    room = last + (sd[:, None] - xd[:, 1:])
     end = np.minimum(b, room.min(axis=1))
     end = np.where((vj <= rest) & (end < b), -np.inf, end)
     end = np.where(end < reach[1][k], -np.inf, end)
