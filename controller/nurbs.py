@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import bisect
+import math
 from dataclasses import dataclass
 from functools import cached_property
 from math import comb, factorial
@@ -213,6 +214,33 @@ class Nurbs:
         ddx = (a2[0] - 2.0 * w1 * dx - w2 * x) / w
         ddy = (a2[1] - 2.0 * w1 * dy - w2 * y) / w
         return dx, dy, ddx, ddy
+
+    def curvature_derivative_scalar(self, u: float) -> float:
+        """d kappa / du at one u without numpy (curves.curvature_derivative_from_derivatives
+        on the derivatives of derivatives_scalar's Horner scheme, carried one order further)."""
+        breaks, coeffs = self._power_form
+        i = min(max(bisect.bisect_right(breaks, u) - 1, 0), len(breaks) - 1)
+        h = u - breaks[i]
+        a0, a1, a2, a3 = [0.0] * 3, [0.0] * 3, [0.0] * 3, [0.0] * 3
+        for c in coeffs[i]:  # highest power first
+            for j in range(3):
+                a3[j] = a3[j] * h + 3.0 * a2[j]
+                a2[j] = a2[j] * h + 2.0 * a1[j]
+                a1[j] = a1[j] * h + a0[j]
+                a0[j] = a0[j] * h + c[j]
+        w, w1, w2, w3 = a0[2], a1[2], a2[2], a3[2]
+        d0 = [a0[0] / w, a0[1] / w]
+        d1 = [(a1[j] - w1 * d0[j]) / w for j in range(2)]
+        d2 = [(a2[j] - 2.0 * w1 * d1[j] - w2 * d0[j]) / w for j in range(2)]
+        d3 = [(a3[j] - 3.0 * w1 * d2[j] - 3.0 * w2 * d1[j] - w3 * d0[j]) / w for j in range(2)]
+        cross = d1[0] * d2[1] - d1[1] * d2[0]
+        dcross = d1[0] * d3[1] - d1[1] * d3[0]
+        g = d1[0] * d1[0] + d1[1] * d1[1]
+        if g == 0.0:
+            return float(self.curvature_derivative(u)[0])  # the vectorised form's handling
+        dot12 = d1[0] * d2[0] + d1[1] * d2[1]
+        return math.copysign(1.0, cross) * dcross / g**1.5 * (cross != 0.0) \
+            - 3.0 * abs(cross) * dot12 / g**2.5
 
     def point_scalar(self, u: float) -> tuple[float, float]:
         p = self.evaluate(u, 0)[0, 0]
