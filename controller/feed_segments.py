@@ -95,19 +95,13 @@ class SegmentWindows:
                               self.big, self.fkey, self.bkey, self._ends[rows],
                               self._marks[rows])
 
-    def first_reach(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """Smallest s in segment k with vlim(s) >= level (inf when none); level is (len(k),)
-        or (len(k), n) for n levels per segment."""
-        return self.reach_pair(level, level[:0], k, k[:0])[0]
-
-    def last_reach(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """Largest s in segment k with vlim(s) >= level (-inf when none); shapes as first_reach."""
-        return self.reach_pair(level[:0], level, k[:0], k)[1]
-
     def reach_pair(self, up: np.ndarray, down: np.ndarray, k_up: np.ndarray,
                    k_down: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(first_reach(up, k_up), last_reach(down, k_down)) in one pass (numpy's per-call
-        cost); up and down have the same number of dimensions."""
+        """(first_reach, last_reach) in one pass (numpy's per-call cost):
+        - first_reach: per segment k_up, the smallest s in it with vlim(s) >= up (inf if none);
+        - last_reach: per segment k_down, the largest s in it with vlim(s) >= down (-inf if none).
+        A level array is (len(k),) or (len(k), n) for n levels per segment; up and down have the
+        same number of dimensions."""
         s, v = self.curve.s_mm, self.curve.vlim_mm_s
         n_up = len(k_up)
         rows = np.concatenate((k_up, k_down + len(self.a)))

@@ -195,44 +195,36 @@ class Nurbs:
         left = self.knots[p:n]  # span i starts at knots[i]; an empty one is never looked up
         return left.tolist(), self._taylor_table[p:n, ::-1].tolist()  # highest power first
 
-    def derivatives_scalar(self, u: float) -> tuple[float, float, float, float]:
-        """(x', y', x'', y'') at one u without numpy: Horner on the span's power form."""
+    def _derivatives_scalar(self, u: float, order: int) -> list[list[float]]:
+        """[C, C', ..., C^(order)] at one u as [x, y] pairs, without numpy: Horner on the span's
+        power form carrying the homogeneous derivatives, then Leibniz on A = w C."""
         breaks, coeffs = self._power_form
         i = min(max(bisect.bisect_right(breaks, u) - 1, 0), len(breaks) - 1)
         h = u - breaks[i]
-        a0 = [0.0, 0.0, 0.0]
-        a1 = [0.0, 0.0, 0.0]
-        a2 = [0.0, 0.0, 0.0]
+        a = [[0.0, 0.0, 0.0] for _ in range(order + 1)]
         for c in coeffs[i]:  # highest power first
             for j in range(3):
-                a2[j] = a2[j] * h + 2.0 * a1[j]
-                a1[j] = a1[j] * h + a0[j]
-                a0[j] = a0[j] * h + c[j]
-        w, w1, w2 = a0[2], a1[2], a2[2]
-        x, y = a0[0] / w, a0[1] / w
-        dx, dy = (a1[0] - w1 * x) / w, (a1[1] - w1 * y) / w
-        ddx = (a2[0] - 2.0 * w1 * dx - w2 * x) / w
-        ddy = (a2[1] - 2.0 * w1 * dy - w2 * y) / w
-        return dx, dy, ddx, ddy
+                for k in range(order, 0, -1):
+                    a[k][j] = a[k][j] * h + k * a[k - 1][j]
+                a[0][j] = a[0][j] * h + c[j]
+        w = [row[2] for row in a]
+        d: list[list[float]] = []
+        for k in range(order + 1):
+            num = [a[k][0], a[k][1]]
+            for m in range(1, k + 1):
+                for j in range(2):
+                    num[j] -= comb(k, m) * w[m] * d[k - m][j]
+            d.append([num[0] / w[0], num[1] / w[0]])
+        return d
+
+    def derivatives_scalar(self, u: float) -> tuple[float, float, float, float]:
+        """(x', y', x'', y'') at one u without numpy."""
+        _, d1, d2 = self._derivatives_scalar(u, 2)
+        return d1[0], d1[1], d2[0], d2[1]
 
     def curvature_derivative_scalar(self, u: float) -> float:
-        """d kappa / du at one u without numpy (curves.curvature_derivative_from_derivatives
-        on the derivatives of derivatives_scalar's Horner scheme, carried one order further)."""
-        breaks, coeffs = self._power_form
-        i = min(max(bisect.bisect_right(breaks, u) - 1, 0), len(breaks) - 1)
-        h = u - breaks[i]
-        a0, a1, a2, a3 = [0.0] * 3, [0.0] * 3, [0.0] * 3, [0.0] * 3
-        for c in coeffs[i]:  # highest power first
-            for j in range(3):
-                a3[j] = a3[j] * h + 3.0 * a2[j]
-                a2[j] = a2[j] * h + 2.0 * a1[j]
-                a1[j] = a1[j] * h + a0[j]
-                a0[j] = a0[j] * h + c[j]
-        w, w1, w2, w3 = a0[2], a1[2], a2[2], a3[2]
-        d0 = [a0[0] / w, a0[1] / w]
-        d1 = [(a1[j] - w1 * d0[j]) / w for j in range(2)]
-        d2 = [(a2[j] - 2.0 * w1 * d1[j] - w2 * d0[j]) / w for j in range(2)]
-        d3 = [(a3[j] - 3.0 * w1 * d2[j] - 3.0 * w2 * d1[j] - w3 * d0[j]) / w for j in range(2)]
+        """d kappa / du at one u without numpy (as curves.curvature_derivative_from_derivatives)."""
+        _, d1, d2, d3 = self._derivatives_scalar(u, 3)
         cross = d1[0] * d2[1] - d1[1] * d2[0]
         dcross = d1[0] * d3[1] - d1[1] * d3[0]
         g = d1[0] * d1[0] + d1[1] * d1[1]
