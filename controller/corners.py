@@ -137,7 +137,7 @@ SCALAR_BRACKETS = 8  # up to this many peaks, dkappa/du point by point beats one
 
 def _slope_function(curve: Curve, n_brackets: int) -> Callable[[np.ndarray], np.ndarray]:
     """dkappa/du for the root finder: without numpy when there are few brackets and the curve
-    has a scalar form (a numpy evaluation costs ~50 us whatever its size; one point ~4 us)."""
+    has a scalar form (a numpy evaluation costs ~50 us whatever its size; one point ~8 us)."""
     scalar = getattr(curve, "curvature_derivative_scalar", None)
     if scalar is None or n_brackets > SCALAR_BRACKETS:
         return curve.curvature_derivative
