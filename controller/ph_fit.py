@@ -13,6 +13,9 @@ from controller.ph_quintic import PhQuintic
 
 _ERROR_SAMPLES = 257
 _FOOT_NEWTON_SWEEPS = 8
+# Newton converges quadratically: a last step of 1e-6 of the range leaves ~1e-12 after the
+# linear correction below, while the next sweep (a whole curve evaluation) would only confirm it.
+FOOT_SETTLED = 1e-6
 DEFAULT_MAX_DEPTH = 8
 
 
@@ -44,10 +47,10 @@ def _hermite_all(curve: Curve, u_start: np.ndarray, u_end: np.ndarray) -> list[P
 def foot_distances(curve: Curve, u_start: ArrayLike, u_end: ArrayLike, pts: np.ndarray,
                    u_guess: np.ndarray) -> np.ndarray:
     """Distance from each point to the curve on [u_start, u_end] (per point or shared): Newton
-    on C'.(C - P) = 0, stopped once no step moves u by more than ~1e-13 of its range."""
+    on C'.(C - P) = 0, stopped once no step moves u by more than FOOT_SETTLED of its range."""
     u = u_guess.copy()
     lo, hi = np.broadcast_to(u_start, u.shape), np.broadcast_to(u_end, u.shape)
-    settled = 1e-13 * np.maximum(hi - lo, 1e-300)
+    settled = FOOT_SETTLED * np.maximum(hi - lo, 1e-300)
     for _ in range(_FOOT_NEWTON_SWEEPS):
         d = curve.evaluate(u, 2)
         diff = d[0] - pts
@@ -55,9 +58,11 @@ def foot_distances(curve: Curve, u_start: ArrayLike, u_end: ArrayLike, pts: np.n
         fp = np.einsum("ni,ni->n", d[1], d[1]) + np.einsum("ni,ni->n", d[2], diff)
         step = np.where(fp > 0, f / np.where(fp > 0, fp, 1.0), 0.0)
         u_new = clamp(u - step, lo, hi)
-        if not np.any(np.abs(u_new - u) > settled):
-            # Settled: the last step moves the foot by ~1e-13 of the range, so the distance
-            # at u (already evaluated) is the distance at the foot to well below a nanometre.
+        moved = u - u_new
+        if not np.any(np.abs(moved) > settled):
+            # Settled: C(u_new) = C(u) - moved C'(u) up to moved^2 |C''| / 2, ~1e-12 of the
+            # zone's size, so the distance at the foot needs no further curve evaluation.
+            diff -= moved[:, None] * d[1]
             return np.sqrt(np.einsum("ni,ni->n", diff, diff))
         u = u_new
     return np.linalg.norm(curve.evaluate(u, 0)[0] - pts, axis=1)
