@@ -97,8 +97,9 @@ def _refine(t: InverseTable, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray,
     parts (k from the error's h^6 scaling) that are checked in turn."""
     done: list[np.ndarray] = []
     for attempt in range(_PASSES + 1):
-        d0, c0 = _u_derivatives(t.derivs(u0))
-        d1, c1 = _u_derivatives(t.derivs(np.nextafter(u1, -np.inf)))
+        # Both ends in one curve evaluation (the end seen from inside: just below u1).
+        dd, cc = _u_derivatives(t.derivs(np.concatenate((u0, np.nextafter(u1, -np.inf)))))
+        d0, c0, d1, c1 = dd[:u0.size], cc[:u0.size], dd[u0.size:], cc[u0.size:]
         if attempt == _PASSES:  # out of passes: kept, unchecked (u_of_s then uses Newton)
             done.append(np.column_stack((u0, u1, s0, s0 + length, d0, c0, d1, c1,
                                          np.zeros(u0.size))))
