@@ -279,26 +279,26 @@ def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray,
     box corner nearest to vlim (position of one sample, speed of the other) makes a placed
     transition lie under vlim everywhere, not only at the samples. Waiting at vi (vj) before
     (after) the transitions must stay where vlim >= vi (vj): reach = (last_reach(vi),
-    first_reach(vj)) for all segments."""
-    if len(k) == 0:
+    first_reach(vj)) for all segments. The peak search calls this once per step, so both
+    transitions are shaped in one go (rows: accelerations, then brakings)."""
+    n = len(k)
+    if n == 0:
         return np.empty(0), np.empty(0)
     a, b = win.a[k], win.b[k]
-    sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
+    v0, v1 = np.concatenate((vi, vp)), np.concatenate((vp, vj))
+    length = transition_length_mm(v0, v1, accel)
+    x, c = _shape(v0, v1, accel)
+    first, last = win.reach_pair(c[:n, 1:], c[n:, :-1], k, k)
     rest = REST_FRACTION * win.big
-    # Acceleration: earliest start with every box corner past where vlim reaches its speed.
-    xa, ca = _shape(vi, vp, accel)
-    xd, cd = _shape(vp, vj, accel)
-    first, last = win.reach_pair(ca[:, 1:], cd[:, :-1], k, k)
-    need = first - xa[:, :-1]
-    start = np.maximum(a, need.max(axis=1))
-    start = np.where((vi <= rest) & (start > a), np.inf, start)  # cannot wait at (near) rest
-    start = np.where(start > reach[0][k], np.inf, start)
+    # Acceleration: earliest start with every box corner past where vlim reaches its speed;
+    # never a wait at (near) rest, nor one past where vlim stays above vi.
+    start = np.maximum(a, (first - x[:n, :-1]).max(axis=1))
+    start[((vi <= rest) & (start > a)) | (start > reach[0][k])] = np.inf
     # Braking: latest end with every box corner before where vlim falls below its speed.
-    room = last + (sd[:, None] - xd[:, 1:])
-    end = np.minimum(b, room.min(axis=1))
-    end = np.where((vj <= rest) & (end < b), -np.inf, end)
-    end = np.where(end < reach[1][k], -np.inf, end)
-    return start + sa, end - sd
+    sd = length[n:]
+    end = np.minimum(b, (last + (sd[:, None] - x[n:, 1:])).min(axis=1))
+    end[((vj <= rest) & (end < b)) | (end < reach[1][k])] = -np.inf
+    return start + length[:n], end - sd
 
 
 def _shape(vs: np.ndarray, ve: np.ndarray, accel: float) -> tuple[np.ndarray, np.ndarray]:
