@@ -131,3 +131,19 @@ def report(traj: Trajectory, program: str, algorithm: str, config: MachineConfig
         "contour_limit_met": all(r.status == RunStatus.OK for r in traj.runs),
         "planning_cpu_s": traj.planning_cpu_s,
     }
+
+
+def table_iv_failures(results: dict[str, dict], limit_um: float) -> list[str]:
+    """Section 5.1's qualitative result over report() dicts keyed by algorithm: both formula
+    feeds exceed the contour limit, both look-ahead algorithms keep it, and ph-lookahead is the
+    faster of those two. The conditions that do not hold (empty: the result holds)."""
+    err = {a: r["contour_error_um"]["max"] for a, r in results.items()}
+    checks = {
+        "adaptive exceeds the limit": err["adaptive"] > limit_um,
+        "curvature exceeds the limit": err["curvature"] > limit_um,
+        "nurbs-lookahead keeps the limit": err["nurbs-lookahead"] <= limit_um,
+        "ph-lookahead keeps the limit": err["ph-lookahead"] <= limit_um,
+        "ph-lookahead is faster than nurbs-lookahead":
+            results["ph-lookahead"]["motion_time_s"] < results["nurbs-lookahead"]["motion_time_s"],
+    }
+    return [name for name, ok in checks.items() if not ok]

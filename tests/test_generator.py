@@ -15,7 +15,7 @@ from controller.feed_limits import path_feed_limit_mm_s  # noqa: F401  (document
 from controller.generator import Algorithm, generate_reference
 from controller.interpreter import read_program
 from controller.nurbs import Nurbs
-from controller.sim_report import report, simulate
+from controller.sim_report import report, simulate, table_iv_failures
 from controller.time_bound import time_optimal_bound_s
 
 REPO = Path(__file__).resolve().parents[1]
@@ -94,12 +94,8 @@ def _table(program: str) -> dict[str, dict]:
 
 def _assert_table_iv_qualitative_result(t: dict[str, dict]) -> None:
     """Section 5.1: both formula feeds exceed the limit, both look-ahead algorithms keep it, and
-    ph-lookahead is the faster of those two."""
-    assert t["adaptive"]["contour_error_um"]["max"] > LIMIT_UM
-    assert t["curvature"]["contour_error_um"]["max"] > LIMIT_UM
-    assert t["nurbs-lookahead"]["contour_error_um"]["max"] <= LIMIT_UM
-    assert t["ph-lookahead"]["contour_error_um"]["max"] <= LIMIT_UM
-    assert t["ph-lookahead"]["motion_time_s"] < t["nurbs-lookahead"]["motion_time_s"]
+    ph-lookahead is the faster of those two (the check bench/table4_generated.py prints)."""
+    assert table_iv_failures(t, LIMIT_UM) == []
 
 
 def test_table_iv_qualitative_result_on_the_butterfly() -> None:
@@ -189,3 +185,16 @@ def test_reference_outside_travel_is_never_streamed(tmp_path: Path) -> None:
     stream = generate_reference(read_program(str(prog), CFG), CFG)
     with pytest.raises(PlanningError, match=r"line 3: X reference .* outside travel"):
         list(stream)
+
+
+def test_table_iv_failures_names_each_condition_that_does_not_hold() -> None:
+    def row(err_um: float, time_s: float) -> dict:
+        return {"contour_error_um": {"max": err_um}, "motion_time_s": time_s}
+
+    good = {"adaptive": row(107.0, 1.03), "curvature": row(92.0, 1.14),
+            "nurbs-lookahead": row(25.0, 1.79), "ph-lookahead": row(29.2, 1.15)}
+    assert table_iv_failures(good, LIMIT_UM) == []
+    bad = {**good, "curvature": row(28.0, 1.14), "ph-lookahead": row(30.5, 1.80)}
+    assert table_iv_failures(bad, LIMIT_UM) == [
+        "curvature exceeds the limit", "ph-lookahead keeps the limit",
+        "ph-lookahead is faster than nurbs-lookahead"]
