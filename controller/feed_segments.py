@@ -95,16 +95,16 @@ class SegmentWindows:
                               self.big, self.fkey, self.bkey, self._ends[rows],
                               self._marks[rows])
 
-    def reach_pair(self, up: np.ndarray, down: np.ndarray, k_up: np.ndarray,
-                   k_down: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(first_reach, last_reach) in one pass (numpy's per-call cost):
-        - first_reach: per segment k_up, the smallest s in it with vlim(s) >= up (inf if none);
-        - last_reach: per segment k_down, the largest s in it with vlim(s) >= down (-inf if none).
+    def reach_pair(self, up: np.ndarray, down: np.ndarray,
+                   k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(first_reach, last_reach) of segments k in one pass (numpy's per-call cost):
+        - first_reach: per segment, the smallest s in it with vlim(s) >= up (inf if none);
+        - last_reach: per segment, the largest s in it with vlim(s) >= down (-inf if none).
         A level array is (len(k),) or (len(k), n) for n levels per segment; up and down have the
-        same number of dimensions."""
+        same shape."""
         s, v = self.curve.s_mm, self.curve.vlim_mm_s
-        n_up = len(k_up)
-        rows = np.concatenate((k_up, k_down + len(self.a)))
+        n_up = len(k)
+        rows = np.concatenate((k, k + len(self.a)))
         level = np.concatenate((up, down))
         if level.ndim == 2:
             rows = rows[:, None]  # per-segment values broadcast over the levels
@@ -167,7 +167,7 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     high = np.maximum(np.minimum(vc, win.curve.span_max(a, b)), low)
     allk = np.arange(len(a))
     # Where waiting at vi may last, where waiting at vj may start: fixed for the segment.
-    to_vj, from_vi = win.reach_pair(vj, vi, allk, allk)
+    to_vj, from_vi = win.reach_pair(vj, vi, allk)
     reach = (from_vi, to_vj)
     # The windows at the highest and at the safe cruise, in one call (numpy's per-call cost).
     n = len(a)
@@ -288,7 +288,7 @@ def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray,
     v0, v1 = np.concatenate((vi, vp)), np.concatenate((vp, vj))
     length = transition_length_mm(v0, v1, accel)
     x, c = _shape(v0, v1, accel)
-    first, last = win.reach_pair(c[:n, 1:], c[n:, :-1], k, k)
+    first, last = win.reach_pair(c[:n, 1:], c[n:, :-1], k)
     rest = REST_FRACTION * win.big
     # Acceleration: earliest start with every box corner past where vlim reaches its speed;
     # never a wait at (near) rest, nor one past where vlim stays above vi.
