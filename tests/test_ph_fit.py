@@ -6,8 +6,10 @@ import math
 
 import numpy as np
 import pytest
+from gen_programs import lobed_nurbs
 from nc_helpers import read_program_nurbs
 
+import controller.ph_fit as ph_fit
 from controller.corners import detect_sharp_corners
 from controller.nurbs import Nurbs
 from controller.ph_fit import fit_single, fit_zone, foot_distances, zone_fit_report
@@ -67,10 +69,6 @@ def test_foot_distances_settled_early_equal_fully_converged(seed: int,
                                                             ) -> None:
     """The early stop (FOOT_SETTLED plus a linear correction) loses nothing measurable: the
     PH fit samples of every sharp corner of a lobed NURBS, against Newton run to 1e-15."""
-    from gen_programs import lobed_nurbs
-
-    import controller.ph_fit as ph_fit
-
     ctrl, weights, knots = lobed_nurbs(seed)
     curve = Nurbs(3, knots, ctrl, weights)
     zones = detect_sharp_corners(curve, 0.5)
