@@ -177,18 +177,33 @@ def _plan_round(nodes: _Nodes, v: np.ndarray, curve: LimitCurve, accel: float, t
     # path unchanged (a zone before it was widened) keeps its result.
     out[:, _POSITION_COLUMNS] += win.a[:, None]
     sp = memo.planner(win.take(new), vi[new], vj[new], nodes.flat[new], accel)
-    out[new, 0], out[new, 1], out[new, 2] = sp.vp, sp.acc_end, sp.dec_start
+    # New segments get their results as remembered ones would: relative to the segment start
+    # (x - a, then + a) and, where several new ones share a key (a circle's equal segments),
+    # the one row kept for it. Otherwise a plan would differ in the last bits from the same
+    # plan made again with the memo filled.
+    a_new = win.a[new]
+    rep = _representatives([keys[i] for i in new.tolist()])
+    rel = np.empty((new.size, 6))
+    rel[:, 0], rel[:, 1], rel[:, 2] = sp.vp, sp.acc_end - a_new, sp.dec_start - a_new
+    out[new, :3] = rel[rep, :3]
+    out[new, 1:3] += a_new[:, None]
     ph = segment_phases(SegmentPlan(win.a, win.b, vi, vj, out[:, 0], out[:, 1], out[:, 2]),
                         accel)
     viol = check_phases(ph.take(~known[ph.seg]), curve, len(keys), tol)
-    out[new, 3], out[new, 4], out[new, 5] = (viol.excess_mm_s[new], viol.s_mm[new],
-                                              viol.phase_len_mm[new])
-    rel = out[new]
-    rel[:, _POSITION_COLUMNS] -= win.a[new, None]
-    for i, row in zip(new.tolist(), rel.tolist(), strict=True):
+    rel[:, 3], rel[:, 4], rel[:, 5] = (viol.excess_mm_s[new], viol.s_mm[new] - a_new,
+                                       viol.phase_len_mm[new])
+    out[new, 3:] = rel[rep, 3:]
+    out[new, 4] += a_new
+    for i, row in zip(new[rep].tolist(), rel[rep].tolist(), strict=True):
         memo.rows[keys[i]] = tuple(row)
-        memo.key_bytes += len(keys[i][4]) + len(keys[i][5])
+    memo.key_bytes += sum(len(keys[i][4]) + len(keys[i][5]) for i in set(new[rep].tolist()))
     return ph, Violations(out[:, 3], out[:, 4], out[:, 5])
+
+
+def _representatives(keys: list[tuple]) -> np.ndarray:
+    """Per key, the index of its last occurrence (the row the memo keeps for it)."""
+    last = {key: j for j, key in enumerate(keys)}
+    return np.array([last[key] for key in keys], np.intp)
 
 
 _POSITION_COLUMNS = [1, 2, 4]  # acc_end, dec_start, where the excess is: stored relative
