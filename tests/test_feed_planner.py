@@ -86,6 +86,24 @@ def test_constant_limit_reaches_vmax() -> None:
     assert v.max() == pytest.approx(50.0, rel=1e-12)
 
 
+@pytest.mark.parametrize("steepness", [1.03, 1.05, 1.1])
+def test_cruise_under_a_steep_rise_is_raised_in_one_round(steepness: float) -> None:
+    """vlim rising straight in v^2, a little steeper than the quintics' mean 8A/15, from a
+    bottom to the top speed: the first round's cruise under the rise is lifted by a staircase
+    added at once, whose first node keeps the cruise speed, so the second round only confirms
+    (one node per round, the first under vlim, took a repair and a round more)."""
+    accel, h = 2450.0, 0.0124
+    s = np.arange(0.0, 30.0 + h / 2, h)
+    v2 = 26.0**2 + steepness * 16.0 * accel / 15.0 * (s - 2.0)
+    vlim = np.sqrt(np.clip(v2, 26.0**2, 58.333**2))
+    plan = plan_feed(s, vlim, accel, 13.0, 0.0)
+    assert plan.result is PlanResult.OK and plan.rounds == 2
+    assert_profile_valid(s, vlim, accel, 13.0, 0.0, plan.profile)
+    # The staircase follows the rise: past it the plan cruises at the top speed.
+    _, pos, v, _ = _dense(plan.profile)
+    assert v[(pos > 4.0) & (pos < 25.0)].min() == pytest.approx(58.333, rel=1e-9)
+
+
 def test_start_above_limit() -> None:
     s = np.linspace(0.0, 10.0, 101)
     assert plan_feed(s, np.full_like(s, 10.0), 1000.0, 11.0).result is PlanResult.START_TOO_FAST
