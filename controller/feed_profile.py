@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -101,11 +102,11 @@ class FeedProfile:
     """A chain of feed phases, contiguous in time and arc length, C2 at the joints."""
 
     phases: tuple[FeedPhase, ...]
-    _arr: np.ndarray = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self) -> None:
-        arr = np.array(self.phases, dtype=float).reshape(-1, 5)
-        object.__setattr__(self, "_arr", arr)
+    @cached_property
+    def _arr(self) -> np.ndarray:
+        """The phases as rows (t0, duration, s0, vs, ve): what evaluation works on."""
+        return np.array(self.phases, dtype=float).reshape(-1, 5)
 
     @classmethod
     def from_arrays(cls, duration_s: np.ndarray, s0_mm: np.ndarray, v_start_mm_s: np.ndarray,
@@ -113,10 +114,10 @@ class FeedProfile:
         """Build from per-phase arrays; start times are the running sum of durations."""
         dur = np.asarray(duration_s, float)
         t0 = t0_s + np.concatenate(([0.0], np.cumsum(dur)[:-1])) if dur.size else dur
-        rows = zip(t0.tolist(), dur.tolist(), np.asarray(s0_mm, float).tolist(),
-                   np.asarray(v_start_mm_s, float).tolist(),
-                   np.asarray(v_end_mm_s, float).tolist(), strict=True)
-        return cls(tuple(map(FeedPhase._make, rows)))
+        arr = np.column_stack((t0, dur, s0_mm, v_start_mm_s, v_end_mm_s)).astype(float)
+        profile = cls(tuple(map(FeedPhase._make, arr.tolist())))
+        profile.__dict__["_arr"] = arr  # the rows _arr would build from the tuples, as they are
+        return profile
 
     @property
     def t0_s(self) -> float:

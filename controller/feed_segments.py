@@ -38,22 +38,27 @@ class SegmentWindows:
 
     The running maximum of vlim from a segment's start (end) is monotone inside the segment;
     shifted by k * big per segment it is monotone over the whole grid, so one searchsorted
-    answers all queries of all segments at once. Searches from the start (first_reach) and from
-    the end (last_reach) share one pass (reach_pair): per segment and direction, one row of
-    _ends (near end, far end, vlim there, k * big, the answer when never reached) and of _marks
-    (grid index bounds, the index where the search has not moved, and where it found nothing),
-    forward rows first."""
+    answers all queries of all segments at once. Each segment has its own slots: its start a,
+    the grid samples inside, its end b, with keys that the searches never stop at (a from the
+    start, b from the end) or always stop at (b from the start, a from the end). The crossing
+    then always lies between a slot and its neighbour: no case for a search that did not move
+    or found nothing inside. Searches from the start (first_reach) and from the end
+    (last_reach) share one pass (reach_pair): per segment and direction, one row of _ends (near
+    end, vlim at the near and far ends, k * big, the answer when never reached) and of _nohit
+    (the slot a search ends at when no sample reaches the level), forward rows first."""
 
     curve: LimitCurve
     a: np.ndarray
     b: np.ndarray
-    va: np.ndarray  # vlim at a and at b
-    vb: np.ndarray
-    big: float
+    lo: np.ndarray  # first grid index inside each segment
+    hi: np.ndarray  # last grid index inside each segment (hi < lo: none)
+    big: float  # above twice any vlim: levels (0 <= level <= max vlim) stay in their segment
+    s_slot: np.ndarray  # per slot: position and vlim
+    v_slot: np.ndarray
     fkey: np.ndarray  # running max from each segment's start, + k * big: non-decreasing
     bkey: np.ndarray  # k * big - running max from each segment's end: non-decreasing
-    _ends: np.ndarray  # (2 n, 6) float, see above
-    _marks: np.ndarray  # (2 n, 4) intp: lowest and highest g, g not moved, g found nothing
+    _ends: np.ndarray  # (2 n, 5) float, see above
+    _nohit: np.ndarray  # (2 n,) intp
 
     @classmethod
     def build(cls, curve: LimitCurve, nodes_s: np.ndarray) -> SegmentWindows:
@@ -69,31 +74,31 @@ class SegmentWindows:
         fkey = np.maximum.accumulate(v + off)
         bkey = -np.maximum.accumulate((v - off)[::-1])[::-1]
         va, vb = curve.at(a), curve.at(b)
-        kbig = np.arange(len(a)) * big
-        inf = np.full(len(a), np.inf)
-        ends = np.vstack((np.column_stack((a, b, va, vb, kbig, inf)),
-                          np.column_stack((b, a, vb, va, kbig, -inf))))
-        f_end, b_end = lo + n_in, hi - n_in  # one past the far end of the samples inside
-        marks = np.vstack((np.column_stack((lo, f_end, lo, f_end)),
-                           np.column_stack((b_end, hi, hi, b_end))))
-        return cls(curve, a, b, va, vb, big, fkey, bkey, ends, marks)
-
-    @property
-    def lo(self) -> np.ndarray:
-        """First grid index inside each segment."""
-        return self._marks[:len(self.a), 0]
-
-    @property
-    def hi(self) -> np.ndarray:
-        """Last grid index inside each segment (hi < lo: none)."""
-        return self._marks[len(self.a):, 1]
+        # Slots of segment k: first[k] (a), the samples inside, last[k] (b).
+        size = n_in + 2
+        last = np.cumsum(size) - 1
+        first = last - (size - 1)
+        src = clamp(np.repeat(lo - 1 - first, size) + np.arange(int(last[-1]) + 1), 0,
+                    len(s) - 1)
+        k = np.arange(len(a), dtype=float)
+        below, above = (k - 0.5) * big, (k + 0.5) * big  # outside every level's reach
+        s_slot, v_slot, f_slot, b_slot = s[src], v[src], fkey[src], bkey[src]
+        s_slot[first], s_slot[last] = a, b
+        v_slot[first], v_slot[last] = va, vb
+        f_slot[first], f_slot[last] = below, above
+        b_slot[first], b_slot[last] = below, above
+        kbig = k * big
+        ends = np.vstack((np.column_stack((a, va, vb, kbig, np.full(len(a), np.inf))),
+                          np.column_stack((b, vb, va, kbig, np.full(len(a), -np.inf)))))
+        return cls(curve, a, b, lo, hi, big, s_slot, v_slot, f_slot, b_slot, ends,
+                   np.concatenate((last, first)))
 
     def take(self, k: np.ndarray) -> SegmentWindows:
         """Segments k alone (their searches still use the whole grid's keys)."""
         rows = np.concatenate((k, k + len(self.a)))
-        return SegmentWindows(self.curve, self.a[k], self.b[k], self.va[k], self.vb[k],
-                              self.big, self.fkey, self.bkey, self._ends[rows],
-                              self._marks[rows])
+        return SegmentWindows(self.curve, self.a[k], self.b[k], self.lo[k], self.hi[k],
+                              self.big, self.s_slot, self.v_slot, self.fkey, self.bkey,
+                              self._ends[rows], self._nohit[rows])
 
     def reach_pair(self, up: np.ndarray, down: np.ndarray,
                    k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -101,38 +106,31 @@ class SegmentWindows:
         - first_reach: per segment, the smallest s in it with vlim(s) >= up (inf if none);
         - last_reach: per segment, the largest s in it with vlim(s) >= down (-inf if none).
         A level array is (len(k),) or (len(k), n) for n levels per segment; up and down have the
-        same shape."""
-        s, v = self.curve.s_mm, self.curve.vlim_mm_s
+        same shape; levels lie in [0, max vlim]."""
+        s, v = self.s_slot, self.v_slot
         n_up = len(k)
         rows = np.concatenate((k, k + len(self.a)))
         level = np.concatenate((up, down))
         if level.ndim == 2:
             rows = rows[:, None]  # per-segment values broadcast over the levels
-        e, m = self._ends[rows], self._marks[rows]
-        near, far, vn, vf, kbig, none = (e[..., i] for i in range(6))
-        # g: the first (last) grid sample inside where the running max reaches level, clamped
-        # to one past the far end of the samples inside; p: the point before it (toward near).
+        e, nohit = self._ends[rows], self._nohit[rows]
+        near, vn, vf, kbig, none = (e[..., i] for i in range(5))
+        # g: the first (last) slot where the running max reaches level, b (a) when no sample
+        # inside does; p: the slot before it (toward near).
         g = np.empty(level.shape, np.intp)
         g[:n_up] = np.searchsorted(self.fkey, level[:n_up] + kbig[:n_up], side="left")
         g[n_up:] = np.searchsorted(self.bkey, kbig[n_up:] - level[n_up:], side="right") - 1
-        g = np.minimum(np.maximum(g, m[..., 0]), m[..., 1])
-        moved, hit = g != m[..., 2], g != m[..., 3]
-        qi = np.minimum(g, len(s) - 1)
-        pi = g.copy()
-        pi[:n_up] -= 1
-        pi[n_up:] = np.minimum(pi[n_up:] + 1, len(s) - 1)
-        # Crossing lies between the previous point (grid sample or the near end) and the hit,
-        # or between the last sample (or near end) and the far end.
-        p_s = np.where(moved, s[pi], near)
-        p_v = np.where(moved, v[pi], vn)
-        q_s = np.where(hit, s[qi], far)
-        q_v = np.where(hit, v[qi], vf)
+        p = g.copy()
+        p[:n_up] -= 1
+        p[n_up:] += 1
+        p_v, q_v = v[p], v[g]
         dv = q_v - p_v
         frac = np.minimum(np.maximum((level - p_v) / np.where(dv != 0.0, dv, 1.0), 0.0), 1.0)
-        x = p_s + frac * (q_s - p_s)
+        p_s = s[p]
+        x = p_s + frac * (s[g] - p_s)
         below = vn < level
         x = np.where(below, x, near)
-        x = np.where(below & ~hit & (vf < level), none, x)
+        x = np.where(below & (g == nohit) & (vf < level), none, x)
         return x[:n_up], x[n_up:]
 
 

@@ -72,7 +72,7 @@ def _piece_samples(p: Piece, n: int) -> tuple[np.ndarray, np.ndarray]:
     speed = np.sqrt(speed2)
     with np.errstate(divide="ignore", invalid="ignore"):
         kappa = np.abs(d[1, :, 0] * d[2, :, 1] - d[1, :, 1] * d[2, :, 0]) / (speed2 * speed)
-    kappa = np.nan_to_num(kappa, nan=0.0, posinf=0.0)
+    kappa = np.where(np.isfinite(kappa), kappa, 0.0)  # |C'| = 0: nan or +inf (nan_to_num: slower)
     s = np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(u))))
     if s[-1] > 0:
         s *= p.length_mm / s[-1]
