@@ -69,6 +69,11 @@ class Nurbs:
         return float(self.knots[-self.degree - 1])
 
     @cached_property
+    def _polynomial(self) -> bool:
+        """All weights 1 (a B-spline): no division by w, whose Horner values are then exact."""
+        return bool(np.all(self.weights == 1.0))
+
+    @cached_property
     def _homogeneous(self) -> list[np.ndarray]:
         """Homogeneous control points (w x, w y, w) and those of each derivative curve."""
         pw = np.column_stack((self.control_points * self.weights[:, None], self.weights))
@@ -110,12 +115,15 @@ class Nurbs:
 
     @cached_property
     def _taylor_rows(self) -> np.ndarray:
-        """_taylor_table as (n, (p+1)*3): gathering whole rows by span is several times faster
-        than gathering along a last axis."""
-        return np.ascontiguousarray(self._taylor_table.reshape(self._taylor_table.shape[0], -1))
+        """_taylor_table as (n, (p+1)*3), x and y only, (n, (p+1)*2), when the curve is
+        polynomial: gathering whole rows by span is several times faster than gathering along a
+        last axis."""
+        table = self._taylor_table[:, :, :2] if self._polynomial else self._taylor_table
+        return np.ascontiguousarray(table.reshape(table.shape[0], -1))
 
     def _homogeneous_rows(self, u: ArrayLike, order: int) -> np.ndarray:
-        """[A, A', ..., A^(order)] as (order+1, 3, N): x, y and w rows, each contiguous.
+        """[A, A', ..., A^(order)] as (order+1, 3, N): x, y and w rows, each contiguous (x and y
+        alone, (order+1, 2, N), when the curve is polynomial: w = 1).
 
         One pass of Horner's scheme over the span's Taylor coefficients carries the value and
         the derivatives divided by j! (the scheme derivatives_scalar uses): d_j = d_j h + d_(j-1)
@@ -124,10 +132,11 @@ class Nurbs:
         uu = np.atleast_1d(np.asarray(u, dtype=float))
         span = self._spans(uu)
         p = self.degree
-        coef = self._taylor_rows.take(span, axis=0).T.reshape(p + 1, 3, uu.size)
+        dims = 2 if self._polynomial else 3
+        coef = self._taylor_rows.take(span, axis=0).T.reshape(p + 1, dims, uu.size)
         h = uu - self.knots.take(span)
         top = min(order, p)
-        out = np.empty((order + 1, 3, uu.size))
+        out = np.empty((order + 1, dims, uu.size))
         out[p + 1:] = 0.0  # derivatives above the degree (empty unless order > p)
         out[0] = coef[p]
         for k in range(p - 1, -1, -1):
@@ -145,11 +154,18 @@ class Nurbs:
 
     def homogeneous_derivatives(self, u: ArrayLike, order: int = 2) -> np.ndarray:
         """[A, A', ..., A^(order)] of the homogeneous curve, shape (order+1, N, 3)."""
-        return self._homogeneous_rows(u, order).transpose(0, 2, 1)
+        a = self._homogeneous_rows(u, order)
+        if self._polynomial:
+            w = np.zeros((order + 1, 1, a.shape[2]))
+            w[0] = 1.0
+            a = np.concatenate((a, w), axis=1)
+        return a.transpose(0, 2, 1)
 
     def evaluate(self, u: ArrayLike, order: int = 2) -> np.ndarray:
         """[C, C', ..., C^(order)] of shape (order+1, N, 2), by Leibniz on A = w C."""
         a = self._homogeneous_rows(u, order)
+        if self._polynomial:  # w = 1, w' = w'' = ... = 0: C^(k) = A^(k)
+            return a.transpose(0, 2, 1)
         w = a[:, 2]
         inv_w = 1.0 / w[0]
         c = np.empty((order + 1, 2, a.shape[2]))

@@ -26,7 +26,9 @@ def random_nurbs(draw: st.DrawFn) -> Nurbs:
     if inner.size >= 2 and draw(st.booleans()):
         inner[1] = inner[0]  # a double knot: lower continuity inside
     knots = np.concatenate((np.zeros(p + 1), inner, np.ones(p + 1))) * 7.0 + 2.0
-    return Nurbs(p, knots, rng.uniform(-50, 50, (n, 2)), rng.uniform(0.2, 5.0, n))
+    # Weights all 1 (a polynomial B-spline, as most CAM output) take evaluation's shortcut.
+    weights = np.ones(n) if draw(st.booleans()) else rng.uniform(0.2, 5.0, n)
+    return Nurbs(p, knots, rng.uniform(-50, 50, (n, 2)), weights)
 
 
 def scipy_rational(c: Nurbs, u: np.ndarray, order: int) -> np.ndarray:
@@ -55,6 +57,15 @@ def test_evaluate_matches_scipy(c: Nurbs, order: int) -> None:
     ours, ref = c.evaluate(u, order), scipy_rational(c, u, order)
     for k in range(order + 1):
         assert rel_err(ours[k], ref[k]) < 1e-12
+
+
+@settings(max_examples=20, deadline=None)
+@given(random_nurbs(), st.integers(0, 4))
+def test_homogeneous_derivatives_match_de_boor(c: Nurbs, order: int) -> None:
+    u = np.concatenate((np.linspace(c.u_start, c.u_end, 23), c.knots[c.degree:-c.degree]))
+    ours, ref = c.homogeneous_derivatives(u, order), c.de_boor_derivatives(u, order)
+    assert ours.shape == ref.shape == (order + 1, u.size, 3)
+    assert rel_err(ours, ref) < 1e-12
 
 
 @settings(max_examples=25, deadline=None)
