@@ -213,16 +213,20 @@ class Nurbs:
 
     def _derivatives_scalar(self, u: float, order: int) -> list[list[float]]:
         """[C, C', ..., C^(order)] at one u as [x, y] pairs, without numpy: Horner on the span's
-        power form carrying the homogeneous derivatives, then Leibniz on A = w C."""
+        power form carrying the homogeneous derivatives, then Leibniz on A = w C (w = 1, x and y
+        alone, when the curve is polynomial)."""
         breaks, coeffs = self._power_form
         i = min(max(bisect.bisect_right(breaks, u) - 1, 0), len(breaks) - 1)
         h = u - breaks[i]
+        dims = 2 if self._polynomial else 3
         a = [[0.0, 0.0, 0.0] for _ in range(order + 1)]
         for c in coeffs[i]:  # highest power first
-            for j in range(3):
+            for j in range(dims):
                 for k in range(order, 0, -1):
                     a[k][j] = a[k][j] * h + k * a[k - 1][j]
                 a[0][j] = a[0][j] * h + c[j]
+        if dims == 2:  # w = 1: no quotient rule
+            return [row[:2] for row in a]
         w = [row[2] for row in a]
         d: list[list[float]] = []
         for k in range(order + 1):

@@ -55,8 +55,12 @@ def rel_err(a: np.ndarray, b: np.ndarray) -> float:
 def test_evaluate_matches_scipy(c: Nurbs, order: int) -> None:
     u = np.concatenate((np.linspace(c.u_start, c.u_end, 41), c.knots[c.degree:-c.degree]))
     ours, ref = c.evaluate(u, order), scipy_rational(c, u, order)
+    span = c.u_end - c.u_start
     for k in range(order + 1):
-        assert rel_err(ours[k], ref[k]) < 1e-12
+        # Relative to the curve's scale too: above a polynomial curve's degree the derivative
+        # is 0 exactly here, and SciPy's weight derivatives leave round-off around it.
+        scale = max(np.abs(ref[k]).max(), np.abs(ref[0]).max() / span**k)
+        assert np.abs(ours[k] - ref[k]).max() < 1e-12 * scale
 
 
 @settings(max_examples=20, deadline=None)
