@@ -114,7 +114,7 @@ class FeedProfile:
         """Build from per-phase arrays; start times are the running sum of durations."""
         dur = np.asarray(duration_s, float)
         t0 = t0_s + np.concatenate(([0.0], np.cumsum(dur)[:-1])) if dur.size else dur
-        arr = np.column_stack((t0, dur, s0_mm, v_start_mm_s, v_end_mm_s)).astype(float)
+        arr = np.column_stack((t0, dur, s0_mm, v_start_mm_s, v_end_mm_s)).astype(float, copy=False)
         profile = cls(tuple(map(FeedPhase._make, arr.tolist())))
         profile.__dict__["_arr"] = arr  # the rows _arr would build from the tuples, as they are
         return profile

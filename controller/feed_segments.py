@@ -74,7 +74,8 @@ class SegmentWindows:
         fkey = np.maximum.accumulate(v + off)
         bkey = -np.maximum.accumulate((v - off)[::-1])[::-1]
         va, vb = curve.at(a), curve.at(b)
-        # Slots of segment k: first[k] (a), the samples inside, last[k] (b).
+        # Slots of segment k: first[k] (a), the samples inside, last[k] (b). The end slots'
+        # sources (the samples either side) may lie off the grid; they are overwritten below.
         size = n_in + 2
         last = np.cumsum(size) - 1
         first = last - (size - 1)

@@ -162,7 +162,8 @@ class Nurbs:
         return a.transpose(0, 2, 1)
 
     def evaluate(self, u: ArrayLike, order: int = 2) -> np.ndarray:
-        """[C, C', ..., C^(order)] of shape (order+1, N, 2), by Leibniz on A = w C."""
+        """[C, C', ..., C^(order)] of shape (order+1, N, 2), by Leibniz on A = w C (A itself
+        when the curve is polynomial)."""
         a = self._homogeneous_rows(u, order)
         if self._polynomial:  # w = 1, w' = w'' = ... = 0: C^(k) = A^(k)
             return a.transpose(0, 2, 1)
