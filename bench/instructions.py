@@ -47,7 +47,7 @@ def _instructions(program: str, plans: int, script: Path, out_dir: Path) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("program", nargs="?", default="nc_programs/naca2415.nc")
+    ap.add_argument("program", nargs="?", type=Path, default=REPO / "nc_programs/naca2415.nc")
     ap.add_argument("--plans", type=int, default=3, help="plans counted after the first")
     args = ap.parse_args(argv)
     if shutil.which("valgrind") is None:
@@ -56,9 +56,10 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         script = Path(tmp) / "plan.py"
         script.write_text(_PLAN)
-        one = _instructions(args.program, 1, script, Path(tmp))
-        more = _instructions(args.program, 1 + args.plans, script, Path(tmp))
-    print(f"{args.program}: {(more - one) / args.plans / 1e6:.1f} M instructions per cold "
+        program = str(args.program.resolve())  # the runs start in the repo, not here
+        one = _instructions(program, 1, script, Path(tmp))
+        more = _instructions(program, 1 + args.plans, script, Path(tmp))
+    print(f"{args.program.name}: {(more - one) / args.plans / 1e6:.1f} M instructions per cold "
           f"ph-lookahead plan (callgrind, {args.plans} plans after the first)")
     return 0
 
