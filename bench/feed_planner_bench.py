@@ -8,9 +8,9 @@ import sys
 import time
 from pathlib import Path
 
-from controller.feed_limits import path_feed_limit_mm_s
-from controller.feed_planner import clear_memo, plan_feed
-from controller.time_bound import time_optimal_bound_s
+from controller.generator.feed.limits import path_feed_limit_mm_s
+from controller.generator.feed.planner import clear_memo, plan_feed
+from controller.generator.feed.time_bound import time_optimal_bound_s
 
 HERE = Path(__file__).resolve().parent
 

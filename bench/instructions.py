@@ -22,9 +22,9 @@ REPO = Path(__file__).resolve().parents[1]
 _PLAN = """
 import sys
 from controller.config import load_config
-from controller.feed_planner import clear_memo
-from controller.generator import plan_program
-from controller.interpreter import read_program
+from controller.generator.feed.planner import clear_memo
+from controller.generator.plan import plan_program
+from controller.interpreter.program import read_program
 config = load_config()
 for _ in range(int(sys.argv[2])):
     clear_memo()

@@ -23,10 +23,11 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # run from a checkout without installing
 
-from controller.interpolators import feed_fluctuation, ph_interpolate, taylor_interpolate  # noqa: E402
-from controller.nurbs import Nurbs  # noqa: E402
-from controller.nurbs_program import program_nurbs  # noqa: E402
-from controller.ph_fit import PhSegment, fit_zone  # noqa: E402
+from controller.generator.ph.fit import PhSegment, fit_zone  # noqa: E402
+from controller.geometry.nurbs import Nurbs  # noqa: E402
+from controller.geometry.ph_quintic import ph_interpolate  # noqa: E402
+from controller.geometry.taylor import feed_fluctuation, taylor_interpolate  # noqa: E402
+from controller.interpreter.program import program_nurbs  # noqa: E402
 
 V_MM_S = 58.33
 T_S = 1e-3

@@ -13,9 +13,9 @@ import sys
 import tempfile
 import time
 
-from controller.check_cmd import check_program
 from controller.config import load_config
-from controller.interpreter import read_program
+from controller.interpreter.program import read_program
+from controller.operator.check_cmd import check_program
 
 
 def write_program(path: str, n_lines: int) -> None:

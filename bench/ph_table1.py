@@ -16,9 +16,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # run from a checkout without installing
 
-from controller.corners import detect_sharp_corners  # noqa: E402
-from controller.nurbs_program import program_nurbs  # noqa: E402
-from controller.ph_fit import fit_zone, zone_fit_report  # noqa: E402
+from controller.generator.corners.detection import detect_sharp_corners  # noqa: E402
+from controller.generator.ph.fit import fit_zone, zone_fit_report  # noqa: E402
+from controller.interpreter.program import program_nurbs  # noqa: E402
 
 KAPPA_TH = 2450.0 / (3500.0 / 60.0) ** 2
 E_MM = 1e-3

@@ -39,7 +39,7 @@ def stop_load(procs: list[subprocess.Popen]) -> None:
 
 
 def one_run(program: str) -> dict[str, Any]:
-    cmd = [sys.executable, "-m", "controller.cli", "run", program, "--json"]
+    cmd = [sys.executable, "-m", "controller.operator.cli", "run", program, "--json"]
     launched = time.time()
     out = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
     events = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]

@@ -20,12 +20,12 @@ sys.path.insert(0, str(REPO / "bench"))
 from time_bound import arc_length_samples  # noqa: E402
 
 from controller.config import load_config  # noqa: E402
-from controller.feed_planner import clear_memo  # noqa: E402
-from controller.generator import Algorithm  # noqa: E402
-from controller.interpreter import read_program  # noqa: E402
-from controller.sim_report import report, simulate  # noqa: E402
-from controller.simulate_cmd import TABLE_ROWS, format_table  # noqa: E402
-from controller.time_bound import time_optimal_bound_s  # noqa: E402
+from controller.generator.feed.planner import clear_memo  # noqa: E402
+from controller.generator.feed.time_bound import time_optimal_bound_s  # noqa: E402
+from controller.generator.plan import Algorithm  # noqa: E402
+from controller.interpreter.program import read_program  # noqa: E402
+from controller.operator.simulate_cmd import TABLE_ROWS, format_table  # noqa: E402
+from controller.runtime.simulation import report, simulate  # noqa: E402
 
 PROGRAMS = ("nc_programs/naca2415.nc", "nc_programs/naca2415_loop.nc", "nc_programs/butterfly.nc")
 PAPER_TABLE_IV = {  # the paper's simulated Table IV (airfoil), same row order as TABLE_ROWS

@@ -19,9 +19,9 @@ sys.path.insert(0, str(REPO / "tests"))
 from gen_programs import generated_program  # noqa: E402
 
 from controller.config import load_config  # noqa: E402
-from controller.generator import Algorithm  # noqa: E402
-from controller.interpreter import read_program  # noqa: E402
-from controller.sim_report import report, simulate, table_iv_failures  # noqa: E402
+from controller.generator.plan import Algorithm  # noqa: E402
+from controller.interpreter.program import read_program  # noqa: E402
+from controller.runtime.simulation import report, simulate, table_iv_failures  # noqa: E402
 
 NAMES = ("naca0012_20", "naca0012_30", "naca2415_20", "naca2415_25", "naca2415_30",
          "naca2415_35", "naca4412_40", "naca6409_30", "lobed_1", "lobed_2", "lobed_3",

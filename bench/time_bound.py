@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from scipy.interpolate import BSpline
 
-from controller.time_bound import time_optimal_bound_s
+from controller.generator.feed.time_bound import time_optimal_bound_s
 
 REPO = Path(__file__).resolve().parents[1]
 PROGRAMS = ("nc_programs/naca2415.nc", "nc_programs/butterfly.nc")

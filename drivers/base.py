@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import enum
 from abc import ABC, abstractmethod
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -156,38 +155,3 @@ class Drive(ABC):
 
     def _close(self) -> None:  # noqa: B027 (optional hook: most backends have nothing to close)
         return None
-
-
-_BACKENDS: dict[str, Callable[..., Drive]] = {}
-
-
-def register_backend(name: str, factory: Callable[..., Drive]) -> None:
-    """Make a backend available to open_drive() under `name` (config drive.backend)."""
-    _BACKENDS[name] = factory
-
-
-def backend_names() -> tuple[str, ...]:
-    _load_builtin_backends()
-    return tuple(sorted(_BACKENDS))
-
-
-def make_drive(config: MachineConfig, **overrides: Any) -> Drive:
-    """Construct (not open) the configured backend; overrides beat config drive.options."""
-    _load_builtin_backends()
-    name = config.drive.backend
-    if name not in _BACKENDS:
-        raise DriveError(f"drive backend {name!r} is not available "
-                         f"(have: {', '.join(sorted(_BACKENDS))})")
-    options = dict(config.drive.options) | overrides
-    return _BACKENDS[name](config, **options)
-
-
-def open_drive(config: MachineConfig, **overrides: Any) -> Drive:
-    drive = make_drive(config, **overrides)
-    drive.open()
-    return drive
-
-
-def _load_builtin_backends() -> None:
-    # Imported lazily so that drivers.base does not depend on its backends.
-    import drivers.sim  # noqa: F401

@@ -17,9 +17,5 @@ class LostCommunicationError(DriveError):
     """The card stopped answering the host."""
 
 
-class FollowingErrorTrip(DriveError):
-    """Commanded minus encoder position exceeded the LinuxCNC limit on one axis."""
-
-
 class BadFrameError(DriveError):
     """The host sent a frame the card cannot execute (too many pulses, FIFO overflow, shape)."""

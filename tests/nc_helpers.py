@@ -6,9 +6,8 @@ from pathlib import Path
 
 from controller.blocks import NcBlock
 from controller.config import MachineConfig, load_config
-from controller.interpreter import read_program
-from controller.nurbs import Nurbs
-from controller.nurbs_program import program_nurbs
+from controller.geometry.nurbs import Nurbs
+from controller.interpreter.program import program_nurbs, read_program
 
 XY_TABLE = load_config("xy_table")
 XYZ_MILL = load_config("xyz_mill")

@@ -6,7 +6,7 @@ import numpy as np
 
 from controller.config import MachineConfig, load_config
 from drivers.base import Feedback
-from drivers.sim import SimCard
+from drivers.sim.card import SimCard
 
 
 def xy_config() -> MachineConfig:

@@ -14,14 +14,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
 import scipy
 
-from controller.cli import main
 from controller.config import load_config
-from controller.generator import Algorithm
-from controller.interpreter import read_program
-from controller.sim_report import simulate
+from controller.generator.plan import Algorithm
+from controller.interpreter.program import read_program
+from controller.operator.cli import main
+from controller.runtime.simulation import simulate
 
 REPO = Path(__file__).resolve().parents[1]
 GOLDEN = REPO / "tests/data/simulate_golden.json"

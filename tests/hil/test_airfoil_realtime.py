@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from controller.config import load_config
-from controller.motion_types import Outcome
-from controller.runtime import Runtime, RuntimeOptions
-from controller.servo import contour_error_mm, discretise, tracking_error_mm
+from controller.generator.dynamics.servo import contour_error_mm, discretise, tracking_error_mm
+from controller.motion.types import Outcome
+from controller.runtime.processes import Runtime, RuntimeOptions
 
 PROGRAM = Path(__file__).resolve().parents[2] / "nc_programs" / "naca2415.nc"
 
@@ -19,8 +19,8 @@ pytestmark = [pytest.mark.hil]
 
 def planned_reference(config: object) -> np.ndarray:
     """The reference the generator streams, computed offline in this process."""
-    from controller.generator import generate_reference
-    from controller.interpreter import read_program
+    from controller.generator.plan import generate_reference
+    from controller.interpreter.program import read_program
 
     chunks = list(generate_reference(read_program(str(PROGRAM), config), config))
     assert chunks[-1].final

@@ -1,0 +1,105 @@
+"""Module 4 of the generator: servo-model prediction of tracking and contour errors (eqs. 27-28)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.config import MachineConfig
+from controller.generator.dynamics.servo import (
+    DiscreteServo,
+    contour_error_mm,
+    discretise,
+    filter_block,
+)
+
+SETTLE_S = 0.06  # simulate this long at rest after the run so the tail error is seen too
+TARGET_FRACTION = 0.95  # re-plan aiming this far under the limit, so rounds converge quickly
+LOOKBACK_S = 0.03  # a violation is caused by what the path did up to this long before it
+
+
+@dataclass(frozen=True, eq=False)
+class ServoPrediction:
+    """Per-sample tracking errors (mm) of X and Y and the contour error (eq. 28)."""
+
+    ex_mm: np.ndarray
+    ey_mm: np.ndarray
+    contour_mm: np.ndarray
+
+
+@dataclass(frozen=True)
+class Violation:
+    """A stretch of samples [k_lo, k_hi] whose |contour error| exceeds the limit."""
+
+    k_lo: int
+    k_hi: int
+    k_peak: int
+    peak_mm: float
+
+
+def axis_servos(config: MachineConfig) -> tuple[DiscreteServo, DiscreteServo]:
+    T = config.sample_period_s  # noqa: N806
+    return discretise(config.axis("x").servo, T), discretise(config.axis("y").servo, T)
+
+
+def acceleration_gain_s2(config: MachineConfig) -> float:
+    """c2 of the small-s expansion e ~ c1 v + c2 a (ALGORITHMS.md 3): the worse of X and Y.
+
+    The contour error on a curve is about c2 * kappa * v^2, so eps_max / c2 is the normal
+    acceleration the servo loop can follow within the contour limit."""
+    gains = []
+    for name in ("x", "y"):
+        p = config.axis(name).servo
+        gains.append((p.a2 - p.b2) / p.a0 - p.a1 * (p.a1 - p.b1) / p.a0**2)
+    return max(gains)
+
+
+ServoState = tuple[np.ndarray, np.ndarray]  # filter states of X and Y
+
+
+def rest_state(servos: tuple[DiscreteServo, DiscreteServo]) -> ServoState:
+    return np.zeros(servos[0].order), np.zeros(servos[1].order)
+
+
+def _velocities(xy_mm: np.ndarray, start_xy_mm: np.ndarray, sample_period_s: float) -> np.ndarray:
+    return np.diff(np.vstack([start_xy_mm[None, :], xy_mm]), axis=0) / sample_period_s
+
+
+def predict(xy_mm: np.ndarray, phi_rad: np.ndarray, start_xy_mm: np.ndarray,
+            servos: tuple[DiscreteServo, DiscreteServo], sample_period_s: float,
+            state: ServoState | None = None) -> ServoPrediction:
+    """Drive each axis model with its per-sample velocity, from rest or from a servo state (a
+    window continuing the previous one); the run ends at rest.
+
+    Returns errors for the run's samples followed by SETTLE_S of samples holding the end point."""
+    settle = int(round(SETTLE_S / sample_period_s))
+    xy = np.vstack([xy_mm, np.repeat(xy_mm[-1:], settle, axis=0)])
+    v = _velocities(xy, start_xy_mm, sample_period_s)
+    sx, sy = rest_state(servos) if state is None else state
+    ex = filter_block(servos[0], v[:, 0], sx)[0]
+    ey = filter_block(servos[1], v[:, 1], sy)[0]
+    phi = np.r_[phi_rad, np.full(settle, phi_rad[-1])]
+    return ServoPrediction(ex, ey, contour_error_mm(ex, ey, phi))
+
+
+def state_after(xy_mm: np.ndarray, start_xy_mm: np.ndarray,
+                servos: tuple[DiscreteServo, DiscreteServo], sample_period_s: float,
+                state: ServoState | None = None) -> ServoState:
+    """The servo filter states after following xy_mm from start_xy_mm (and state)."""
+    v = _velocities(xy_mm, start_xy_mm, sample_period_s)
+    sx, sy = rest_state(servos) if state is None else state
+    return filter_block(servos[0], v[:, 0], sx)[1], filter_block(servos[1], v[:, 1], sy)[1]
+
+
+def find_violations(contour_mm: np.ndarray, limit_mm: float) -> list[Violation]:
+    """Contiguous stretches above the limit, each with its peak."""
+    over = np.abs(contour_mm) > limit_mm
+    if not np.any(over):
+        return []
+    edges = np.flatnonzero(np.diff(np.r_[0, over.astype(np.int8), 0]))
+    out = []
+    for lo, hi in zip(edges[::2], edges[1::2] - 1, strict=True):
+        k = lo + int(np.argmax(np.abs(contour_mm[lo:hi + 1])))
+        out.append(Violation(int(lo), int(hi), int(k), float(abs(contour_mm[k]))))
+    return out

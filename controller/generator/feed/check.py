@@ -1,0 +1,258 @@
+"""Vectorised checks of a chain of quintic feed phases against a sampled feed-limit curve."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.generator.feed.profile import quintic_distance, quintic_speed
+from controller.numeric import clamp
+
+CHUNK_SAMPLES = 16  # check-sample intervals per chunk of the coarse pass over transitions
+
+
+@dataclass(frozen=True, eq=False)
+class LimitCurve:
+    """vlim(s), linear between samples on an increasing grid s (mm, mm/s)."""
+
+    s_mm: np.ndarray
+    vlim_mm_s: np.ndarray
+    step_mm: float | None = None  # the grid's typical step, when the caller knows it
+
+    @property
+    def spacing_mm(self) -> float:
+        """The typical grid step if given, else the smallest (floored so a degenerate grid cannot
+        explode the sample count). A given step keeps the planner's memo valid when pieces of
+        the path change and, with them, the odd short step where two pieces meet."""
+        if self.step_mm is not None:
+            return self.step_mm
+        ds = np.diff(self.s_mm)
+        return float(max(ds.min(), 1e-7 * (self.s_mm[-1] - self.s_mm[0])))
+
+    def at(self, s_mm: np.ndarray) -> np.ndarray:
+        return np.interp(s_mm, self.s_mm, self.vlim_mm_s)
+
+    def span_min(self, a_mm: np.ndarray, b_mm: np.ndarray) -> np.ndarray:
+        """min vlim over each [a, b]: the two interpolated ends and every grid sample inside."""
+        inner = _range_reduce(np.minimum, self.vlim_mm_s, np.inf, *self._inside(a_mm, b_mm))
+        return np.minimum(inner, np.minimum(self.at(a_mm), self.at(b_mm)))
+
+    def span_max(self, a_mm: np.ndarray, b_mm: np.ndarray) -> np.ndarray:
+        inner = _range_reduce(np.maximum, self.vlim_mm_s, -np.inf, *self._inside(a_mm, b_mm))
+        return np.maximum(inner, np.maximum(self.at(a_mm), self.at(b_mm)))
+
+    def _inside(self, a_mm: np.ndarray, b_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        lo = np.searchsorted(self.s_mm, a_mm, side="right")
+        hi = np.searchsorted(self.s_mm, b_mm, side="left")
+        return lo, np.maximum(hi, lo)
+
+
+def _range_reduce(op: np.ufunc, vals: np.ndarray, empty: float, lo: np.ndarray,
+                  hi: np.ndarray) -> np.ndarray:
+    """op over vals[lo:hi] for every pair at once (reduceat on interleaved bounds)."""
+    if len(lo) == 0:
+        return np.empty(0)
+    ext = np.append(vals, empty)  # index len(vals) becomes valid and neutral
+    idx = np.empty(2 * len(lo), dtype=np.intp)
+    idx[0::2], idx[1::2] = lo, hi
+    out = op.reduceat(ext, idx)[0::2]
+    return np.where(hi > lo, out, empty)
+
+
+@dataclass(frozen=True, eq=False)
+class PhaseArrays:
+    """Phases of a planned chain as arrays; seg maps each phase to its planning segment."""
+
+    duration_s: np.ndarray
+    s0_mm: np.ndarray
+    vs_mm_s: np.ndarray
+    ve_mm_s: np.ndarray
+    seg: np.ndarray
+
+    @property
+    def length_mm(self) -> np.ndarray:
+        return 0.5 * self.duration_s * (self.vs_mm_s + self.ve_mm_s)
+
+    def take(self, mask: np.ndarray) -> PhaseArrays:
+        return PhaseArrays(self.duration_s[mask], self.s0_mm[mask], self.vs_mm_s[mask],
+                           self.ve_mm_s[mask], self.seg[mask])
+
+
+@dataclass(frozen=True, eq=False)
+class Violations:
+    """Per planning segment: worst excess of v over vlim (mm/s, <= 0 when fine), where, and the
+    length of the phase in which it happens."""
+
+    excess_mm_s: np.ndarray
+    s_mm: np.ndarray
+    phase_len_mm: np.ndarray
+
+
+def check_phases(ph: PhaseArrays, curve: LimitCurve, n_seg: int, tol: float) -> Violations:
+    """Worst violation of v <= vlim in each segment: cruises by range minimum, transitions by
+    dense samples (close enough that v between them is within tol/2 of linear) plus the exact
+    speed at the grid samples inside them. Transition samples are only taken where a coarse
+    bound allows an excess above tol/4, so a segment's excess (and where) is exact when it is
+    above tol/4 and otherwise only known to be at most tol/4."""
+    exc = np.full(n_seg, -np.inf)
+    loc = np.zeros(n_seg)
+    plen = np.zeros(n_seg)
+    lengths = ph.length_mm
+    cruise = ph.vs_mm_s == ph.ve_mm_s
+    _merge(exc, loc, plen, *_cruise_excess(ph, lengths, cruise, curve))
+    for part in _transition_excess(ph, lengths, ~cruise, curve, tol):
+        _merge(exc, loc, plen, *part)
+    return Violations(exc, loc, plen)
+
+
+def _merge(exc: np.ndarray, loc: np.ndarray, plen: np.ndarray, seg: np.ndarray, e: np.ndarray,
+           s: np.ndarray, ln: np.ndarray) -> None:
+    """Keep, per segment, the largest excess among candidates sorted by segment (in place)."""
+    if len(seg) == 0:
+        return
+    starts = np.concatenate(([0], np.flatnonzero(seg[1:] != seg[:-1]) + 1))
+    gmax = np.maximum.reduceat(e, starts)
+    counts = np.diff(np.append(starts, len(seg)))
+    at_max = np.flatnonzero(e == np.repeat(gmax, counts))
+    group = np.searchsorted(starts, at_max, side="right") - 1
+    _, first = np.unique(group, return_index=True)
+    pick = at_max[first]  # first sample reaching the group maximum
+    sg = seg[starts]
+    better = gmax > exc[sg]
+    sg, pick = sg[better], pick[better]
+    exc[sg], loc[sg], plen[sg] = e[pick], s[pick], ln[pick]
+
+
+def _cruise_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
+                   curve: LimitCurve) -> tuple[np.ndarray, ...]:
+    a, ln = ph.s0_mm[mask], lengths[mask]
+    lo, hi = curve._inside(a, a + ln)
+    inner = _range_reduce(np.minimum, curve.vlim_mm_s, np.inf, lo, hi)
+    ends = np.minimum(curve.at(a), curve.at(a + ln))
+    # Where the minimum sits: an end or the argmin inside (only needed for the violating ones).
+    s_min = np.where(curve.at(a) <= curve.at(a + ln), a, a + ln)
+    exc = ph.vs_mm_s[mask] - np.minimum(inner, ends)
+    for i in np.flatnonzero((inner < ends) & (exc > 0.0)):
+        s_min[i] = curve.s_mm[lo[i] + np.argmin(curve.vlim_mm_s[lo[i]:hi[i]])]
+    return ph.seg[mask], exc, s_min, ln
+
+
+def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
+                       curve: LimitCurve, tol: float) -> tuple[tuple[np.ndarray, ...], ...]:
+    dur, s0, vs, ve = ph.duration_s[mask], ph.s0_mm[mask], ph.vs_mm_s[mask], ph.ve_mm_s[mask]
+    if len(dur) == 0:
+        return ()
+    n = _sample_counts(dur, vs, ve, lengths[mask], curve.spacing_mm, tol)
+    ch = _Chunks.build(n, dur, s0, vs, ve, curve, tol)
+    # Dense samples only in the chunks that may hold an excess above tol/4 (the very samples a
+    # full pass takes there, so the worst points found are the same).
+    c = np.flatnonzero(ch.keep)
+    cnt = ch.j1[c] - ch.j0[c] + ~ch.keep_next[c]  # a chunk's last sample unless the next has it
+    k = np.repeat(ch.k[c], cnt)
+    j = np.repeat(ch.j0[c], cnt) + np.arange(len(k)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    tau = j / (n[k] - 1.0)
+    s = s0[k] + quintic_distance(tau, dur[k], vs[k], ve[k])
+    v = quintic_speed(tau, vs[k], ve[k])
+    e = v - curve.at(s)
+    # Grid samples inside transitions (where vlim may kink): exact v, by Newton on s(tau) from
+    # the interpolated tau; only those in kept chunks (elsewhere v - vlim <= tol/4 there too).
+    g = _grid_inside(curve, s0, s0 + lengths[mask])
+    gk = clamp(np.searchsorted(s0, curve.s_mm[g], side="right") - 1, 0, len(s0) - 1)
+    in_kept = ch.keep[ch.chunk_of(curve.s_mm[g], gk)]
+    g, gk = g[in_kept], gk[in_kept]
+    tg = _seed_tau(curve.s_mm[g], gk, k, s, tau)
+    for _ in range(3):
+        sg = s0[gk] + quintic_distance(tg, dur[gk], vs[gk], ve[gk])
+        vg = np.maximum(quintic_speed(tg, vs[gk], ve[gk]), 1e-12) * dur[gk]
+        tg = clamp(tg - (sg - curve.s_mm[g]) / vg, 0.0, 1.0)
+    ge = quintic_speed(tg, vs[gk], ve[gk]) - curve.vlim_mm_s[g]
+    seg = ph.seg[mask]
+    ln = lengths[mask]
+    return (seg[k], e, s, ln[k]), (seg[gk], ge, curve.s_mm[g], ln[gk])
+
+
+
+def _seed_tau(x: np.ndarray, gk: np.ndarray, k: np.ndarray, s: np.ndarray,
+              tau: np.ndarray) -> np.ndarray:
+    """tau at x by linear interpolation between samples of its own transition gk (as np.interp
+    does inside it; np.interp over all samples may take a neighbour's sample where two
+    transitions meet at x, rounding making s step back there), held within their taus."""
+    first = np.searchsorted(k, gk, side="left")
+    last = np.searchsorted(k, gk, side="right") - 1
+    j = np.minimum(np.maximum(np.searchsorted(s, x, side="right") - 1, first),
+                   np.maximum(last - 1, first))
+    j1 = np.minimum(j + 1, last)
+    ds = s[j1] - s[j]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (tau[j1] - tau[j]) / ds * (x - s[j]) + tau[j]
+    t = np.where((x == s[j]) | (ds == 0.0), tau[j], t)
+    return np.minimum(np.maximum(t, tau[first]), tau[last])
+
+
+@dataclass(frozen=True, eq=False)
+class _Chunks:
+    """Runs of CHUNK_SAMPLES check-sample intervals per transition, and whether each may hold an
+    excess above tol/4: a transition is monotone, so on a chunk v <= its larger end speed, and
+    vlim >= its minimum over the chunk's span."""
+
+    k: np.ndarray  # transition of each chunk
+    j0: np.ndarray  # first and last sample index of the chunk
+    j1: np.ndarray
+    first: np.ndarray  # per transition: its first chunk
+    start_s: np.ndarray  # where each chunk starts (mm)
+    keep: np.ndarray
+    keep_next: np.ndarray  # the next chunk of the same transition is kept
+
+    @classmethod
+    def build(cls, n: np.ndarray, dur: np.ndarray, s0: np.ndarray, vs: np.ndarray,
+              ve: np.ndarray, curve: LimitCurve, tol: float) -> _Chunks:
+        m = (n - 2) // CHUNK_SAMPLES + 1  # chunks per transition (n >= 2 samples)
+        first = np.cumsum(m) - m
+        # Chunk boundaries: m + 1 per transition, the last at sample n - 1.
+        kb = np.repeat(np.arange(len(n)), m + 1)
+        cb = np.arange(len(kb)) - np.repeat(first + np.arange(len(n)), m + 1)
+        jb = np.minimum(cb * CHUNK_SAMPLES, n[kb] - 1)
+        tau = jb / (n[kb] - 1.0)
+        sb = s0[kb] + quintic_distance(tau, dur[kb], vs[kb], ve[kb])
+        vb = quintic_speed(tau, vs[kb], ve[kb])
+        last = np.zeros(len(kb), bool)
+        last[np.cumsum(m + 1) - 1] = True
+        i0 = np.flatnonzero(~last)  # a chunk runs from boundary i0 to i0 + 1
+        vmax = np.maximum(vb[i0], vb[i0 + 1])
+        keep = vmax - curve.span_min(sb[i0], sb[i0 + 1]) > 0.25 * tol
+        k = kb[i0]
+        keep_next = np.append(keep[1:], False) & (np.append(k[1:], -1) == k)
+        return cls(k, jb[i0], jb[i0 + 1], first, sb[i0], keep, keep_next)
+
+    def chunk_of(self, s_mm: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """The chunk of transition k holding s (the later one at a shared boundary)."""
+        c = np.searchsorted(self.start_s, s_mm, side="right") - 1
+        n_chunks = np.diff(np.append(self.first, len(self.k)))
+        return clamp(c, self.first[k], self.first[k] + n_chunks[k] - 1)
+
+
+def _sample_counts(dur: np.ndarray, vs: np.ndarray, ve: np.ndarray, length: np.ndarray,
+                   h: float, tol: float) -> np.ndarray:
+    """Samples per transition so that v(s) between two check points deviates from its chord by
+    at most tol/2: spacing sqrt(4 tol / |v''|), with |v''| = |j v - a^2| / v^3 <= (J vmax +
+    A^2) / vmin^3 (peak jerk J = 10/sqrt(3) dV/T^2, peak a = 15 dV / (8T)); at least half a grid
+    step; capped where a transition starts from (near) rest, where vlim is not the binding limit.
+    """
+    dv = np.abs(ve - vs)
+    vmax, vmin = np.maximum(vs, ve), np.minimum(vs, ve)
+    vmin = np.maximum(vmin, 0.05 * vmax)
+    jerk = 10.0 / np.sqrt(3.0) * dv / dur ** 2
+    acc = 15.0 * dv / (8.0 * dur)
+    curv = (jerk * vmax + acc * acc) / vmin ** 3
+    step = np.minimum(0.5 * h, np.sqrt(4.0 * tol / np.maximum(curv, 1e-300)))
+    n = np.ceil(length / step) + 2
+    return np.minimum(n, 4.0 * length / h + 2000).astype(np.intp)
+
+
+def _grid_inside(curve: LimitCurve, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Indices of grid samples inside any of the sorted, disjoint spans [a_i, b_i]."""
+    lo = np.searchsorted(curve.s_mm, a, side="left")
+    hi = np.searchsorted(curve.s_mm, b, side="right")
+    cnt = np.maximum(hi - lo, 0)
+    return np.repeat(lo, cnt) + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)

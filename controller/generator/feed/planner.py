@@ -1,0 +1,408 @@
+"""Feed planning along a path: quintic transitions and cruises under a feed-limit curve vlim(s)."""
+
+from __future__ import annotations
+
+import bisect
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from controller.generator.feed.check import LimitCurve, PhaseArrays, Violations, check_phases
+from controller.generator.feed.profile import FeedProfile
+from controller.generator.feed.segments import (
+    SegmentPlan,
+    SegmentWindows,
+    plan_segments,
+    segment_phases,
+)
+from controller.generator.feed.time_bound import fb_pass_speed_mm_s
+
+# A quintic transition changes v^2 by 16 A d / 15 over a distance d: an "effective" constant
+# acceleration of 8A/15 in the v^2 passes between nodes.
+EFFECTIVE_ACCEL_FACTOR = 8.0 / 15.0
+MAX_SPLIT_DEPTH = 8  # a segment split this often is flattened instead (always safe)
+STAIR_STEP = 0.03  # relative speed step of the staircase where vlim binds
+STAIR_CAP = 0.25  # stair node speed: this many steps below vlim there
+FLATTEN_ROUNDS = 3  # rounds that only flatten, before flattening everything
+MAX_CRUISE_RAISES = 4  # rounds spent lifting cruises that vlim lets rise later on
+MIN_RAISED_CRUISE_S = 0.01  # only cruises at least this long are worth a new node
+# A raised cruise is bound by vlim where it starts when vlim is within this many stair steps
+# of it there (see _raise_cruises). Over the benchmarks and 15 generated programs, 4 and 8 gave
+# the same rounds, motion times and contour errors (2: a round more on one, three motion times
+# 1-2 ms apart); on a straight vlim rise 3-20 % steeper than 8A/15, the repair round is saved
+# by 8 at every slope, by 4 up to 10 %, by 2 at none.
+BOUND_CRUISE_STEPS = 4
+LIMIT_TOLERANCE = 1e-7  # relative to max vlim: v <= vlim + tol on the whole profile
+MEMO_BYTES = 1 << 24  # size of the memo's vlim keys kept across calls (then it starts afresh)
+
+
+class PlanResult(Enum):
+    """Outcome of plan_feed."""
+
+    OK = "ok"
+    START_TOO_FAST = "start speed above the limit or too fast to slow down in time"
+    END_TOO_FAST = "end speed above the limit at the end of the path"
+    END_UNREACHABLE = "end speed cannot be reached within the path length"
+    INVALID_INPUT = "feed-limit curve is not a positive curve on an increasing grid"
+    LIMIT_VIOLATED = "no profile under the feed limit was found"
+
+
+@dataclass(frozen=True)
+class FeedPlan:
+    """A planned feed profile (empty unless result is OK) and the planning rounds it took."""
+
+    profile: FeedProfile
+    result: PlanResult
+    rounds: int = 0
+
+
+@dataclass
+class _Nodes:
+    """Planning nodes: the profile passes node k at s[k] with zero acceleration."""
+
+    s: np.ndarray
+    cap: np.ndarray  # speed ceiling at the node
+    depth: np.ndarray  # per segment (node k to k+1): how often it was split
+    flat: np.ndarray  # per segment: no overshoot above the end speeds
+
+
+def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
+              v_start_mm_s: float = 0.0, v_end_mm_s: float = 0.0,
+              raise_cruises: bool = True, grid_step_mm: float | None = None) -> FeedPlan:
+    """Plan v(t) from s=0 at v_start to s=L at v_end, with v <= vlim(s) and |a| <= accel.
+
+    The profile passes every node with zero acceleration. Nodes: the ends, the local minima of
+    vlim, and a staircase where vlim is gentler than the quintics can follow. Each round:
+    - v^2 passes on the nodes at the quintics' mean acceleration 8A/15 (node speeds reachable);
+    - per segment between nodes (vlim unimodal there): wait at vi, accelerate, cruise at V,
+      decelerate, wait at vj, with the quickest V whose transitions, placed as early / late as
+      fits, lie under vlim (feed_segments: safe by construction up to sampling);
+    - check every phase against vlim (feed_check); a segment still crossing vlim gets a node at
+      its worst point (below vlim there), or, once split MAX_SPLIT_DEPTH times, is flattened
+      (node speeds <= min vlim over it: safe by construction). After FLATTEN_ROUNDS more rounds
+      every segment is flattened, so the loop ends after a bounded number of rounds.
+    Segments a round leaves unchanged are not planned or checked again (see _Memo).
+    s_mm may start anywhere; the profile's s runs from s_mm[0] to s_mm[-1]. grid_step_mm is the
+    grid's typical step (default: its smallest); on any result but OK the profile is empty.
+    """
+    s = np.asarray(s_mm, float)
+    vlim = np.asarray(vlim_mm_s, float)
+    bad = _input_error(s, vlim, v_start_mm_s, v_end_mm_s)
+    if bad is not None:
+        return FeedPlan(FeedProfile(()), bad)
+    curve = LimitCurve(s - s[0], vlim, grid_step_mm)
+    nodes = _initial_nodes(curve, v_start_mm_s, v_end_mm_s, accel_mm_s2)
+    tol = LIMIT_TOLERANCE * float(vlim.max())
+    memo = _memo_for(curve, accel_mm_s2, tol)
+    n_rounds = MAX_SPLIT_DEPTH + FLATTEN_ROUNDS + 2
+    best: tuple[float, PhaseArrays, int] | None = None  # duration, phases, round
+    raises = 0
+    for rnd in range(1, n_rounds + MAX_CRUISE_RAISES + 1):
+        v = _node_speeds(nodes, accel_mm_s2, v_start_mm_s, v_end_mm_s)
+        if isinstance(v, PlanResult):
+            return _result(best, s[0], v, rnd)
+        ph, viol = _plan_round(nodes, v, curve, accel_mm_s2, tol, memo)
+        if not np.any(viol.excess_mm_s > 0.5 * tol):
+            # The profile's duration (FeedProfile sums the durations in the same order).
+            dur = float(np.cumsum(ph.duration_s)[-1]) if len(ph.duration_s) else 0.0
+            if best is None or dur < best[0]:
+                best = (dur, ph, rnd)
+            if raise_cruises and raises < MAX_CRUISE_RAISES and _raise_cruises(nodes, ph, curve):
+                raises += 1
+                continue
+            return _result(best, s[0], PlanResult.OK, rnd)
+        if best is not None and rnd >= n_rounds - 1:
+            # An improvement attempt did not settle: keep the last good plan.
+            return _result(best, s[0], PlanResult.OK, rnd)
+        if rnd == n_rounds - 1:  # last resort: flatten everything (safe by construction)
+            viol = Violations(np.full(len(nodes.s) - 1, np.inf), viol.s_mm, viol.phase_len_mm)
+        failed = _repair(nodes, viol, curve, 0.5 * tol, last=rnd > MAX_SPLIT_DEPTH)
+        if failed is not None:
+            return _result(best, s[0], failed, rnd)
+        # Cruises that vlim lets rise later are raised in the same round as the repairs (the
+        # next round plans both), which saves a round on the common case of both at once.
+        if raise_cruises and raises < MAX_CRUISE_RAISES and rnd <= MAX_SPLIT_DEPTH \
+                and _raise_cruises(nodes, ph, curve):
+            raises += 1
+    return _result(best, s[0], PlanResult.LIMIT_VIOLATED, rnd)
+
+
+def _result(best: tuple[float, PhaseArrays, int] | None, s0: float, failed: PlanResult,
+            rnd: int) -> FeedPlan:
+    """The best plan found (its profile built only now), else the empty plan with failed."""
+    if best is None:
+        return FeedPlan(FeedProfile(()), failed, rnd)
+    ph = best[1]
+    profile = FeedProfile.from_arrays(ph.duration_s, ph.s0_mm + s0, ph.vs_mm_s, ph.ve_mm_s)
+    return FeedPlan(profile, PlanResult.OK, best[2])
+
+
+@dataclass(eq=False)
+class _Memo:
+    """Segment results (cruise speed, end of the acceleration, start of the braking, excess,
+    where, phase length) by segment: its length, node speeds, flat flag and the vlim samples it
+    depends on (the grid inside and one sample either side), positions relative to the segment's
+    start (so are the kept positions). A segment is planned and checked on
+    its own, so one that a round leaves unchanged keeps its result, and so does one that a later
+    call with the same globals (accel, tolerance, grid step, vlim maximum) sees again: the
+    generator's raise_cruises attempt repeats its previous call, and its dynamics rounds change
+    vlim only locally."""
+
+    globals_: tuple[float, float, float, float]
+    planner: Callable[..., SegmentPlan]  # plan_segments (a test may swap it)
+    rows: dict[tuple, tuple[float, ...]]
+    key_bytes: int = 0
+
+
+_last_memo: list[_Memo] = []  # the previous call's memo (at most one)
+
+
+def clear_memo() -> None:
+    """Forget segment results kept from earlier calls (for benchmarks of cold planning)."""
+    _last_memo.clear()
+
+
+def _memo_for(curve: LimitCurve, accel: float, tol: float) -> _Memo:
+    key = (accel, tol, curve.spacing_mm, float(curve.vlim_mm_s.max()))
+    for m in _last_memo:
+        if m.globals_ == key and m.planner is plan_segments and m.key_bytes < MEMO_BYTES:
+            return m
+    m = _Memo(key, plan_segments, {})
+    _last_memo[:] = [m]
+    return m
+
+
+def _plan_round(nodes: _Nodes, v: np.ndarray, curve: LimitCurve, accel: float, tol: float,
+                memo: _Memo) -> tuple[PhaseArrays, Violations]:
+    """Plan every segment between the nodes and check it against vlim (new segments only)."""
+    win = SegmentWindows.build(curve, nodes.s)
+    vi, vj = v[:-1], v[1:]
+    keys = _segment_keys(win, vi, vj, nodes.flat)
+    known = np.array([key in memo.rows for key in keys], bool)
+    new = np.flatnonzero(~known)
+    out = np.empty((len(keys), 6))
+    if new.size < len(keys):
+        out[known] = [memo.rows[key] for key, kn in zip(keys, known.tolist(), strict=True) if kn]
+    # Rows hold positions relative to their segment's start: a segment that moved along the
+    # path unchanged (a zone before it was widened) keeps its result.
+    out[:, _POSITION_COLUMNS] += win.a[:, None]
+    sp = memo.planner(win.take(new), vi[new], vj[new], nodes.flat[new], accel)
+    # New segments get their results as remembered ones would: relative to the segment start
+    # (x - a, then + a) and, where several new ones share a key (a circle's equal segments),
+    # the one row kept for it. Otherwise a plan would differ in the last bits from the same
+    # plan made again with the memo filled.
+    a_new = win.a[new]
+    rep = _representatives([keys[i] for i in new.tolist()])
+    rel = np.empty((new.size, 6))
+    rel[:, 0], rel[:, 1], rel[:, 2] = sp.vp, sp.acc_end - a_new, sp.dec_start - a_new
+    out[new, :3] = rel[rep, :3]
+    out[new, 1:3] += a_new[:, None]
+    ph = segment_phases(SegmentPlan(win.a, win.b, vi, vj, out[:, 0], out[:, 1], out[:, 2]),
+                        accel)
+    viol = check_phases(ph.take(~known[ph.seg]), curve, len(keys), tol)
+    rel[:, 3], rel[:, 4], rel[:, 5] = (viol.excess_mm_s[new], viol.s_mm[new] - a_new,
+                                       viol.phase_len_mm[new])
+    out[new, 3:] = rel[rep, 3:]
+    out[new, 4] += a_new
+    for j in set(rep.tolist()):  # one row per key
+        key = keys[int(new[j])]
+        memo.rows[key] = tuple(rel[j].tolist())
+        memo.key_bytes += len(key[4]) + len(key[5])
+    return ph, Violations(out[:, 3], out[:, 4], out[:, 5])
+
+
+def _representatives(keys: list[tuple]) -> np.ndarray:
+    """Per key, the index of its last occurrence (the row the memo keeps for it)."""
+    last = {key: j for j, key in enumerate(keys)}
+    return np.array([last[key] for key in keys], np.intp)
+
+
+_POSITION_COLUMNS = [1, 2, 4]  # acc_end, dec_start, where the excess is: stored relative
+KEY_DECIMALS = 10  # positions in memo keys, relative to the segment start, rounded to 1e-10 mm
+
+
+def _segment_keys(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray,
+                  flat: np.ndarray) -> list[tuple]:
+    """Per segment: its length, node speeds, flat flag and the vlim samples it depends on (the
+    grid inside and one either side), positions relative to the segment start. All windows are
+    gathered and rounded in one go; each key slices the two byte strings."""
+    s, vl = win.curve.s_mm, win.curve.vlim_mm_s
+    first = win.lo - 1  # each key holds s[lo - 1:hi + 2] (lo >= 1: a node is never before s[0])
+    count = np.maximum(np.minimum(win.hi + 2, len(s)) - first, 0)
+    idx = np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count,
+                                                                       count)
+    rel = np.round(s[idx] - np.repeat(win.a, count), KEY_DECIMALS).tobytes()
+    vals = vl[idx].tobytes()
+    ends = (np.cumsum(count) * 8).tolist()
+    starts = [0, *ends[:-1]]
+    rel_b = np.round(win.b - win.a, KEY_DECIMALS).tolist()
+    return [(b, v0, v1, f, rel[i:j], vals[i:j])
+            for b, v0, v1, f, i, j in zip(rel_b, vi.tolist(), vj.tolist(), flat.tolist(), starts,
+                                          ends, strict=True)]
+
+
+def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanResult | None:
+    if s.ndim != 1 or s.shape != vlim.shape or len(s) < 2 or np.any(np.diff(s) <= 0.0):
+        return PlanResult.INVALID_INPUT
+    if np.any(~np.isfinite(vlim)) or np.any(vlim <= 0.0) or v0 < 0.0 or v1 < 0.0:
+        return PlanResult.INVALID_INPUT
+    if v0 > vlim[0]:
+        return PlanResult.START_TOO_FAST
+    if v1 > vlim[-1]:
+        return PlanResult.END_TOO_FAST
+    return None
+
+
+def _initial_nodes(curve: LimitCurve, v0: float, v1: float, accel: float) -> _Nodes:
+    """The ends, every local minimum of vlim (both ends of a flat bottom, not its inside), and a
+    staircase of nodes where vlim binds (see _stair_nodes)."""
+    v = curve.vlim_mm_s
+    # Runs of equal values: a run is a bottom when both neighbouring runs are higher.
+    start = np.flatnonzero(np.concatenate(([True], v[1:] != v[:-1])))
+    end = np.append(start[1:] - 1, len(v) - 1)
+    # A run at an end is a bottom if its neighbour is higher.
+    rv = np.concatenate(([np.inf], v[start], [np.inf]))
+    bottom = np.flatnonzero((rv[1:-1] < rv[:-2]) & (rv[1:-1] < rv[2:]))
+    idx = np.concatenate((start[bottom], end[bottom]))
+    stair, stair_cap = _stair_nodes(curve, v0, v1, accel)
+    cap = np.concatenate((v[idx], stair_cap))
+    idx = np.concatenate((idx, stair))
+    keep = (idx > 0) & (idx < len(v) - 1)
+    idx, order = np.unique(idx[keep], return_index=True)
+    s = np.concatenate(([0.0], curve.s_mm[idx], curve.s_mm[-1:]))
+    cap = np.concatenate(([v0], cap[keep][order], [v1]))
+    n = len(s) - 1
+    return _Nodes(s, cap, np.zeros(n, np.intp), np.zeros(n, bool))
+
+
+def _stair_nodes(curve: LimitCurve, v0: float, v1: float,
+                 accel: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where vlim is gentle enough to bind the v^2 passes at the quintics' mean acceleration
+    8A/15, the profile must follow it as a staircase (one transition per segment): seed nodes
+    where vlim crosses the levels (1+STAIR_STEP)^m, capped STAIR_CAP steps below vlim there."""
+    v = curve.vlim_mm_s
+    u = fb_pass_speed_mm_s(curve.s_mm, v, EFFECTIVE_ACCEL_FACTOR * accel, v0, v1)
+    binding = u >= v * (1.0 - 1e-9)
+    level = np.floor(np.log(v) / np.log1p(STAIR_STEP))
+    i = 1 + np.flatnonzero(binding[1:] & binding[:-1] & (level[1:] != level[:-1]))
+    return i, np.minimum(v[i], v[i - 1]) / (1.0 + STAIR_CAP * STAIR_STEP)
+
+
+def _node_speeds(nodes: _Nodes, accel: float, v0: float, v1: float) -> np.ndarray | PlanResult:
+    """Node speeds reachable by quintic transitions both ways (v^2 passes at 8A/15)."""
+    a_eff = EFFECTIVE_ACCEL_FACTOR * accel
+    v = fb_pass_speed_mm_s(nodes.s, nodes.cap, a_eff, v0, v1)
+    # The passes work on v^2 shifted by 2 a s, so they round to ~1e-16 of that scale.
+    slack = 1e-12 * (2.0 * a_eff * nodes.s[-1] + v0 * v0 + v1 * v1)
+    if v[0] ** 2 < v0 * v0 - slack:
+        return PlanResult.START_TOO_FAST
+    if v[-1] ** 2 < v1 * v1 - slack:
+        return PlanResult.END_UNREACHABLE
+    v = np.minimum(v, nodes.cap)  # sqrt rounding must not lift a node above its cap
+    v[0], v[-1] = v0, v1
+    return v
+
+
+def _repair(nodes: _Nodes, viol: Violations, curve: LimitCurve, tol: float,
+            last: bool) -> PlanResult | None:
+    """Split or flatten every violating segment; a result when a pinned end speed is to blame."""
+    bad = np.flatnonzero(viol.excess_mm_s > tol)
+    h = curve.spacing_mm
+    a, b, sw = nodes.s[bad], nodes.s[bad + 1], viol.s_mm[bad]
+    split = (~nodes.flat[bad]) & (nodes.depth[bad] < MAX_SPLIT_DEPTH) & (not last)
+    split &= (sw - a > 2.0 * h) & (b - sw > 2.0 * h)
+    failed = _flatten(nodes, bad[~split], curve)
+    if failed is not None:
+        return failed
+    k = bad[split]
+    r = np.maximum(0.5 * viol.phase_len_mm[k], 2.0 * h)
+    sw = sw[split]
+    cap = curve.span_min(np.maximum(sw - r, nodes.s[k]), np.minimum(sw + r, nodes.s[k + 1]))
+    depth = nodes.depth[k] + 1
+    nodes.s = np.insert(nodes.s, k + 1, sw)
+    nodes.cap = np.insert(nodes.cap, k + 1, cap)
+    nodes.flat = np.insert(nodes.flat, k + 1, False)
+    nodes.depth[k] = depth
+    nodes.depth = np.insert(nodes.depth, k + 1, depth)
+    return None
+
+
+def _flatten(nodes: _Nodes, k: np.ndarray, curve: LimitCurve) -> PlanResult | None:
+    """Cap both ends of segment k at min vlim over it: no phase then rises above that minimum."""
+    if len(k) == 0:
+        return None
+    m = curve.span_min(nodes.s[k], nodes.s[k + 1])
+    if np.any(m[k == 0] < nodes.cap[0]):
+        return PlanResult.START_TOO_FAST  # the pinned start speed cannot stay under vlim
+    if np.any(m[k + 1 == len(nodes.s) - 1] < nodes.cap[-1]):
+        return PlanResult.END_TOO_FAST
+    np.minimum.at(nodes.cap, k, m)
+    np.minimum.at(nodes.cap, k + 1, m)
+    nodes.flat[k] = True
+    return None
+
+
+def _raise_cruises(nodes: _Nodes, ph: PhaseArrays, curve: LimitCurve) -> bool:
+    """Add a staircase of nodes inside every long cruise where vlim later rises a stair step
+    above it.
+
+    A segment's single accelerate-cruise-decelerate shape must cruise under the lowest vlim it
+    crosses after its acceleration; when vlim keeps rising beyond, nodes there let the profile
+    step up again (the staircase of _stair_nodes, found after the fact). All the steps are added
+    at once, each where vlim passes the last one's cap by a stair step; one per round took a
+    round per step. Where vlim at the first step is within BOUND_CRUISE_STEPS of the cruise,
+    the cruise is bound by vlim where it starts and the first node is capped at the cruise
+    speed: the plan reaches it there under vlim, while a cap under vlim lets the v^2 passes ask
+    the transition into the node for more than its S-shape fits under a steep, straight vlim
+    (the airfoil's rise after its nose then needed a repair and a round more). Elsewhere (a
+    cruise held down before it starts, vlim far above it) every cap follows vlim."""
+    cruise = np.flatnonzero((ph.vs_mm_s == ph.ve_mm_s) & (ph.duration_s >= MIN_RAISED_CRUISE_S))
+    steps: list[tuple[float, float]] = []
+    for k in cruise:
+        v_c = float(ph.vs_mm_s[k])
+        a, b = ph.s0_mm[k], ph.s0_mm[k] + ph.length_mm[k]
+        lo, hi = np.searchsorted(curve.s_mm, [a, b])
+        steps += [(float(curve.s_mm[i]), cap)
+                  for i, cap in _raise_steps(curve.vlim_mm_s, int(lo), int(hi), v_c)]
+    return _insert_nodes(nodes, steps, curve.spacing_mm)
+
+
+def _raise_steps(vlim: np.ndarray, lo: int, hi: int, v_c: float) -> list[tuple[int, float]]:
+    """(grid index, cap) of the staircase over vlim[lo:hi] above a cruise at v_c."""
+    steps: list[tuple[int, float]] = []
+    level = v_c * (1.0 + 0.5 * STAIR_STEP)
+    while True:
+        above = np.flatnonzero(vlim[lo:hi] >= level)
+        if above.size == 0:
+            return steps
+        i = lo + int(above[0])
+        cap = float(vlim[i]) / (1.0 + STAIR_CAP * STAIR_STEP)
+        if not steps and vlim[i] <= v_c * (1.0 + BOUND_CRUISE_STEPS * STAIR_STEP):
+            cap = v_c
+        steps.append((i, cap))
+        lo, level = i + 1, cap * (1.0 + STAIR_STEP)
+
+
+def _insert_nodes(nodes: _Nodes, steps: list[tuple[float, float]], h: float) -> bool:
+    """Nodes at the (position, cap) pairs, sorted by position, each unless within 4 grid steps
+    of a node or of one added before it; a split segment's depth is copied to its parts, all
+    but the last one not flat. All in one insert per array (numpy's per-call cost)."""
+    s_all = nodes.s.tolist()
+    added: list[tuple[float, float]] = []
+    for s_new, cap in steps:
+        j = bisect.bisect_left(s_all, s_new)
+        if s_new - s_all[j - 1] < 4.0 * h or s_all[j] - s_new < 4.0 * h:
+            continue
+        s_all.insert(j, s_new)
+        added.append((s_new, cap))
+    if not added:
+        return False
+    s_add, cap_add = np.array(added).T
+    j = np.searchsorted(nodes.s, s_add)
+    nodes.s = np.insert(nodes.s, j, s_add)
+    nodes.cap = np.insert(nodes.cap, j, cap_add)
+    nodes.depth = np.insert(nodes.depth, j - 1, nodes.depth[j - 1])
+    nodes.flat = np.insert(nodes.flat, j - 1, False)
+    return True

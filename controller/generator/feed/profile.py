@@ -1,0 +1,152 @@
+"""Quintic Bernstein feed transitions and cruises (paper eqs. 25-26), evaluated in closed form."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import NamedTuple
+
+import numpy as np
+
+from controller.numeric import clamp
+
+# Peak |a| of the quintic transition is (15/8)|dV|/T (at tau = 1/2); T is chosen so it equals Amax.
+PEAK_ACCEL_FACTOR = 15.0 / 8.0
+
+
+def transition_duration_s(v_start_mm_s: np.ndarray | float, v_end_mm_s: np.ndarray | float,
+                          accel_mm_s2: float) -> np.ndarray:
+    """Duration T = 15|Ve-Vs|/(8 Amax): the fastest quintic transition whose peak |a| is Amax."""
+    dv = np.abs(np.asarray(v_end_mm_s, float) - np.asarray(v_start_mm_s, float))
+    return PEAK_ACCEL_FACTOR * dv / accel_mm_s2
+
+
+def transition_length_mm(v_start_mm_s: np.ndarray | float, v_end_mm_s: np.ndarray | float,
+                         accel_mm_s2: float) -> np.ndarray:
+    """Distance of that transition, T(Vs+Ve)/2 = 15|Ve^2-Vs^2|/(16 Amax)."""
+    vs, ve = np.asarray(v_start_mm_s, float), np.asarray(v_end_mm_s, float)
+    return 15.0 * np.abs(ve * ve - vs * vs) / (16.0 * accel_mm_s2)
+
+
+def bernstein6_distance(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray,
+                        ve: np.ndarray) -> np.ndarray:
+    """Distance travelled after tau*T: (T/6) sum F_k b_k^6(tau), F_k = [0,Vs,2Vs,3Vs,3Vs+Ve,..]."""
+    return bernstein6_sum(bernstein6_weights(tau), duration_s, vs, ve)
+
+
+def quintic_distance(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray,
+                     ve: np.ndarray) -> np.ndarray:
+    """bernstein6_distance in power form, T (vs tau + (ve - vs)(5/2 tau^4 - 3 tau^5 + tau^6)):
+    the integral of quintic_speed. A third of the operations, for the planner's checks; it
+    agrees with the Bernstein form to round-off (tests/test_feed_profile.py)."""
+    t2 = tau * tau
+    t4 = t2 * t2
+    return duration_s * (vs * tau + (ve - vs) * (t4 * (2.5 + tau * (tau - 3.0))))
+
+
+def bernstein6_weights(tau: np.ndarray) -> tuple[np.ndarray, ...]:
+    """b_1^6 .. b_6^6 at tau (b_0^6 has F_0 = 0, so it is omitted); reusable for fixed tau."""
+    u = 1.0 - tau
+    t2, u2 = tau * tau, u * u
+    t3, u3 = t2 * tau, u2 * u
+    return (6.0 * u3 * u2 * tau, 15.0 * u2 * u2 * t2, 20.0 * u3 * t3, 15.0 * u2 * t2 * t2,
+            6.0 * u * t3 * t2, t3 * t3)
+
+
+def bernstein6_sum(weights: tuple[np.ndarray, ...], duration_s: np.ndarray, vs: np.ndarray,
+                   ve: np.ndarray) -> np.ndarray:
+    """bernstein6_distance from precomputed bernstein6_weights."""
+    w1, w2, w3, w4, w5, w6 = weights
+    acc = w1 * vs
+    acc += w2 * (2.0 * vs)
+    acc += w3 * (3.0 * vs)
+    acc += w4 * (3.0 * vs + ve)
+    acc += w5 * (3.0 * vs + 2.0 * ve)
+    acc += w6 * (3.0 * vs + 3.0 * ve)
+    return duration_s / 6.0 * acc
+
+
+def quintic_speed(tau: np.ndarray, vs: np.ndarray, ve: np.ndarray) -> np.ndarray:
+    """V(tau) = sum V_k b_k^5 with V0..2 = Vs, V3..5 = Ve, i.e. Vs + dV (10t^3 - 15t^4 + 6t^5)."""
+    smooth = tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau))
+    return vs + (ve - vs) * smooth
+
+
+def quintic_accel(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray,
+                  ve: np.ndarray) -> np.ndarray:
+    """a = (Ve-Vs)/T * 30 tau^2 (1-tau)^2; zero (with the jerk) at both ends."""
+    safe_t = np.where(duration_s > 0.0, duration_s, 1.0)
+    w = tau * (1.0 - tau)
+    return np.where(duration_s > 0.0, (ve - vs) / safe_t * 30.0 * w * w, 0.0)
+
+
+class FeedPhase(NamedTuple):
+    """One phase of a feed profile: a quintic transition, or a cruise when the speeds are equal.
+
+    A named tuple, not a dataclass: a plan has thousands of phases, made by the tuple's cheap
+    constructor, and the profile's array is built from the tuples in one call."""
+
+    t0_s: float
+    duration_s: float
+    s0_mm: float
+    v_start_mm_s: float
+    v_end_mm_s: float
+
+    @property
+    def length_mm(self) -> float:
+        return 0.5 * self.duration_s * (self.v_start_mm_s + self.v_end_mm_s)
+
+
+@dataclass(frozen=True)
+class FeedProfile:
+    """A chain of feed phases, contiguous in time and arc length, C2 at the joints."""
+
+    phases: tuple[FeedPhase, ...]
+
+    @cached_property
+    def _arr(self) -> np.ndarray:
+        """The phases as rows (t0, duration, s0, vs, ve): what evaluation works on."""
+        return np.array(self.phases, dtype=float).reshape(-1, 5)
+
+    @classmethod
+    def from_arrays(cls, duration_s: np.ndarray, s0_mm: np.ndarray, v_start_mm_s: np.ndarray,
+                    v_end_mm_s: np.ndarray, t0_s: float = 0.0) -> FeedProfile:
+        """Build from per-phase arrays; start times are the running sum of durations."""
+        dur = np.asarray(duration_s, float)
+        t0 = t0_s + np.concatenate(([0.0], np.cumsum(dur)[:-1])) if dur.size else dur
+        arr = np.column_stack((t0, dur, s0_mm, v_start_mm_s, v_end_mm_s)).astype(float, copy=False)
+        profile = cls(tuple(map(FeedPhase._make, arr.tolist())))
+        profile.__dict__["_arr"] = arr  # the rows _arr would build from the tuples, as they are
+        return profile
+
+    @property
+    def t0_s(self) -> float:
+        return float(self._arr[0, 0]) if len(self.phases) else 0.0
+
+    @property
+    def duration_s(self) -> float:
+        if not self.phases:
+            return 0.0
+        return float(self._arr[-1, 0] + self._arr[-1, 1] - self._arr[0, 0])
+
+    @property
+    def length_mm(self) -> float:
+        if not self.phases:
+            return 0.0
+        last = self._arr[-1]
+        return float(last[2] + 0.5 * last[1] * (last[3] + last[4]) - self._arr[0, 2])
+
+    def evaluate(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(s_mm, v_mm_s, a_mm_s2) at the given times; times outside the profile are clamped."""
+        t = np.asarray(t_s, dtype=float)
+        if not self.phases:
+            z = np.zeros_like(t)
+            return z, z.copy(), z.copy()
+        arr = self._arr
+        t = clamp(t, arr[0, 0], arr[-1, 0] + arr[-1, 1])
+        k = clamp(np.searchsorted(arr[:, 0], t, side="right") - 1, 0, len(arr) - 1)
+        t0, dur, s0, vs, ve = (arr[k, j] for j in range(5))
+        # Zero-length phases never get selected unless at the very end; guard the division.
+        tau = clamp((t - t0) / np.where(dur > 0.0, dur, 1.0), 0.0, 1.0)
+        s = s0 + bernstein6_distance(tau, dur, vs, ve)
+        return s, quintic_speed(tau, vs, ve), quintic_accel(tau, dur, vs, ve)

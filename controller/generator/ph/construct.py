@@ -1,0 +1,224 @@
+"""Modules 1 and 2 of the generator: sharp corner detection and PH construction for one run."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.blocks import ArcBlock, LineBlock, MotionBlock, NurbsBlock, PathMode
+from controller.generator.corners.detection import (
+    CornerZone,
+    detect_sharp_corners,
+    joint_angle_rad,
+    widen_zone,
+)
+from controller.generator.ph.blend import blend_joint
+from controller.generator.ph.fit import PhSegment, fit_zones
+from controller.geometry.curves import ArcCurve, Curve, LineCurve
+from controller.geometry.nurbs import Nurbs
+from controller.geometry.path import Path, Piece, PieceKind, chain, make_piece
+
+# Joints whose tangents turn by less than this are treated as smooth (CAM output jitter).
+SMOOTH_JOINT_RAD = math.radians(0.5)
+MIN_LENGTH_MM = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class BlockCurve:
+    """One motion block as a curve, with its programmed feed and source line."""
+
+    curve: Curve
+    feed_mm_s: float
+    line: int
+    nurbs: bool
+    blend_tolerance_mm: float | None = None  # how far a G1 corner at its end may be rounded
+
+
+@dataclass(frozen=True)
+class CornerInfo:
+    """A sharp corner found on block `block` (eq. 13-15) and how it was replaced."""
+
+    block: int
+    zone: CornerZone
+    ph_count: int
+    fit_rms_mm: float
+    fit_max_mm: float
+    x_mm: float
+    y_mm: float
+
+
+@dataclass(frozen=True, eq=False)
+class Geometry:
+    """The output of modules 1-2: the path with PH corners, and what was done to it."""
+
+    path: Path
+    corners: tuple[CornerInfo, ...]
+    ph_pieces: tuple[Piece, ...]
+    g1_blends: int = 0
+
+
+def block_curve(block: MotionBlock, feed_cap_mm_s: float,
+                default_tolerance_mm: float = 0.0) -> BlockCurve | None:
+    """The XY curve of a block, or None for a block that does not move in XY.
+
+    Under G64 a G1 corner at the block's end may be rounded by G64 P, or by default_tolerance_mm
+    (the contour error limit) when P is not given; under G61/G61.1 it is an exact stop."""
+    feed = min(block.feed_mm_s, feed_cap_mm_s)
+    line = block.source.first_line
+    tol = None
+    if block.path.mode == PathMode.BLEND:
+        tol = block.path.tolerance_mm if block.path.tolerance_mm is not None \
+            else default_tolerance_mm
+    if isinstance(block, NurbsBlock):
+        return BlockCurve(Nurbs.from_block(block), feed, line, True, tol)
+    if isinstance(block, ArcBlock):
+        c = block.center
+        a0 = math.atan2(block.start[1] - c[1], block.start[0] - c[0])
+        return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad), feed, line, False,
+                          tol)
+    assert isinstance(block, LineBlock)
+    p0, p1 = block.start[:2], block.end[:2]
+    if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
+        return None
+    return BlockCurve(LineCurve(p0, p1), feed, line, False, tol)
+
+
+def find_corners(curves: list[BlockCurve], kappa_th_per_mm: float) -> dict[int, list[CornerZone]]:
+    """Module 1: curvature peaks above kappa_th with their zones, for every NURBS block."""
+    return {i: detect_sharp_corners(bc.curve, kappa_th_per_mm)
+            for i, bc in enumerate(curves) if bc.nurbs}
+
+
+def widen(curves: list[BlockCurve], zones: dict[int, list[CornerZone]], block: int,
+          u: float, level_per_mm: float) -> bool:
+    """Widen the zone of `block` nearest to u down to curvature level; True if it grew."""
+    blocks_zones = zones.get(block, [])
+    if not blocks_zones:
+        return False
+    i = int(np.argmin([min(abs(u - z.u_start), abs(u - z.u_end)) for z in blocks_zones]))
+    old = blocks_zones[i]
+    new = widen_zone(curves[block].curve, old, level_per_mm)
+    # Never let two zones of one block overlap: clip at the neighbours.
+    lo = blocks_zones[i - 1].u_end if i > 0 else new.u_start
+    hi = blocks_zones[i + 1].u_start if i + 1 < len(blocks_zones) else new.u_end
+    new = CornerZone(max(new.u_start, lo), min(new.u_end, hi), new.u_peak, new.kappa_peak_per_mm)
+    grew = new.u_start < old.u_start - 1e-12 or new.u_end > old.u_end + 1e-12
+    blocks_zones[i] = new
+    return grew
+
+
+# Keyed by the curve itself, not id(curve): an id is only unique among live objects.
+FitCache = dict[tuple[Curve, float, float, float], list[PhSegment]]
+
+
+def _fits(curve: Curve, zones: list[CornerZone], error_limit_mm: float,
+          cache: FitCache) -> list[list[PhSegment]]:
+    """The PH fit of every zone, the ones not in the cache fitted together in one batch."""
+    keys = [(curve, z.u_start, z.u_end, error_limit_mm) for z in zones]
+    missing = [i for i, k in enumerate(keys) if k not in cache]
+    if missing:
+        fitted = fit_zones(curve, [(zones[i].u_start, zones[i].u_end) for i in missing],
+                           error_limit_mm)
+        for i, segs in zip(missing, fitted, strict=True):
+            cache[keys[i]] = segs
+    return [cache[k] for k in keys]
+
+
+def _nurbs_pieces(bc: BlockCurve, block: int, zones: list[CornerZone], error_limit_mm: float,
+                  use_ph: bool, corner_base: int,
+                  cache: FitCache) -> tuple[list[Piece], list[CornerInfo]]:
+    """Split one NURBS into Taylor parts and PH corners (module 2)."""
+    curve = bc.curve
+    # In path order: NURBS spans as (u0, u1, corner or -1), corner zones as their PH fits.
+    spans: list[tuple[float, float, int] | list[PhSegment]] = []
+    infos: list[CornerInfo] = []
+    fits = _fits(curve, zones, error_limit_mm, cache) if use_ph and zones else []
+    peaks = curve.evaluate(np.array([z.u_peak for z in zones]), 0)[0] if zones else []
+    u = curve.u_start
+    for k, z in enumerate(zones):
+        if z.u_start > u + 1e-12:
+            spans.append((u, z.u_start, -1))
+        peak = peaks[k]
+        if use_ph:
+            segs = fits[k]
+            spans.append(segs)
+            rms = float(np.sqrt(np.mean([s.fit_rms_mm**2 for s in segs])))
+            worst = max(s.fit_max_mm for s in segs)
+            infos.append(CornerInfo(block, z, len(segs), rms, worst, float(peak[0]),
+                                    float(peak[1])))
+        else:
+            spans.append((z.u_start, z.u_end, corner_base + k))
+            infos.append(CornerInfo(block, z, 0, 0.0, 0.0, float(peak[0]), float(peak[1])))
+        u = z.u_end
+    if curve.u_end > u + 1e-12:
+        spans.append((u, curve.u_end, -1))
+    return _materialise(bc, spans, corner_base), infos
+
+
+def _materialise(bc: BlockCurve, spans: list, corner_base: int) -> list[Piece]:
+    """Pieces from _nurbs_pieces' spans, every NURBS span's length from one arc-length call."""
+    ends = [u for sp in spans if isinstance(sp, tuple) for u in sp[:2]]
+    s = bc.curve.s_of_u(np.array(ends)) if ends else np.empty(0)
+    pieces: list[Piece] = []
+    j, corner = 0, corner_base
+    for sp in spans:
+        if isinstance(sp, tuple):
+            u0, u1, c = sp
+            pieces.append(Piece(PieceKind.NURBS, bc.curve, u0, u1, 0.0, float(s[j + 1] - s[j]),
+                                bc.feed_mm_s, bc.line, c))
+            j += 2
+        else:
+            pieces += [Piece(PieceKind.PH, seg.ph, 0.0, 1.0, 0.0, seg.ph.length_mm,
+                             bc.feed_mm_s, bc.line, corner) for seg in sp]
+        if not isinstance(sp, tuple) or sp[2] >= 0:
+            corner += 1
+    return pieces
+
+
+def _tangent(piece: Piece, at_end: bool) -> np.ndarray:
+    d = piece.curve.evaluate(np.array([piece.u1 if at_end else piece.u0]), 1)[1, 0]
+    return d / max(float(np.hypot(d[0], d[1])), 1e-300)
+
+
+def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
+               error_limit_mm: float, use_ph: bool = True,
+               cache: FitCache | None = None, prefix: tuple[Piece, ...] = (),
+               prefix_tolerance_mm: float | None = None) -> Geometry:
+    """Module 2: the run's path, corner zones replaced by PH quintics within error_limit_mm.
+
+    Joints between blocks whose tangents turn by more than SMOOTH_JOINT_RAD are G1 corners: a
+    PH quintic blend within the block's tolerance (gen_blend), else an exact stop (feed zero).
+    A prefix is geometry already decided by the previous look-ahead window; the blocks follow it.
+    """
+    cache = {} if cache is None else cache
+    pieces: list[Piece] = list(prefix)
+    corner_base = max((p.corner for p in prefix), default=-1) + 1  # keep corner ids distinct
+    infos: list[CornerInfo] = []
+    stops: list[int] = []
+    blends = 0
+    for i, bc in enumerate(curves):
+        if bc.nurbs:
+            ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph,
+                                    corner_base + len(infos), cache)
+            infos += inf
+        else:
+            kind = PieceKind.ARC if isinstance(bc.curve, ArcCurve) else PieceKind.LINE
+            ps = [make_piece(kind, bc.curve, 0.0, 1.0, 0.0, bc.feed_mm_s, bc.line)]
+        if pieces and joint_angle_rad(_tangent(pieces[-1], True), _tangent(ps[0], False)) \
+                > SMOOTH_JOINT_RAD:
+            tol = curves[i - 1].blend_tolerance_mm if i > 0 else prefix_tolerance_mm
+            blended = blend_joint(pieces[-1], ps[0], tol) if tol else None
+            if blended is None:
+                stops.append(len(pieces))
+            else:
+                pieces[-1] = blended[0]
+                pieces.append(blended[1])
+                ps[0] = blended[2]
+                blends += 1
+        pieces += ps
+    chained = chain(pieces)
+    stop_s = tuple(chained[k].s0_mm for k in stops)
+    ph = tuple(p for p in chained if p.kind == PieceKind.PH)
+    return Geometry(Path(chained, stop_s), tuple(infos), ph, blends)

@@ -1,0 +1,268 @@
+"""The reference-point generator: NC blocks in, one reference point per sample period out."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, replace
+from enum import StrEnum
+
+import numpy as np
+
+from controller.blocks import (
+    ArcBlock,
+    DwellBlock,
+    LineBlock,
+    NcBlock,
+    NurbsBlock,
+    PathMode,
+)
+from controller.config import MachineConfig
+from controller.errors import PlanningError
+from controller.generator.baselines import FORMULA_FEEDS, plan_formula_run
+from controller.generator.feed.planner import plan_feed
+from controller.generator.loop import (
+    NURBS_LOOKAHEAD,
+    PH_LOOKAHEAD,
+    Continuation,
+    RunPlan,
+    RunStatus,
+    plan_contour_run,
+)
+from controller.generator.ph.construct import BlockCurve, block_curve
+from controller.generator.window import continuation_cut
+from controller.refpoints import RefChunk
+
+MAX_RUN_BLOCKS = 500  # baselines: a longer contour is planned in pieces, stopping between
+IN_POSITION_S = 0.04  # wait at rest before the next move: the servo settles to 2 % in 32 ms
+WINDOW_BLOCKS = 200  # ph-lookahead: new blocks per look-ahead window (cut and continued)
+
+
+class Algorithm(StrEnum):
+    ADAPTIVE = "adaptive"  # Yeh & Hsu 2002: feed = min(Vmax, V_af)
+    CURVATURE = "curvature"  # Zhiming et al. 2002: feed = V_cf
+    NURBS_LOOKAHEAD = "nurbs-lookahead"  # Tsai et al. 2008
+    PH_LOOKAHEAD = "ph-lookahead"  # this controller (the paper's algorithm)
+
+
+@dataclass(frozen=True, eq=False)
+class PlannedStep:
+    """One chunk of reference points and, for contour runs, how it was planned."""
+
+    chunk: RefChunk
+    run: RunPlan | None = None
+    rapid: bool = False  # a G0 move (and its in-position wait): not part of any contour
+    phi_rad: np.ndarray | None = None  # exact path tangent angle per sample, where known
+
+
+def _pos_row(config: MachineConfig, xy: np.ndarray, z_mm: float) -> np.ndarray:
+    if config.has_axis("z"):
+        return np.column_stack([xy, np.full(len(xy), z_mm)])
+    return xy
+
+
+def _straight_move(block: LineBlock, config: MachineConfig, t0_s: float) -> RefChunk | None:
+    """A line that moves Z, or a rapid: its own quintic feed profile from rest to rest."""
+    start, end = np.array(block.start), np.array(block.end)
+    if not config.has_axis("z"):
+        start, end = start[:2], end[:2]
+    length = float(np.linalg.norm(end - start))
+    if length < 1e-9:
+        return None
+    cap = config.interpolator.rapid_feed_mm_s if block.rapid else min(
+        block.feed_mm_s, config.interpolator.max_feed_mm_s)
+    plan = plan_feed(np.array([0.0, length]), np.array([cap, cap]),
+                     config.interpolator.max_accel_mm_s2)
+    T = config.sample_period_s  # noqa: N806
+    k = max(int(np.ceil(plan.profile.duration_s / T - 1e-9)), 1)
+    s, v, _ = plan.profile.evaluate(np.minimum(np.arange(1, k + 1) * T, plan.profile.duration_s))
+    pos = start + (s / length)[:, None] * (end - start)
+    pos[-1] = end
+    line = np.full(len(pos), block.source.first_line, np.int32)
+    return RefChunk(t0_s + T, pos, v, line)
+
+
+def _in_position_hold(last: PlannedStep, config: MachineConfig, t_s: float) -> PlannedStep:
+    """IN_POSITION_S of samples holding the last step's end point."""
+    k = int(round(IN_POSITION_S / config.sample_period_s))
+    rows = np.repeat(last.chunk.pos_mm[-1:], k, axis=0)
+    line = np.full(k, last.chunk.line[-1], np.int32)
+    chunk = RefChunk(t_s + config.sample_period_s, rows, np.zeros(k), line)
+    return PlannedStep(chunk, rapid=last.rapid)
+
+
+def _dwell(block: DwellBlock, config: MachineConfig, t0_s: float) -> RefChunk | None:
+    T = config.sample_period_s  # noqa: N806
+    k = int(round(block.seconds / T))
+    if k <= 0:
+        return None
+    pos = np.array(block.position)[: len(config.axis_names)]
+    rows = np.repeat(pos[None, :], k, axis=0)
+    return RefChunk(t0_s + T, rows, np.zeros(k), np.full(k, block.source.first_line, np.int32))
+
+
+def plan_run(curves: list[BlockCurve], start_xy: np.ndarray, config: MachineConfig,
+             algorithm: Algorithm, cont: Continuation | None = None,
+             ) -> tuple[RunPlan | None, np.ndarray, np.ndarray, np.ndarray]:
+    """Plan one XY contour run with the chosen algorithm: (report, xy, feed, line)."""
+    if algorithm in FORMULA_FEEDS:
+        s = plan_formula_run(curves, config, algorithm.value)
+        return None, s.xy_mm, s.v_mm_s, s.line
+    settings = PH_LOOKAHEAD if algorithm == Algorithm.PH_LOOKAHEAD else NURBS_LOOKAHEAD
+    run = plan_contour_run(curves, start_xy, config, settings, cont)
+    return run, run.samples.xy_mm, run.samples.v_mm_s, run.samples.line
+
+
+def _curves(blocks: list[NcBlock], config: MachineConfig) -> list[BlockCurve]:
+    ip = config.interpolator
+    return [c for b in blocks
+            if (c := block_curve(b, ip.max_feed_mm_s, ip.contour_error_limit_mm)) is not None]
+
+
+def _contour(blocks: list[NcBlock], config: MachineConfig, algorithm: Algorithm,
+             t0_s: float, cont: Continuation | None = None) -> PlannedStep | None:
+    """Plan pending blocks (after a cut of the previous window, if any) all the way to rest."""
+    curves = _curves(blocks, config)
+    if not curves and cont is None:
+        return None
+    start = np.array(blocks[0].start[:2]) if cont is None else cont.xy_mm
+    end = blocks[-1].end if blocks else cont.end_mm  # type: ignore[union-attr]
+    run, xy, v, line = plan_run(curves, start, config, algorithm, cont)
+    return _run_step(xy, v, line, run, t0_s, config, end[2], end[:2])
+
+
+def _run_step(xy: np.ndarray, v: np.ndarray, line: np.ndarray, run: RunPlan | None, t0_s: float,
+              config: MachineConfig, z_mm: float,
+              end_xy: tuple[float, ...] | None = None) -> PlannedStep:
+    """Samples of a run (or its first part) as one chunk; end_xy, for a run to rest, replaces
+    the last point by the programmed end point exactly, not a curve evaluation."""
+    if end_xy is not None:
+        xy = xy.copy()
+        xy[-1] = end_xy
+    phi = None if run is None else run.samples.phi_rad[:len(xy)]
+    chunk = RefChunk(t0_s + config.sample_period_s, _pos_row(config, xy, z_mm), v, line)
+    return PlannedStep(chunk, run, phi_rad=phi)
+
+
+def _window(blocks: list[NcBlock], config: MachineConfig, t0_s: float,
+            cont: Continuation | None) -> tuple[PlannedStep | None, Continuation | None]:
+    """Plan a look-ahead window to rest, then keep only what precedes its last cruise sample
+    before the overlap; the rest is planned again with the next blocks (no stop between).
+
+    Without such a cruise sample the whole window is kept and the machine stops at its end."""
+    curves = _curves(blocks, config)
+    if not curves:  # nothing moves in XY (all blocks shorter than a micrometre): keep going
+        return None, cont
+    start = np.array(blocks[0].start[:2]) if cont is None else cont.xy_mm
+    run = plan_contour_run(curves, start, config, PH_LOOKAHEAD, cont)
+    cut = continuation_cut(run, curves[-1].blend_tolerance_mm, blocks[-1].end, config, cont)
+    end, s = blocks[-1].end, run.samples
+    if cut is None or run.status != RunStatus.OK:
+        return _run_step(s.xy_mm, s.v_mm_s, s.line, run, t0_s, config, end[2], end[:2]), None
+    k, nxt = cut
+    return _run_step(s.xy_mm[:k + 1], s.v_mm_s[:k + 1], s.line[:k + 1], run, t0_s, config,
+                     end[2]), nxt
+
+
+def _is_contour_block(block: NcBlock) -> bool:
+    if isinstance(block, NurbsBlock | ArcBlock):
+        return True
+    return isinstance(block, LineBlock) and not block.rapid and block.start[2] == block.end[2]
+
+
+def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
+                 algorithm: Algorithm | str = Algorithm.PH_LOOKAHEAD) -> Iterator[PlannedStep]:
+    """Group blocks into runs (rest to rest) and plan each; chunks follow each other in time.
+
+    ph-lookahead plans long runs in look-ahead windows of WINDOW_BLOCKS new blocks, each cut
+    mid-cruise and continued by the next (see _window); the other algorithms stop between
+    windows."""
+    algorithm = Algorithm(algorithm)
+    T = config.sample_period_s  # noqa: N806
+    t_s = 0.0
+    pending: list[NcBlock] = []
+    cont: Continuation | None = None
+
+    settle_after: PlannedStep | None = None  # the last step, if it came to rest moving
+
+    def emit(step: PlannedStep | None, at_rest: bool = True,
+             dwell: bool = False) -> Iterator[PlannedStep]:
+        nonlocal t_s, settle_after
+        if step is None or not len(step.chunk):
+            return
+        if settle_after is not None and not dwell:
+            # In-position check between moves that stop (exact stop, rapids, Z moves), as
+            # Fanuc does: the next move starts once the servo has settled, so it does not
+            # begin with the residual error of the last one (the dynamics module assumes rest).
+            hold = _in_position_hold(settle_after, config, t_s)
+            yield hold
+            t_s += len(hold.chunk) * T
+            step = replace(step, chunk=replace(step.chunk, t0_s=t_s + T))
+        t_s = step.chunk.t0_s + (len(step.chunk) - 1) * T
+        yield step
+        settle_after = step if at_rest and not dwell else None
+
+    def flush() -> Iterator[PlannedStep]:
+        nonlocal cont
+        if pending or cont is not None:
+            run_blocks = list(pending)
+            pending.clear()
+            step = _contour(run_blocks, config, algorithm, t_s, cont)
+            cont = None
+            yield from emit(step)
+
+    def window() -> Iterator[PlannedStep]:
+        nonlocal cont
+        run_blocks = list(pending)
+        pending.clear()
+        step, cont = _window(run_blocks, config, t_s, cont)
+        yield from emit(step, at_rest=cont is None)
+
+    for block in blocks:
+        if _is_contour_block(block):
+            pending.append(block)  # type: ignore[arg-type]
+            exact = block.path.mode != PathMode.BLEND  # type: ignore[union-attr]
+            if exact:
+                yield from flush()
+            elif len(pending) >= WINDOW_BLOCKS and algorithm == Algorithm.PH_LOOKAHEAD:
+                yield from window()
+            elif len(pending) >= MAX_RUN_BLOCKS:
+                yield from flush()
+            continue
+        yield from flush()
+        if isinstance(block, LineBlock):
+            chunk = _straight_move(block, config, t_s)
+            yield from emit(PlannedStep(chunk, rapid=block.rapid) if chunk is not None else None)
+        elif isinstance(block, DwellBlock):
+            chunk = _dwell(block, config, t_s)
+            yield from emit(PlannedStep(chunk) if chunk is not None else None, dwell=True)
+    yield from flush()
+
+
+TRAVEL_SLACK_MM = 1e-6  # rounding only: the programs were checked against travel beforehand
+
+
+def check_travel(chunk: RefChunk, config: MachineConfig) -> None:
+    """Last line of defence (soft limits, as LinuxCNC's planner also enforces them): no
+    reference point may leave the machine's travel, whatever the checks before missed."""
+    for i, axis in enumerate(config.axes):
+        lo, hi = axis.travel_mm
+        col = chunk.pos_mm[:, i]
+        bad = np.flatnonzero((col < lo - TRAVEL_SLACK_MM) | (col > hi + TRAVEL_SLACK_MM))
+        if bad.size:
+            k = int(bad[0])
+            raise PlanningError(f"line {int(chunk.line[k])}: {axis.name.upper()} reference "
+                                f"{col[k]:.4f} mm outside travel [{lo:g}, {hi:g}] mm")
+
+
+def generate_reference(blocks: Iterable[NcBlock], config: MachineConfig,
+                       algorithm: Algorithm | str = Algorithm.PH_LOOKAHEAD) -> Iterator[RefChunk]:
+    """The generator process's stream: chunks of reference points, the last one marked final;
+    a chunk leaving the travel raises PlanningError instead of being sent."""
+    previous: RefChunk | None = None
+    for step in plan_program(blocks, config, algorithm):
+        check_travel(step.chunk, config)
+        if previous is not None:
+            yield previous
+        previous = step.chunk
+    if previous is not None:
+        yield RefChunk(previous.t0_s, previous.pos_mm, previous.feed_mm_s, previous.line, True)

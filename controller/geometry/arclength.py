@@ -1,0 +1,107 @@
+"""Arc length s(u) of a parametric curve by composite Gauss-Legendre, vectorised inverse u(s)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from controller.geometry.arclength_inverse import INVERSE_TOL_MM, DerivsFn, InverseTable, SpeedFn
+from controller.numeric import clamp, sorted_unique
+
+__all__ = ["INVERSE_TOL_MM", "ArcLengthTable"]
+
+_GL_ORDER = 10
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(_GL_ORDER)
+_NEWTON_SWEEPS = 60  # safeguarded: usually 1-2 sweeps, bisection at worst
+_NEWTON_TOL_MM = 1e-11
+
+
+def _gauss_integrals(speed: SpeedFn, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Integral of speed over each [a_i, b_i], all intervals in one speed call."""
+    half = 0.5 * (b - a)
+    nodes = (0.5 * (a + b))[:, None] + half[:, None] * _GL_X[None, :]
+    values = speed(nodes.ravel()).reshape(nodes.shape)
+    return half * (values @ _GL_W)
+
+
+def _subdivide(breaks: np.ndarray, m: int) -> np.ndarray:
+    """Split every non-empty interval between breakpoints into m equal parts."""
+    lo, hi = breaks[:-1], breaks[1:]
+    keep = hi > lo
+    frac = np.arange(m) / m
+    inner = (lo[keep][:, None] + (hi[keep] - lo[keep])[:, None] * frac[None, :]).ravel()
+    return np.append(inner, breaks[-1])
+
+
+@dataclass(frozen=True, eq=False)
+class ArcLengthTable:
+    """Cumulative arc length at sub-interval nodes; s(u) and u(s) evaluated to ~1e-12 relative."""
+
+    speed: SpeedFn
+    u_nodes: np.ndarray  # sub-interval boundaries
+    s_nodes: np.ndarray  # arc length at u_nodes, s_nodes[0] = 0
+    derivs: DerivsFn | None = None  # for the inverse table (u_of_s)
+
+    @classmethod
+    def build(cls, speed: SpeedFn, breaks: ArrayLike, rel_tol: float = 1e-12,
+              derivs: DerivsFn | None = None) -> ArcLengthTable:
+        """Double the sub-intervals per knot span until two successive totals agree to rel_tol."""
+        brk = sorted_unique(np.asarray(breaks, dtype=float))
+        m, previous = 2, None
+        while True:
+            u_nodes = _subdivide(brk, m)
+            pieces = _gauss_integrals(speed, u_nodes[:-1], u_nodes[1:])
+            total = float(pieces.sum())
+            if previous is not None and abs(total - previous) <= rel_tol * max(total, 1e-300):
+                break
+            if m >= 1024:
+                break
+            previous, m = total, m * 2
+        return cls(speed, u_nodes, np.concatenate(([0.0], np.cumsum(pieces))), derivs)
+
+    @property
+    def total_length_mm(self) -> float:
+        return float(self.s_nodes[-1])
+
+    def _interval(self, u: np.ndarray) -> np.ndarray:
+        idx = np.searchsorted(self.u_nodes, u, side="right") - 1
+        return clamp(idx, 0, self.u_nodes.size - 2)
+
+    def s_of_u(self, u: ArrayLike) -> np.ndarray:
+        """Arc length from the curve start to u (Gauss-Legendre on [u_node, u])."""
+        uu = clamp(np.atleast_1d(np.asarray(u, dtype=float)), self.u_nodes[0], self.u_nodes[-1])
+        idx = self._interval(uu)
+        return self.s_nodes[idx] + _gauss_integrals(self.speed, self.u_nodes[idx], uu)
+
+    @cached_property
+    def _inverse(self) -> InverseTable:
+        if self.derivs is None:
+            raise ValueError("an inverse table needs the curve's derivatives")
+        return InverseTable(self.speed, self.derivs, _gauss_integrals, self.u_nodes, self.s_nodes)
+
+    def u_of_s(self, s_mm: ArrayLike, tol_mm: float = _NEWTON_TOL_MM) -> np.ndarray:
+        """Inverse: quintic Hermite on the inverse table (built where first asked), then, when
+        tol_mm is below INVERSE_TOL_MM or a sub-interval could not be checked, safeguarded
+        Newton (bisection when a step leaves the bracket) to tol_mm."""
+        s = clamp(np.atleast_1d(np.asarray(s_mm, dtype=float)), 0.0, self.total_length_mm)
+        inv = self._inverse
+        inv.ensure(s)
+        u, idx = inv.hermite(s)
+        if tol_mm >= INVERSE_TOL_MM and inv.checked(idx):
+            return u
+        lo, hi, s_lo = inv.interval(idx)
+        a, b, u_node = lo.copy(), hi.copy(), lo
+        for _ in range(_NEWTON_SWEEPS):
+            err = s_lo + _gauss_integrals(self.speed, u_node, u) - s
+            if not np.any(np.abs(err) > tol_mm):
+                break
+            a = np.where(err < 0, u, a)
+            b = np.where(err > 0, u, b)
+            speed = self.speed(u)
+            newton = u - err / np.where(speed > 0, speed, np.inf)
+            inside = (newton > a) & (newton < b)
+            u = np.where(np.abs(err) > tol_mm, np.where(inside, newton, 0.5 * (a + b)), u)
+        return u

@@ -1,0 +1,109 @@
+"""A planar tool path as a chain of pieces (NURBS parts, PH corners, lines, arcs) in arc length."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from controller.geometry.curves import Curve
+from controller.numeric import clamp, sorted_unique
+
+
+class PieceKind(StrEnum):
+    NURBS = "nurbs"  # a non-corner NURBS part: Taylor interpolator
+    PH = "ph"  # a PH quintic corner: exact arc length, Newton interpolator
+    LINE = "line"
+    ARC = "arc"
+
+
+@dataclass(frozen=True, eq=False)
+class Piece:
+    """The part [u0, u1] of a curve; s0_mm is where it starts along the whole path."""
+
+    kind: PieceKind
+    curve: Curve
+    u0: float
+    u1: float
+    s0_mm: float
+    length_mm: float
+    feed_mm_s: float  # programmed feed (capped by the machine's limit)
+    line: int  # NC source line
+    corner: int = -1  # index of the corner zone this PH piece belongs to, -1 otherwise
+
+    @property
+    def curve_s0_mm(self) -> float:
+        """Arc length of the curve before u0 (the piece's offset inside its curve)."""
+        return float(self.curve.s_of_u(np.array([self.u0]))[0])
+
+    def u_at(self, s_path_mm: np.ndarray) -> np.ndarray:
+        """Exact curve parameters at path arc lengths inside this piece."""
+        local = clamp(s_path_mm - self.s0_mm, 0.0, self.length_mm)
+        u = self.curve.u_of_s(local + self.curve_s0_mm)
+        return clamp(u, min(self.u0, self.u1), max(self.u0, self.u1))
+
+
+@dataclass(frozen=True, eq=False)
+class Path:
+    """Pieces joined end to end; stops_at holds path positions where the feed must be zero."""
+
+    pieces: tuple[Piece, ...]
+    stops_at_mm: tuple[float, ...] = ()
+
+    @property
+    def length_mm(self) -> float:
+        last = self.pieces[-1]
+        return last.s0_mm + last.length_mm
+
+    @property
+    def breaks_mm(self) -> np.ndarray:
+        return np.array([p.s0_mm for p in self.pieces])
+
+    def piece_index(self, s_mm: np.ndarray) -> np.ndarray:
+        """Which piece each arc length falls in (the last piece owns the end point)."""
+        return clamp(np.searchsorted(self.breaks_mm, s_mm, side="right") - 1, 0,
+                       len(self.pieces) - 1)
+
+    def _per_piece(self, s_mm: np.ndarray, fn) -> np.ndarray:  # noqa: ANN001
+        s = np.asarray(s_mm, float)
+        idx = self.piece_index(s)
+        out: np.ndarray | None = None
+        for i in sorted_unique(idx):
+            mask = idx == i
+            val = fn(self.pieces[i], s[mask])
+            if out is None:
+                out = np.zeros(s.shape + val.shape[1:], dtype=val.dtype)
+            out[mask] = val
+        assert out is not None
+        return out
+
+    def feed_cap(self, s_mm: np.ndarray) -> np.ndarray:
+        """Programmed feed of the piece at each arc length."""
+        return self._per_piece(s_mm, lambda p, s: np.full(s.shape, p.feed_mm_s))
+
+    def line_at(self, s_mm: np.ndarray) -> np.ndarray:
+        return self._per_piece(s_mm, lambda p, s: np.full(s.shape, p.line, dtype=np.int32))
+
+    @property
+    def end_xy(self) -> np.ndarray:
+        p = self.pieces[-1]
+        return p.curve.evaluate(np.array([p.u1]), 0)[0, 0]
+
+
+def make_piece(kind: PieceKind, curve: Curve, u0: float, u1: float, s0_mm: float,
+               feed_mm_s: float, line: int, corner: int = -1) -> Piece:
+    """A piece with its length measured on the curve."""
+    s = curve.s_of_u(np.array([u0, u1]))
+    return Piece(kind, curve, u0, u1, s0_mm, float(s[1] - s[0]), feed_mm_s, line, corner)
+
+
+def chain(pieces: list[Piece]) -> tuple[Piece, ...]:
+    """Re-number the path offsets so the pieces follow each other."""
+    out: list[Piece] = []
+    s0 = 0.0
+    for p in pieces:
+        out.append(Piece(p.kind, p.curve, p.u0, p.u1, s0, p.length_mm, p.feed_mm_s, p.line,
+                         p.corner))
+        s0 += p.length_mm
+    return tuple(out)

@@ -1,0 +1,229 @@
+"""Motion of one line: G0/G1 lines, G2/G3 arcs, and the G5.2/G6.2 NURBS blocks."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from controller.blocks import ArcBlock, LineBlock, NcBlock, PathControl, Source
+from controller.config import MachineConfig
+from controller.interpreter.arcs import center_ijk, center_r
+from controller.interpreter.codes import WordError, g_name
+from controller.interpreter.nurbs_blocks import NurbsCollector, check_order
+
+SAME_POINT_MM = 1e-6  # G6.2's first control point must be the current position within this
+_G6_LETTERS = frozenset("XYZRK")
+_AXES = frozenset("XYZ")
+
+
+class MotionMixin:
+    """Builds motion blocks from the modal state; mixed into InterpState, which sets what is
+    declared here (declared, not imported, so that this file does not import state.py)."""
+
+    path: str
+    config: MachineConfig
+    has_z: bool
+    rapid_mm_s: float
+    out: list[NcBlock]
+    pos: tuple[float, float, float]
+    scale: float
+    absolute: bool
+    arc_absolute: bool
+    feed_mm_s: float
+    motion: int | None
+    path_control: PathControl
+    nurbs: NurbsCollector | None
+    _src: Callable[[int], Source]
+
+    def move(self, motion: int | None, vals: dict[str, float], lineno: int) -> None:
+        if motion is not None:
+            self.motion = None if motion in (800, 53) else motion
+        mode = self.motion if motion is None else motion
+        if mode == 800 and not _AXES.intersection(vals):
+            return  # G80 alone cancels the motion mode
+        if mode is None or mode == 800:
+            raise WordError("X" if "X" in vals else ("Y" if "Y" in vals else "Z"),
+                            "axis word with no motion mode (G0, G1, G2, G3) in force")
+        if mode == 53:
+            raise WordError("G5.3", "G5.3 without an open G5.2 block")
+        if mode in (52, 62):
+            self._start_nurbs(mode, vals, lineno)
+            return
+        end = self._end_point(vals)
+        if mode == 0:
+            self._line(end, True, lineno)
+        elif mode == 10:
+            self._need_feed(motion)
+            self._line(end, False, lineno)
+        else:
+            self._need_feed(motion)
+            self._arc(mode == 20, end, vals, lineno)
+
+    def _need_feed(self, motion: int | None) -> None:
+        if self.feed_mm_s <= 0.0:
+            word = g_name(motion if motion is not None else self.motion or 10)
+            raise WordError(word, f"{word} feed move with no feed rate: program F first")
+
+    def _end_point(self, vals: dict[str, float]) -> tuple[float, float, float]:
+        x, y, z = self.pos
+        s = self.scale
+        if self.absolute:
+            x = vals["X"] * s if "X" in vals else x
+            y = vals["Y"] * s if "Y" in vals else y
+            z = vals["Z"] * s if "Z" in vals else z
+        else:
+            x += vals.get("X", 0.0) * s
+            y += vals.get("Y", 0.0) * s
+            z += vals.get("Z", 0.0) * s
+        if z != self.pos[2] and not self.has_z:
+            raise WordError("Z", f"Z move on a machine without a Z axis "
+                                 f"(config '{self.config.name}')")
+        return x, y, z
+
+    def _line(self, end: tuple[float, float, float], rapid: bool, lineno: int) -> None:
+        if end == self.pos:
+            return  # a zero-length move changes nothing
+        feed = self.rapid_mm_s if rapid else self.feed_mm_s
+        self.out.append(LineBlock(self.pos, end, feed, rapid, self.path_control,
+                                  self._src(lineno)))
+        self.pos = end
+
+    def _arc(self, clockwise: bool, end: tuple[float, float, float], vals: dict[str, float],
+             lineno: int) -> None:
+        sx, sy, sz = self.pos
+        ex, ey, ez = end
+        if ez != sz:
+            raise WordError("Z", "helical arcs (Z motion in G2/G3) are not supported")
+        if "K" in vals:
+            raise WordError("K", "K word in an XY-plane (G17) arc")
+        turns = self._turns(vals)
+        inch = self.scale != 1.0
+        has_ij = "I" in vals or "J" in vals
+        if "R" in vals:
+            if has_ij:
+                raise WordError("R", "arc with both R and I J: use one of them")
+            cx, cy = center_r(sx, sy, ex, ey, vals["R"] * self.scale, clockwise, inch)
+        elif has_ij:
+            cx, cy = center_ijk(sx, sy, ex, ey, *self._center(vals), inch)
+        else:
+            raise WordError(g_name(20 if clockwise else 30), "arc needs I J (centre) or R")
+        self.out.append(ArcBlock(self.pos, end, (cx, cy), clockwise, turns, self.feed_mm_s,
+                                 self.path_control, self._src(lineno)))
+        self.pos = end
+
+    def _turns(self, vals: dict[str, float]) -> int:
+        p = vals.get("P", 1.0)
+        if p < 1 or p != int(p):
+            raise WordError("P", "arc P (number of turns) must be a positive integer")
+        return int(p) - 1
+
+    def _center(self, vals: dict[str, float]) -> tuple[float, float]:
+        s = self.scale
+        if self.arc_absolute:
+            for letter in "IJ":
+                if letter not in vals:
+                    raise WordError(letter if letter == "I" else "J",
+                                    f"{letter} word missing in absolute-centre arc (G90.1)")
+            return vals["I"] * s, vals["J"] * s
+        return self.pos[0] + vals.get("I", 0.0) * s, self.pos[1] + vals.get("J", 0.0) * s
+
+    # ---- NURBS ------------------------------------------------------------------------------
+    def _start_nurbs(self, mode: int, vals: dict[str, float], lineno: int) -> None:
+        name = g_name(mode)
+        if not self.absolute:
+            raise WordError(name, f"{name} NURBS in incremental mode (G91) is not supported")
+        self._need_feed(mode)
+        if "Z" in vals and vals["Z"] * self.scale != self.pos[2]:
+            raise WordError("Z", "NURBS must stay at constant Z (no Z motion)")
+        x0, y0, z0 = self.pos
+        if mode == 52:
+            self._start_g5(vals, lineno, x0, y0, z0)
+        else:
+            self._start_g6(vals, lineno, x0, y0, z0)
+        self.motion = None  # after the NURBS block, a new motion code is needed
+
+    def _start_g5(self, vals: dict[str, float], lineno: int, x0: float, y0: float,
+                  z0: float) -> None:
+        order = check_order(vals["L"], "L") if "L" in vals else 3
+        has_xy = _xy_flags(vals)
+        w0 = vals.get("P", 1.0) if not has_xy else 1.0  # LinuxCNC: P alone weights point 0
+        self.nurbs = NurbsCollector("G5.2", order, x0, y0, w0, z0, self.feed_mm_s,
+                                    self.path_control, self.path, lineno)
+        if has_xy:
+            self._g5_point(vals, lineno)
+
+    def _g5_point(self, vals: dict[str, float], lineno: int) -> None:
+        if "P" not in vals:
+            raise WordError("X", "G5.2 control point needs a weight P")
+        s = self.scale
+        self.nurbs.add_point(vals["X"] * s, vals["Y"] * s, vals["P"], lineno)
+
+    def _start_g6(self, vals: dict[str, float], lineno: int, x0: float, y0: float,
+                  z0: float) -> None:
+        if "P" not in vals:
+            raise WordError("G6.2", "G6.2 needs the order P on its first line")
+        order = check_order(vals["P"], "P")
+        if "K" not in vals:
+            raise WordError("G6.2", "G6.2 control point needs its knot K")
+        x = vals["X"] * self.scale if "X" in vals else x0
+        y = vals["Y"] * self.scale if "Y" in vals else y0
+        if abs(x - x0) > SAME_POINT_MM or abs(y - y0) > SAME_POINT_MM:
+            raise WordError("X" if "X" in vals else "Y",
+                            f"the first G6.2 control point must be the current position "
+                            f"X{x0 / self.scale:.4f} Y{y0 / self.scale:.4f}")
+        self.nurbs = NurbsCollector("G6.2", order, x0, y0, vals.get("R", 1.0), z0,
+                                    self.feed_mm_s, self.path_control, self.path, lineno)
+        self.nurbs.add_knot(vals["K"], lineno, knot_only=False)
+
+    def nurbs_line(self, gs: list[int], ms: list[int], vals: dict[str, float],
+                   lineno: int) -> bool:
+        """A line while a NURBS block is open. True if the line belonged to the block."""
+        if self.nurbs.kind == "G5.2":
+            self._g5_line(gs, ms, vals, lineno)
+            return True
+        if ms or any(g != 62 for g in gs) or "P" in vals or not _G6_LETTERS.issuperset(vals):
+            self.end_nurbs()
+            return False
+        if "Z" in vals:
+            raise WordError("Z", "NURBS must stay at constant Z (no Z motion)")
+        if "X" in vals or "Y" in vals or "R" in vals:
+            if "K" not in vals:
+                raise WordError("X" if "X" in vals else "Y" if "Y" in vals else "R",
+                                "G6.2 control point needs its knot K")
+            last_x, last_y = self.nurbs.points[-1]
+            x = vals["X"] * self.scale if "X" in vals else last_x
+            y = vals["Y"] * self.scale if "Y" in vals else last_y
+            self.nurbs.add_point(x, y, vals.get("R", 1.0), lineno)
+            self.nurbs.add_knot(vals["K"], lineno, knot_only=False)
+        elif "K" in vals:
+            self.nurbs.add_knot(vals["K"], lineno, knot_only=True)
+        return True
+
+    def _g5_line(self, gs: list[int], ms: list[int], vals: dict[str, float],
+                 lineno: int) -> None:
+        if gs == [53] and not ms and not vals:
+            self.end_nurbs(lineno)
+            return
+        if "Z" in vals:
+            raise WordError("Z", "NURBS must stay at constant Z (no Z motion)")
+        if gs or ms or not {"X", "Y", "P"}.issuperset(vals):
+            word = g_name(gs[0]) if gs else (f"M{ms[0]}" if ms else
+                                             min(vals.keys() - {"X", "Y", "P"}))
+            raise WordError(word, "only X Y P control points may stand between G5.2 and G5.3")
+        if _xy_flags(vals):
+            self._g5_point(vals, lineno)
+        elif "P" in vals:
+            raise WordError("P", "P without X and Y is only allowed for the first control point")
+
+    def end_nurbs(self, end_line: int | None = None) -> None:
+        block = self.nurbs.finish(end_line)
+        self.nurbs = None
+        self.out.append(block)
+        self.pos = (*block.end[:2], self.pos[2])
+
+
+def _xy_flags(vals: dict[str, float]) -> bool:
+    """True if X and Y are both given, False if neither; one alone is an error."""
+    if ("X" in vals) != ("Y" in vals):
+        raise WordError("X" if "X" in vals else "Y",
+                        "NURBS control point needs both X and Y")
+    return "X" in vals

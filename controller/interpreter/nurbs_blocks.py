@@ -1,0 +1,114 @@
+"""NURBS blocks from G-code: LinuxCNC G5.2 ... G5.3 and G6.2 with explicit knots (Fanuc form)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controller.blocks import NurbsBlock, PathControl, Source
+from controller.errors import NcError
+from controller.interpreter.codes import WordError
+
+MIN_ORDER, MAX_ORDER = 2, 6
+MAX_CONTROL_POINTS = 100_000  # one block is held in memory; bounded so memory stays bounded
+
+
+def check_order(order: float, word: str) -> int:
+    """The order word (L for G5.2, P for G6.2) as an int in 2..6."""
+    if order != int(order) or not MIN_ORDER <= order <= MAX_ORDER:
+        raise WordError(word, f"NURBS order {word}{order:g} must be an integer from "
+                              f"{MIN_ORDER} to {MAX_ORDER}")
+    return int(order)
+
+
+def _check_weight(weight: float, word: str) -> float:
+    if weight <= 0.0:
+        raise WordError(word, f"NURBS weight {word}{weight:g} must be positive")
+    return weight
+
+
+def uniform_clamped_knots(n: int, order: int) -> np.ndarray:
+    """LinuxCNC's G5.2 knot vector: `order` zeros, 1, 2, ..., then `order` copies of n-order+1."""
+    inner = np.arange(1, n - order + 1, dtype=float)
+    return np.concatenate([np.zeros(order), inner, np.full(order, float(n - order + 1))])
+
+
+class NurbsCollector:
+    """Gathers the control points (and, for G6.2, the knots) of one NURBS block."""
+
+    def __init__(self, kind: str, order: int, x: float, y: float, weight: float, z_mm: float,
+                 feed_mm_s: float, path: PathControl, program: str, line: int) -> None:
+        self.kind = kind  # "G5.2" or "G6.2"
+        self.order = order
+        self.points: list[tuple[float, float]] = [(x, y)]
+        self.weights: list[float] = [_check_weight(weight, "P" if kind == "G5.2" else "R")]
+        self.knots: list[float] = []
+        self.knot_lines: list[int] = []  # program line of each knot, for error messages
+        self.z_mm = z_mm
+        self.feed_mm_s = feed_mm_s
+        self.path = path
+        self.program = program
+        self.first_line = line
+        self.last_line = line
+        self.knot_only = False  # G6.2: knot-only lines have started
+
+    def add_point(self, x: float, y: float, weight: float, line: int) -> None:
+        if self.knot_only:
+            raise WordError("X", "NURBS control point after the knot-only lines")
+        if len(self.points) >= MAX_CONTROL_POINTS:
+            raise WordError("X", f"NURBS with more than {MAX_CONTROL_POINTS} control points")
+        self.weights.append(_check_weight(weight, "P" if self.kind == "G5.2" else "R"))
+        self.points.append((x, y))
+        self.last_line = line
+
+    def add_knot(self, knot: float, line: int, knot_only: bool) -> None:
+        if self.knots and knot < self.knots[-1]:
+            raise WordError("K", f"NURBS knots must not decrease: K{knot:g} after "
+                                 f"K{self.knots[-1]:g}")
+        if knot_only:
+            self.knot_only = True
+            if len(self.knots) >= len(self.points) + self.order:
+                raise WordError("K", f"too many knots: {len(self.points)} control points of "
+                                     f"order {self.order} need {len(self.points) + self.order}")
+        self.knots.append(knot)
+        self.knot_lines.append(line)
+        self.last_line = line
+
+    def _fail(self, line: int, word: str, message: str) -> NcError:
+        return NcError(self.program, line, 1, word, message)
+
+    def finish(self, end_line: int | None = None) -> NurbsBlock:
+        """Check the whole block and build it; errors name the line where the block ends."""
+        last = end_line if end_line is not None else self.last_line
+        n, order = len(self.points), self.order
+        if n < order:
+            raise self._fail(last, self.kind, f"NURBS of order {order} needs at least {order} "
+                                              f"control points, got {n}")
+        knots = self._knot_vector(last)
+        return NurbsBlock(
+            degree=order - 1,
+            control_points=np.array(self.points, dtype=float),
+            weights=np.array(self.weights, dtype=float),
+            knots=knots,
+            z_mm=self.z_mm,
+            feed_mm_s=self.feed_mm_s,
+            path=self.path,
+            source=Source(self.program, self.first_line, last),
+        )
+
+    def _knot_vector(self, last: int) -> np.ndarray:
+        n, order = len(self.points), self.order
+        if self.kind == "G5.2":
+            return uniform_clamped_knots(n, order)
+        if len(self.knots) != n + order:
+            raise self._fail(last, "K", f"NURBS knot count {len(self.knots)} must equal control "
+                                        f"points + order = {n} + {order} = {n + order}")
+        k = self.knots
+        if k[0] != k[order - 1]:
+            raise self._fail(self.knot_lines[order - 1], "K",
+                             f"NURBS knots not clamped: the first {order} knots must be equal")
+        if k[-order] != k[-1]:
+            raise self._fail(last, "K",
+                             f"NURBS knots not clamped: the last {order} knots must be equal")
+        if not k[order - 1] < k[n]:
+            raise self._fail(last, "K", "NURBS knot vector has an empty parameter range")
+        return np.array(k, dtype=float)

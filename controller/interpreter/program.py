@@ -1,0 +1,255 @@
+"""NC interpreter: streams an RS274/NGC file into typed NC blocks (absolute mm, mm/s).
+
+Public API: `read_program(path, config)`. Memory stays bounded: one line is read at a time and
+only the current NURBS block (at most MAX_CONTROL_POINTS points) is held.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import TextIO
+
+from controller.blocks import NcBlock, NurbsBlock
+from controller.config import MachineConfig, load_config
+from controller.errors import NcError
+from controller.geometry.nurbs import Nurbs
+from controller.interpreter.codes import (
+    G_GROUP,
+    G_UNSUPPORTED,
+    M_GROUP,
+    WordError,
+    g_code10,
+    g_name,
+)
+from controller.interpreter.lexer import CLEAN_RE, MAX_LINE_CHARS, WORD_RE, Line, lex_line
+from controller.interpreter.state import InterpState
+
+_G_CACHE: dict[str, int] = {}  # G number text -> code10, for supported/known codes only
+_G_BY_VALUE: dict[float, int] = {}  # the same by value (G01 and G1 alike)
+_M_CACHE: dict[str, int] = {}
+MAX_PARAMETER = 5399  # LinuxCNC's numbered parameters
+_VALUE_LETTERS = frozenset("XYZIJKRPQLFSTH")
+_CHUNK_CHARS = 1 << 16
+
+
+def read_program(path: str, config: MachineConfig) -> Iterator[NcBlock]:
+    """Yield the NC blocks of a program one by one; raise NcError at the first mistake."""
+    try:
+        handle = open(path, encoding="utf-8-sig", errors="replace", newline=None)  # noqa: SIM115
+    except OSError as exc:
+        raise NcError(path, 0, 0, "", f"cannot open program: {exc.strerror or exc}") from exc
+    with handle:
+        yield from Interpreter(path, config).run(handle)
+
+
+class Interpreter:
+    """Reads lines, checks words and modal groups, and hands each line to InterpState."""
+
+    def __init__(self, path: str, config: MachineConfig) -> None:
+        self.path = path
+        self.state = InterpState(path, config)
+        self.params: dict[int, float] = {}
+        self.percent_seen = False
+        self.words_seen = False
+
+    def run(self, handle: TextIO) -> Iterator[NcBlock]:
+        out = self.state.out
+        lineno = 0
+        for raw in _raw_lines(handle, self.path):
+            lineno += 1
+            text = raw.upper()
+            # The hot path (almost every line of a CAM program): plain words, no comment.
+            if len(text) <= MAX_LINE_CHARS and CLEAN_RE.fullmatch(text) is not None:
+                words = WORD_RE.findall(text)
+                if words:
+                    self._execute_plain(words, text, lineno)
+            else:
+                line = lex_line(raw, self.path, lineno)
+                if line is None:
+                    continue
+                if line == "%":
+                    if self._percent():
+                        break
+                    continue
+                self._execute(line, lineno)  # type: ignore[arg-type]
+            if out:
+                yield from out
+                out.clear()
+            if self.state.ended:
+                break
+        self.state.finish_program(lineno)
+        yield from out
+        out.clear()
+
+    def _execute_plain(self, words: list[tuple[str, str]], text: str, lineno: int) -> None:
+        """A line of plain words; the usual case (each letter once, one G, no M) inline."""
+        self.words_seen = True
+        vals = {k: float(v) for k, v in words}
+        if len(vals) == len(words) and "M" not in vals:
+            g = vals.pop("G", None)
+            vals.pop("N", None)
+            code = -1 if g is None else _G_BY_VALUE.get(g)
+            if code is not None and _VALUE_LETTERS.issuperset(vals):
+                state = self.state
+                try:
+                    if state.nurbs is not None or not state.fast(code, vals, lineno):
+                        state.execute([] if code < 0 else [code], [], vals, lineno)
+                except WordError as exc:
+                    raise self._error(Line(words, text), lineno, exc.word, exc.message) from None
+                return
+        self._execute(Line(words, text), lineno)
+
+    def _percent(self) -> bool:
+        """`%` before any code opens the program; any later `%` ends it."""
+        if self.percent_seen or self.words_seen:
+            return True
+        self.percent_seen = True
+        return False
+
+    def _execute(self, line: Line, lineno: int) -> None:
+        words = line.words
+        if line.has_params:
+            words = self._resolve(line, lineno)
+        if words:
+            self.words_seen = True
+            gs, ms, vals = self._classify(line, words, lineno)
+            try:
+                self.state.execute(gs, ms, vals, lineno)
+            except WordError as exc:
+                raise self._error(line, lineno, exc.word, exc.message) from None
+        if line.assigns:
+            self._assign(line, lineno)
+
+    def _classify(self, line: Line, words: list[tuple[str, str]], lineno: int
+                  ) -> tuple[list[int], list[int], dict[str, float]]:
+        gs: list[int] = []
+        ms: list[int] = []
+        vals: dict[str, float] = {}
+        for i, (letter, text) in enumerate(words):
+            if letter == "G":
+                gs.append(self._g_code(line, i, text, lineno))
+            elif letter == "M":
+                ms.append(self._m_code(line, i, text, lineno))
+            elif letter == "N":
+                continue
+            elif letter in vals:
+                raise NcError(self.path, lineno, line.col(i), letter + text,
+                              f"{letter} word given twice on one line")
+            elif letter not in _VALUE_LETTERS:
+                raise NcError(self.path, lineno, line.col(i), letter + text,
+                              _unknown_letter(letter))
+            else:
+                vals[letter] = float(text)
+        return gs, ms, vals
+
+    def _g_code(self, line: Line, i: int, text: str, lineno: int) -> int:
+        code = _G_CACHE.get(text)
+        if code is not None:
+            return code
+        code = g_code10(float(text))
+        word = "G" + text
+        if code is None:
+            raise NcError(self.path, lineno, line.col(i), word, f"unknown G code {word}")
+        if code in G_UNSUPPORTED:
+            raise NcError(self.path, lineno, line.col(i), word,
+                          f"{g_name(code)}: {G_UNSUPPORTED[code]}")
+        if code not in G_GROUP:
+            raise NcError(self.path, lineno, line.col(i), word, f"unknown G code {g_name(code)}")
+        _G_CACHE[text] = code
+        _G_BY_VALUE[float(text)] = code
+        return code
+
+    def _m_code(self, line: Line, i: int, text: str, lineno: int) -> int:
+        code = _M_CACHE.get(text)
+        if code is not None:
+            return code
+        number = float(text)
+        if number != int(number) or int(number) not in M_GROUP:
+            raise NcError(self.path, lineno, line.col(i), "M" + text,
+                          f"M{number:g} is not supported")
+        _M_CACHE[text] = int(number)
+        return int(number)
+
+    def _error(self, line: Line, lineno: int, word: str, message: str) -> NcError:
+        """NcError at the first word of the line named `word` ("X", "G5.2", "M3")."""
+        for i, (letter, text) in enumerate(line.words):
+            if word in (letter, _word_name(letter, text)):
+                return NcError(self.path, lineno, line.col(i), letter + text, message)
+        first = line.word_text(0) if line.words else ""
+        return NcError(self.path, lineno, line.col(0), first, message)
+
+    def _resolve(self, line: Line, lineno: int) -> list[tuple[str, str]]:
+        """Replace `#N` values by the parameter values (as set before this line)."""
+        out = []
+        for i, (letter, text) in enumerate(line.words):
+            if text.startswith("#"):
+                text = repr(self._param(int(text[1:]), lineno, line.col(i), letter + text))
+            out.append((letter, text))
+        return out
+
+    def _param(self, number: int, lineno: int, col: int, word: str) -> float:
+        if not 1 <= number <= MAX_PARAMETER:
+            raise NcError(self.path, lineno, col, word,
+                          f"parameter #{number} out of range 1..{MAX_PARAMETER}")
+        if number not in self.params:
+            raise NcError(self.path, lineno, col, word, f"parameter #{number} is not set")
+        return self.params[number]
+
+    def _assign(self, line: Line, lineno: int) -> None:
+        # LinuxCNC applies all settings of a line after reading it: evaluate first, then store.
+        values = []
+        for number, text, col in line.assigns or ():
+            if not 1 <= number <= MAX_PARAMETER:
+                raise NcError(self.path, lineno, col, f"#{number}",
+                              f"parameter #{number} out of range 1..{MAX_PARAMETER}")
+            value = (self._param(int(text[1:]), lineno, col, text) if text.startswith("#")
+                     else float(text))
+            values.append((number, value))
+        self.params.update(values)
+
+
+def _raw_lines(handle: TextIO, path: str) -> Iterator[str]:
+    """Lines without their newline, read in chunks so that a huge line cannot fill memory."""
+    rest = ""
+    lineno = 0
+    while True:
+        try:
+            chunk = handle.read(_CHUNK_CHARS)
+        except (OSError, ValueError) as exc:
+            raise NcError(path, lineno + 1, 0, "", f"cannot read program: {exc}") from exc
+        if not chunk:
+            break
+        parts = (rest + chunk).split("\n")
+        rest = parts.pop()
+        lineno += len(parts)
+        if len(rest) > MAX_LINE_CHARS:
+            raise NcError(path, lineno + 1, MAX_LINE_CHARS + 1, "",
+                          f"line longer than {MAX_LINE_CHARS} characters")
+        yield from parts
+    if rest:
+        yield rest
+
+
+def _unknown_letter(letter: str) -> str:
+    if letter in "ABCUVW":
+        return f"axis {letter} is not supported (X Y Z only)"
+    if letter == "O":
+        return "O-words (subroutines, loops) are not supported"
+    return f"{letter} words are not supported"
+
+
+def _word_name(letter: str, text: str) -> str:
+    """Canonical name of a G or M word (G02 -> G2, G61.10 -> G61.1)."""
+    if letter not in "GM" or text.startswith("#"):
+        return letter + text
+    code = g_code10(float(text))
+    if code is None:
+        return letter + text
+    return g_name(code) if letter == "G" else f"M{code // 10}"
+
+
+def program_nurbs(path: str, config: MachineConfig | None = None) -> list[Nurbs]:
+    """Every NURBS block of the program as a Nurbs curve, in order (default machine config if
+    none given): for benches, tests and tools."""
+    cfg = config if config is not None else load_config(None)
+    return [Nurbs.from_block(b) for b in read_program(path, cfg) if isinstance(b, NurbsBlock)]

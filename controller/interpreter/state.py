@@ -1,0 +1,207 @@
+"""Modal state of the interpreter and the execution of one line, in LinuxCNC's order."""
+
+from __future__ import annotations
+
+from controller.blocks import (
+    AuxBlock,
+    DwellBlock,
+    NcBlock,
+    PathControl,
+    PathMode,
+    Source,
+    StopBlock,
+    StopKind,
+)
+from controller.config import MachineConfig
+from controller.errors import NcError
+from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
+from controller.interpreter.moves import MotionMixin
+
+MM_PER_INCH = 25.4
+_AXES = frozenset("XYZ")
+_STOPS = {0: StopKind.PAUSE, 1: StopKind.OPTIONAL_PAUSE, 2: StopKind.END, 30: StopKind.END_REWIND}
+# Letters each G code may use (besides F S T, allowed everywhere).
+_USES: dict[int, frozenset[str]] = {
+    0: _AXES, 10: _AXES, 20: _AXES | set("IJRP") | {"K"}, 30: _AXES | set("IJRP") | {"K"},
+    52: frozenset("XYZPL"), 62: frozenset("XYZRKPQ"), 40: frozenset("P"),
+    640: frozenset("PQ"), 430: frozenset("H"),
+}
+_ALWAYS = frozenset("FST")
+_FAST_MOTIONS = frozenset((0, 10, 20, 30))
+_LINE_LETTERS = frozenset("XYZF")
+_ARC_LETTERS = frozenset("XYZFIJR")
+
+
+class InterpState(MotionMixin):
+    """Position (absolute mm), modal codes, feed and spindle; collects blocks in `out`."""
+
+    def __init__(self, path: str, config: MachineConfig) -> None:
+        self.path = path
+        self.config = config
+        self.has_z = config.has_axis("z")
+        self.rapid_mm_s = config.interpolator.rapid_feed_mm_s
+        self.out: list[NcBlock] = []
+        self.pos = (0.0, 0.0, 0.0)
+        self.scale = 1.0  # mm per program unit (G21 / G20)
+        self.absolute = True  # G90
+        self.arc_absolute = False  # G91.1 is LinuxCNC's default
+        self.feed_mm_s = 0.0
+        self.motion: int | None = None  # code10 of the modal motion; None after G80 / NURBS
+        self.path_control = PathControl()
+        self.spindle_rpm = 0.0
+        self.spindle_on = False
+        self.css = False  # G96: S is a surface speed
+        self.tool = 0
+        self.ended = False
+        self.nurbs = None  # the NurbsCollector of an open G5.2 or G6.2 block
+
+    # ---- one line ---------------------------------------------------------------------------
+    def execute(self, gs: list[int], ms: list[int], vals: dict[str, float], lineno: int) -> None:
+        if self.nurbs is not None and self.nurbs_line(gs, ms, vals, lineno):
+            return
+        if not ms and len(gs) <= 1 and self.fast(gs[0] if gs else -1, vals, lineno):
+            return
+        groups = _groups(gs, G_GROUP, g_name)
+        mgroups = _groups(ms, M_GROUP, lambda m: f"M{m}")
+        motion = groups.get("motion")
+        _check_letters(groups, vals, motion if motion is not None else self.motion)
+        self._modes(groups, vals)
+        self._feed_speed_tool(vals, ms, mgroups, lineno)
+        if groups.get("non-modal") == 40:
+            self._dwell(vals, lineno)
+        if motion is not None or not _AXES.isdisjoint(vals):
+            self.move(motion, vals, lineno)
+        stop = mgroups.get("stopping")
+        if stop is not None:
+            self.out.append(StopBlock(_STOPS[stop], self.pos, self._src(lineno)))
+            self.ended = stop in (2, 30)
+
+    def fast(self, code: int, vals: dict[str, float], lineno: int) -> bool:
+        """G0 G1 G2 G3 lines with only X Y Z F (and I J R for arcs): most lines of a program.
+
+        `code` is the line's one G code (code10) or -1. Same result as the general path,
+        without its group and letter bookkeeping; False means "use the general path"."""
+        if code >= 0:
+            mode = code
+            if mode not in _FAST_MOTIONS:
+                return False
+        else:
+            mode = self.motion
+            if mode not in _FAST_MOTIONS or _AXES.isdisjoint(vals):
+                return False
+        if not (_ARC_LETTERS if mode >= 20 else _LINE_LETTERS).issuperset(vals):
+            return False
+        if "F" in vals:
+            if vals["F"] < 0:
+                return False  # the general path reports it
+            self.feed_mm_s = vals["F"] * self.scale / 60.0
+        self.move(code if code >= 0 else None, vals, lineno)
+        return True
+
+    def _src(self, lineno: int) -> Source:
+        return Source(self.path, lineno, lineno)
+
+    def _modes(self, groups: dict[str, int], vals: dict[str, float]) -> None:
+        if "units" in groups:
+            self.scale = MM_PER_INCH if groups["units"] == 200 else 1.0
+        if "distance" in groups:
+            self.absolute = groups["distance"] == 900
+        if "arc distance" in groups:
+            self.arc_absolute = groups["arc distance"] == 901
+        if "spindle mode" in groups:
+            self.css = groups["spindle mode"] == 960
+        path = groups.get("path control")
+        if path == 610:
+            self.path_control = PathControl(PathMode.EXACT_STOP)
+        elif path == 611:
+            self.path_control = PathControl(PathMode.EXACT_PATH)
+        elif path == 640:
+            self.path_control = PathControl(PathMode.BLEND, self._tol(vals, "P"),
+                                            self._tol(vals, "Q"))
+        # G17, G40, G43/G49 (no tool table: zero length), G54 (no offset), G94, G98/G99 and
+        # G97 change nothing in phcnc's model; they are accepted because CAM headers use them.
+
+    def _tol(self, vals: dict[str, float], letter: str) -> float | None:
+        if letter not in vals:
+            return None
+        if vals[letter] < 0:
+            raise WordError(letter, f"G64 {letter} tolerance must not be negative")
+        return vals[letter] * self.scale
+
+    def _feed_speed_tool(self, vals: dict[str, float], ms: list[int], mgroups: dict[str, int],
+                         lineno: int) -> None:
+        # F is read in the units in force after this line's G20/G21.
+        if "F" in vals:
+            if vals["F"] < 0:
+                raise WordError("F", "negative feed rate")
+            self.feed_mm_s = vals["F"] * self.scale / 60.0
+        if "S" in vals:
+            if vals["S"] < 0:
+                raise WordError("S", "negative spindle speed")
+            self.spindle_rpm = vals["S"]
+            if self.spindle_on and "spindle" not in mgroups:
+                self.out.append(AuxBlock("S", self._rpm(), None, self._src(lineno)))
+        if "T" in vals:
+            if vals["T"] < 0 or vals["T"] != int(vals["T"]):
+                raise WordError("T", "tool number must be a non-negative integer")
+            self.tool = int(vals["T"])
+        if "tool change" in mgroups:
+            self.out.append(AuxBlock("M6", None, self.tool, self._src(lineno)))
+        spindle = mgroups.get("spindle")
+        if spindle is not None:
+            self.spindle_on = spindle != 5
+            rpm = self._rpm() if self.spindle_on else None
+            self.out.append(AuxBlock(f"M{spindle}", rpm, None, self._src(lineno)))
+        for m in ms:
+            if m in (7, 8, 9):
+                self.out.append(AuxBlock(f"M{m}", None, None, self._src(lineno)))
+
+    def _rpm(self) -> float | None:
+        """Spindle speed for AuxBlock: None under G96, where S is a surface speed."""
+        return None if self.css else self.spindle_rpm
+
+    def _dwell(self, vals: dict[str, float], lineno: int) -> None:
+        if "P" not in vals:
+            raise WordError("G4", "G4 dwell needs P (seconds)")
+        if vals["P"] < 0:
+            raise WordError("P", "G4 dwell time must not be negative")
+        self.out.append(DwellBlock(vals["P"], self.pos, self._src(lineno)))
+
+    def finish_program(self, lineno: int) -> None:
+        """End of file: an open G6.2 block ends here; an open G5.2 block is an error."""
+        if self.nurbs is None:
+            return
+        if self.nurbs.kind == "G5.2":
+            raise NcError(self.path, self.nurbs.first_line, 1, "G5.2",
+                          "G5.2 NURBS block not closed by G5.3 before the end of the program")
+        self.end_nurbs()
+
+
+def _groups(codes: list[int], table: dict[int, str], name) -> dict[str, int]:  # noqa: ANN001
+    """Group -> code for one line; two codes of one modal group are an error."""
+    groups: dict[str, int] = {}
+    for code in codes:
+        group = table[code]
+        if group in groups:
+            if group == "coolant" and {groups[group], code} == {7, 8}:
+                continue  # mist and flood together are fine
+            raise WordError(name(code), f"{name(code)} and {name(groups[group])} are both in "
+                                        f"the {group} modal group")
+        groups[group] = code
+    return groups
+
+
+def _check_letters(groups: dict[str, int], vals: dict[str, float], motion: int | None) -> None:
+    """Every value word must be used by a code of the line (LinuxCNC's 'word with no G code')."""
+    allowed = set(_ALWAYS)
+    for code in groups.values():
+        allowed |= _USES.get(code, frozenset())
+    if motion is not None and not _AXES.isdisjoint(vals):
+        allowed |= _USES.get(motion, frozenset())
+    unused = vals.keys() - allowed
+    if unused:
+        letter = min(unused, key="XYZIJKRPQLHFST".index)
+        if letter in _AXES:
+            raise WordError(letter, f"{letter} word with no motion mode (G0, G1, G2, G3) "
+                                    f"in force")
+        raise WordError(letter, f"{letter} word with no G code on the line that uses it")

@@ -1,0 +1,108 @@
+"""Per-frame checks of executed motion: following error (LinuxCNC rule) and contour error."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.config import MachineConfig
+from controller.motion.stopping import REST_SPEED_MM_S
+from drivers.base import Feedback
+
+
+class RefHistory:
+    """Reference rows of frames sent but maybe not yet executed, indexed by frame sequence."""
+
+    def __init__(self, capacity: int, n_axes: int, period_s: float) -> None:
+        self.capacity = capacity
+        self.period_s = period_s
+        self.pos_mm = np.zeros((capacity, n_axes))
+        self.feed_mm_s = np.zeros(capacity)
+        self.line = np.zeros(capacity, dtype=np.int64)
+        self.phi_rad = np.full(capacity, np.nan)  # path tangent angle; NaN when at rest
+        self.count = 0
+
+    def append(self, pos_mm: np.ndarray, feed_mm_s: np.ndarray, line: np.ndarray,
+               prev_mm: np.ndarray) -> None:
+        d = np.diff(np.vstack([prev_mm[None, :], pos_mm]), axis=0)
+        # Below the rest speed the tangent is undefined: no contour error is measured there.
+        moving = np.hypot(d[:, 0], d[:, 1]) / self.period_s >= REST_SPEED_MM_S
+        phi = np.where(moving, np.arctan2(d[:, 1], d[:, 0]), np.nan)
+        idx = np.arange(self.count, self.count + len(pos_mm)) % self.capacity
+        self.pos_mm[idx], self.feed_mm_s[idx], self.line[idx], self.phi_rad[idx] = (
+            pos_mm, feed_mm_s, line, phi)
+        self.count += len(pos_mm)
+
+
+@dataclass(frozen=True)
+class FerrorTrip:
+    axis: str
+    ferror_mm: float
+    limit_mm: float
+    seq: int
+
+
+class FerrorCheck:
+    """ferror = commanded - encoder per axis and frame; limit max(MIN_FERROR, FERROR |v|/Vmax)."""
+
+    def __init__(self, config: MachineConfig, start_counts: np.ndarray) -> None:
+        self.names = config.axis_names
+        self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
+        self.ferror_mm = np.array([a.ferror_mm for a in config.axes])
+        self.min_ferror_mm = np.array([a.min_ferror_mm for a in config.axes])
+        self.vmax_mm_s = np.array([a.max_velocity_mm_s for a in config.axes])
+        self.period_s = config.sample_period_s
+        self.last_cmd = np.asarray(start_counts, dtype=np.int64).copy()
+        self.max_abs_mm = 0.0
+        self.last_mm = np.zeros(len(self.names))
+
+    def limits_mm(self, v_mm_s: np.ndarray) -> np.ndarray:
+        """Vectorised AxisConfig.ferror_limit_mm over rows of per-axis velocities."""
+        return np.maximum(self.min_ferror_mm, self.ferror_mm * np.abs(v_mm_s) / self.vmax_mm_s)
+
+    def check(self, fb: Feedback) -> FerrorTrip | None:
+        if not len(fb):
+            return None
+        cmd = fb.commanded_counts
+        v = np.diff(np.vstack([self.last_cmd, cmd]), axis=0) * self.pulse_mm / self.period_s
+        self.last_cmd = cmd[-1].copy()
+        ferr = (cmd - fb.encoder_counts) * self.pulse_mm
+        self.last_mm = ferr[-1].copy()
+        self.max_abs_mm = max(self.max_abs_mm, float(np.abs(ferr).max()))
+        over = np.abs(ferr) > self.limits_mm(v)
+        if not over.any():
+            return None
+        row, axis = np.argwhere(over)[0]
+        return FerrorTrip(self.names[axis], float(ferr[row, axis]),
+                          float(self.limits_mm(v)[row, axis]), int(fb.seq[row]))
+
+
+class ContourStats:
+    """Eq. 28 contour error of encoder positions against the reference, running max/RMS/mean."""
+
+    def __init__(self, pulse_mm: np.ndarray) -> None:
+        self.pulse_mm = pulse_mm
+        self.max_abs_mm = 0.0
+        self.sum_abs_mm = 0.0
+        self.sum_sq_mm2 = 0.0
+        self.n = 0
+
+    def update(self, fb: Feedback, hist: RefHistory) -> None:
+        if not len(fb):
+            return
+        idx = fb.seq % hist.capacity
+        e = hist.pos_mm[idx] - fb.encoder_counts * self.pulse_mm
+        phi = hist.phi_rad[idx]
+        keep = ~np.isnan(phi)
+        eps = np.abs(-e[keep, 0] * np.sin(phi[keep]) + e[keep, 1] * np.cos(phi[keep]))
+        if eps.size:
+            self.max_abs_mm = max(self.max_abs_mm, float(eps.max()))
+            self.sum_abs_mm += float(eps.sum())
+            self.sum_sq_mm2 += float(np.square(eps).sum())
+            self.n += int(eps.size)
+
+    def summary_um(self) -> dict[str, float]:
+        n = max(1, self.n)
+        return {"max": self.max_abs_mm * 1e3, "rms": float(np.sqrt(self.sum_sq_mm2 / n)) * 1e3,
+                "mean": self.sum_abs_mm / n * 1e3}

@@ -1,0 +1,293 @@
+"""The motion controller loop: keeps the card FIFO filled, checks feedback, stops under control."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from controller.config import MachineConfig
+from controller.motion.checks import ContourStats, FerrorCheck, RefHistory
+from controller.motion.pacing import VirtualPacer, WallPacer
+from controller.motion.pulses import PulseCounter
+from controller.motion.source import RefSource, SourceState
+from controller.motion.stopping import stop_along_path
+from controller.motion.types import (
+    MotionProgress,
+    MotionResult,
+    MotionSettings,
+    MotionState,
+    Outcome,
+)
+from drivers.base import CardStatus, Drive, Feedback
+from drivers.errors import LostCommunicationError
+
+SETTLE_HOLD_S = 0.02  # encoder equal to the step counter for this long = settled
+
+
+class MotionController:
+    """One instance runs one program: run() returns a MotionResult, never raises on faults.
+
+    Every fault ends in a controlled stop (quintic decel along the buffered path, appended
+    behind the frames already in the card) or, if the card itself halted, in a latched card
+    fault; either way the final position is read back and pulses are accounted.
+    """
+
+    def __init__(self, config: MachineConfig, drive: Drive, source: RefSource,
+                 pacer: WallPacer | VirtualPacer, settings: MotionSettings | None = None,
+                 on_progress: Callable[[MotionProgress], None] | None = None,
+                 watch: Callable[[], str | None] | None = None) -> None:
+        self.config, self.drive, self.source, self.pacer = config, drive, source, pacer
+        self.settings = settings or MotionSettings.from_config(config)
+        self.on_progress = on_progress
+        self.watch = watch  # external health check (dead processes): message -> stop
+        self.n = len(config.axes)
+        self.period_s = config.sample_period_s
+        self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
+        self._abort_message: str | None = None
+
+    def request_abort(self, message: str = "aborted by operator") -> None:
+        """Operator stop (SIGINT handler safe: only sets a flag read by the loop)."""
+        self._abort_message = message
+
+    @property
+    def abort_requested(self) -> bool:
+        return self._abort_message is not None
+
+    def _frames(self, ms: float) -> int:
+        return max(1, math.ceil(ms * 1e-3 / self.period_s - 1e-9))
+
+    # -- main loop ------------------------------------------------------------------------
+    def run(self) -> MotionResult:
+        self._setup()
+        while self.state is not MotionState.FINISHED:
+            self.pacer.wait()
+            self._cycle()
+        return self._result()
+
+    def _setup(self) -> None:
+        start_cmd, start_enc = self.drive.position_counts()
+        self.start_cmd = start_cmd
+        self.last_enc = start_enc
+        self.pulses = PulseCounter(self.pulse_mm, start_cmd)
+        self.ferr = FerrorCheck(self.config, start_cmd)
+        self.contour = ContourStats(self.pulse_mm)
+        self.hist = RefHistory(2 * self.drive.fifo_capacity() + 1024, self.n, self.period_s)
+        self.prev_mm = self.last_mm = start_cmd * self.pulse_mm
+        self.held = np.zeros((0, self.n + 2))
+        self.pending_stop = np.zeros((0, self.n))
+        self.state = MotionState.WAITING
+        self.outcome: Outcome | None = None
+        self.message = ""
+        self.sent = self.executed = 0
+        self.sent_eos = False
+        self.line = 0
+        self.underruns = 0
+        self.min_fifo_frames: int | None = None
+        self.first_motion_s: float | None = None
+        self.last_motion_s = 0.0
+        self.next_progress_s = 0.0
+        self.settle_deadline_s = 0.0
+        self.settled_since_s: float | None = None
+        self.position_known = True
+
+    def _cycle(self) -> None:
+        try:
+            fb, status, level = self.drive.feedback(), self.drive.status(), self.drive.fifo_level()
+        except LostCommunicationError as exc:
+            self.position_known = False
+            self._finish(Outcome.FAULT, str(exc))
+            return
+        self._account(fb)
+        if status.halted:
+            self.underruns += int(CardStatus.UNDERRUN in status)
+            self._finish(Outcome.FAULT, self.drive.fault_message())
+            return
+        self._supervise(fb)
+        if self.state in (MotionState.WAITING, MotionState.RUNNING) and not self.sent_eos:
+            self._refill(level)
+        elif self.state is MotionState.STOPPING:
+            self._send_stop(level)
+        self._settle(level, fb)
+        self._report(level)
+
+    def _account(self, fb: Feedback) -> None:
+        if not len(fb):
+            return
+        now_s = self.pacer.elapsed_s()
+        if self.first_motion_s is None:
+            self.first_motion_s = now_s
+        self.last_motion_s = now_s
+        self.executed = int(fb.seq[-1]) + 1
+        self.last_enc = fb.encoder_counts[-1]
+        self.line = int(self.hist.line[fb.seq[-1] % self.hist.capacity])
+        self.contour.update(fb, self.hist)
+
+    def _supervise(self, fb: Feedback) -> None:
+        trip = self.ferr.check(fb)
+        if trip is not None:
+            line = int(self.hist.line[trip.seq % self.hist.capacity])
+            self._begin_stop(Outcome.FAULT, f"{trip.axis.upper()} axis following error "
+                             f"{abs(trip.ferror_mm):.3f} mm > limit {trip.limit_mm:.3f} mm "
+                             f"at line {line}")
+        problem = self.watch() if self.watch is not None else None
+        if problem:
+            self._begin_stop(Outcome.FAULT, problem)
+        if self._abort_message is not None:
+            self._begin_stop(Outcome.ABORTED, self._abort_message)
+
+    # -- streaming ------------------------------------------------------------------------
+    def _refill(self, level: int) -> None:
+        s = self.settings
+        want = self._frames(s.high_water_ms) - level
+        hold, low = self._frames(s.holdback_ms), self._frames(s.low_water_ms)
+        if self.state is MotionState.RUNNING:
+            self.min_fifo_frames = (level if self.min_fifo_frames is None
+                                    else min(level, self.min_fifo_frames))
+        finished_before, _ = self.source.state()
+        ask = max(0, want + hold - len(self.held))
+        rows = self.source.read(ask) if ask else np.zeros((0, self.n + 2))
+        # Final only when a read came back short after the producer had finished.
+        final = finished_before is SourceState.FINISHED and 0 < ask and len(rows) < ask
+        state, problem = self.source.state()
+        if state is SourceState.FAILED:
+            self._begin_stop(Outcome.FAULT, problem)
+            return
+        if len(rows) and not self._start_ok(rows):
+            return
+        self.held = np.vstack([self.held, rows]) if len(rows) else self.held
+        sendable = len(self.held) if final else max(0, len(self.held) - hold)
+        if self.state is MotionState.WAITING and not final and len(self.held) < hold + low:
+            sendable = 0  # prime: first motion only with enough reference behind it
+        n = max(0, min(want, sendable))
+        self._send(self.held[:n], end=final and n == len(self.held))
+        self.held = self.held[n:]
+        if self.sent and not final and level + n < low:
+            self._begin_stop(Outcome.FAULT, f"feed hold at line {self.line}: reference points "
+                             "ran late (generator starved), stopped along the path")
+
+    def _start_ok(self, rows: np.ndarray) -> bool:
+        """The first reference point must be where the machine is (no jump at start)."""
+        if self.sent or len(self.held):
+            return True
+        gap = np.abs(rows[0, : self.n] - self.start_cmd * self.pulse_mm)
+        if np.all(gap <= self.pulse_mm):
+            return True
+        self._finish(Outcome.FAULT, f"reference starts at {rows[0, :self.n].tolist()} mm but "
+                     f"the machine is at {(self.start_cmd * self.pulse_mm).tolist()} mm")
+        return False
+
+    def _send(self, rows: np.ndarray, end: bool) -> None:
+        pos = rows[:, : self.n]
+        if len(pos):
+            feed = rows[:, self.n] if rows.shape[1] > self.n else np.zeros(len(pos))
+            line = rows[:, self.n + 1] if rows.shape[1] > self.n + 1 else np.full(len(pos),
+                                                                                   self.line)
+            self.hist.append(pos, feed, line.astype(np.int64), self.last_mm)
+            self.prev_mm = pos[-2] if len(pos) > 1 else self.last_mm
+            self.last_mm = pos[-1].copy()
+            self.state = MotionState.RUNNING if self.state is MotionState.WAITING else self.state
+        if len(pos) or end:
+            self.drive.write_frames(self.pulses.frames(pos), end_of_stream=end)
+        self.sent += len(pos)
+        self.sent_eos = self.sent_eos or end
+
+    def _begin_stop(self, outcome: Outcome, message: str) -> None:
+        if self.outcome is not None:
+            return  # the first reason is the one reported
+        self.outcome, self.message = outcome, message
+        if self.sent_eos or not self.sent:
+            self.state = MotionState.SETTLING if self.sent else MotionState.FINISHED
+            return
+        self.pending_stop = stop_along_path(self.prev_mm, self.last_mm, self.held[:, : self.n],
+                                            self.config.interpolator.max_accel_mm_s2,
+                                            self.period_s)
+        self.held = np.zeros((0, self.n + 2))
+        self.state = MotionState.STOPPING
+
+    def _send_stop(self, level: int) -> None:
+        space = max(0, self.drive.fifo_capacity() - level - 1)
+        rows, self.pending_stop = self.pending_stop[:space], self.pending_stop[space:]
+        self._send(rows, end=not len(self.pending_stop))
+
+    def _settle(self, level: int, fb: Feedback) -> None:
+        if self.state in (MotionState.RUNNING, MotionState.STOPPING) and self.sent_eos \
+                and level == 0:
+            self.state = MotionState.SETTLING
+            self.settle_deadline_s = self.pacer.elapsed_s() + self.settings.settle_s
+        if self.state is not MotionState.SETTLING:
+            return
+        cmd, enc = self.drive.position_counts()
+        now_s = self.pacer.elapsed_s()
+        # Equal once is not settled: the 36 % overshoot crosses the target on its way.
+        if not np.array_equal(cmd, enc):
+            self.settled_since_s = None
+        elif self.settled_since_s is None:
+            self.settled_since_s = now_s
+        held_s = 0.0 if self.settled_since_s is None else now_s - self.settled_since_s
+        if held_s >= SETTLE_HOLD_S or now_s >= self.settle_deadline_s:
+            self._finish(self.outcome or Outcome.DONE, self.message)
+
+    def _finish(self, outcome: Outcome, message: str) -> None:
+        if self.outcome is None or self.outcome is Outcome.DONE:
+            self.outcome, self.message = outcome, message
+        elif outcome is Outcome.FAULT and message and message not in self.message:
+            self.message = f"{self.message}; then {message}"
+        self.state = MotionState.FINISHED
+
+    # -- reporting ------------------------------------------------------------------------
+    def _report(self, level: int) -> None:
+        now_s = self.pacer.elapsed_s()
+        if self.on_progress is None or (now_s < self.next_progress_s
+                                        and self.state is not MotionState.FINISHED):
+            return
+        self.next_progress_s = now_s + self.settings.progress_every_s
+        total = self.source.total_rows()
+        idx = (self.executed - 1) % self.hist.capacity
+        self.on_progress(MotionProgress(
+            state=self.state, line=self.line,
+            feed_mm_s=float(self.hist.feed_mm_s[idx]) if self.executed else 0.0,
+            ferror_um=float(np.abs(self.ferr.last_mm).max()) * 1e3,
+            fifo_ms=level * self.period_s * 1e3, elapsed_s=now_s,
+            executed_s=self.executed * self.period_s,
+            planned_s=None if total is None else total * self.period_s))
+
+    def _result(self) -> MotionResult:
+        return build_result(self)
+
+
+def _read_position(ctrl: MotionController) -> tuple[np.ndarray | None, np.ndarray, bool]:
+    """(card step counter or None, encoder counts, known?) -- last known if the card is mute."""
+    try:
+        cmd, enc = ctrl.drive.position_counts()
+        return cmd, enc, True
+    except LostCommunicationError:
+        return None, ctrl.last_enc, False
+
+
+def build_result(ctrl: MotionController) -> MotionResult:
+    names = ctrl.config.axis_names
+    cmd, enc, known = _read_position(ctrl)
+    commanded = ctrl.pulses.commanded_counts
+    executed = (cmd - ctrl.start_cmd) if cmd is not None else np.full(len(names), -1)
+    motion_s = 0.0 if ctrl.first_motion_s is None else ctrl.last_motion_s - ctrl.first_motion_s
+    min_fifo_ms = (ctrl.min_fifo_frames or 0) * ctrl.period_s * 1e3
+    return MotionResult(
+        outcome=ctrl.outcome or Outcome.DONE,
+        message=ctrl.message,
+        line=ctrl.line,
+        motion_time_s=motion_s + (ctrl.period_s if ctrl.first_motion_s is not None else 0.0),
+        planned_time_s=ctrl.sent * ctrl.period_s,
+        contour_error_um=ctrl.contour.summary_um(),
+        following_error_um_max=ctrl.ferr.max_abs_mm * 1e3,
+        underruns=ctrl.underruns,
+        late_cycles=ctrl.pacer.late_cycles,
+        min_fifo_ms=min_fifo_ms,
+        commanded_counts={n: int(c) for n, c in zip(names, commanded, strict=True)},
+        executed_counts={n: int(c) for n, c in zip(names, executed, strict=True)},
+        final_position_mm={n: float(e * p) for n, e, p in
+                           zip(names, enc, ctrl.pulse_mm, strict=True)},
+        position_known=known,
+        time_to_first_motion_s=ctrl.first_motion_s,
+    )

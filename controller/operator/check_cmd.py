@@ -1,0 +1,136 @@
+"""`cncctl check PROGRAM`: parse a whole program, check travel limits, print a summary."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+
+from controller.blocks import ArcBlock, LineBlock, NcBlock, NurbsBlock
+from controller.config import MachineConfig, load_config
+from controller.errors import ConfigError, NcError
+from controller.interpreter.extent import (
+    arc_length_and_box,
+    line_length_and_box,
+    nurbs_length_and_box,
+)
+from controller.interpreter.program import read_program
+
+_AXES = ("x", "y", "z")
+
+
+@dataclass
+class CheckSummary:
+    """What `check` found: counts, lengths, the box the tool moves in and the machine travel."""
+
+    program: str
+    config: str
+    blocks: dict[str, int] = field(default_factory=dict)
+    path_length_mm: float = 0.0
+    feed_length_mm: float = 0.0
+    rapid_length_mm: float = 0.0
+    nominal_time_s: float = 0.0  # length / programmed feed, no acceleration: a lower bound
+    nurbs_blocks: int = 0
+    nurbs_control_points: int = 0
+    extents_mm: dict[str, list[float]] = field(default_factory=dict)
+    travel_mm: dict[str, list[float]] = field(default_factory=dict)
+
+
+_GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
+             NurbsBlock: nurbs_length_and_box}  # NURBS: from dense samples, 64 per knot span
+Limits = list[tuple[int, str, float, float]]
+
+
+def _limits(config: MachineConfig) -> Limits:
+    """(index, axis, min, max) of each axis the machine has."""
+    return [(i, name, *config.axis(name).travel_mm) for i, name in enumerate(_AXES)
+            if config.has_axis(name)]
+
+
+def _travel_error(path: str, block: NcBlock, name: str, reached: float, lo: float,
+                  hi: float) -> NcError:
+    axis = name.upper()
+    return NcError(path, block.source.first_line, 1, axis,
+                   f"{axis} travel limit exceeded: the path reaches {reached:.4f} mm, "
+                   f"travel is [{lo:g}, {hi:g}] mm")
+
+
+def check_program(path: str, config: MachineConfig) -> CheckSummary:
+    """Parse and check the whole program; raise NcError at the first problem."""
+    kinds: Counter[type] = Counter()
+    lo, hi = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]  # the machine starts at X0 Y0 Z0
+    limits = _limits(config)
+    feed_mm = rapid_mm = time_s = 0.0
+    nurbs_points = 0
+    for block in read_program(path, config):
+        kind = type(block)
+        kinds[kind] += 1
+        geometry = _GEOMETRY.get(kind)
+        if geometry is None:
+            continue
+        length, (blo, bhi) = geometry(block)
+        for i, name, tlo, thi in limits:
+            if blo[i] < tlo:
+                raise _travel_error(path, block, name, blo[i], tlo, thi)
+            if bhi[i] > thi:
+                raise _travel_error(path, block, name, bhi[i], tlo, thi)
+            if blo[i] < lo[i]:
+                lo[i] = blo[i]
+            if bhi[i] > hi[i]:
+                hi[i] = bhi[i]
+        time_s += length / block.feed_mm_s  # type: ignore[union-attr]
+        if kind is LineBlock and block.rapid:  # type: ignore[union-attr]
+            rapid_mm += length
+        else:
+            feed_mm += length
+        if kind is NurbsBlock:
+            nurbs_points += block.control_points.shape[0]  # type: ignore[union-attr]
+    return CheckSummary(
+        program=path, config=config.name,
+        blocks=dict(sorted((k.__name__, v) for k, v in kinds.items())),
+        path_length_mm=feed_mm + rapid_mm, feed_length_mm=feed_mm, rapid_length_mm=rapid_mm,
+        nominal_time_s=time_s, nurbs_blocks=kinds[NurbsBlock], nurbs_control_points=nurbs_points,
+        extents_mm={name: [lo[i], hi[i]] for i, name, _, _ in limits},
+        travel_mm={name: [tlo, thi] for _, name, tlo, thi in limits})
+
+
+def format_summary(s: CheckSummary) -> str:
+    lines = [f"{s.program}: OK (config {s.config})",
+             "blocks: " + (", ".join(f"{k} {v}" for k, v in s.blocks.items()) or "none"),
+             f"path length: {s.path_length_mm:.3f} mm (feed {s.feed_length_mm:.3f} mm, "
+             f"rapid {s.rapid_length_mm:.3f} mm)",
+             f"nominal time at programmed feed: {s.nominal_time_s:.3f} s",
+             f"NURBS: {s.nurbs_blocks} blocks, {s.nurbs_control_points} control points"]
+    for name, (lo, hi) in s.extents_mm.items():
+        tlo, thi = s.travel_mm[name]
+        lines.append(f"{name.upper()}: {lo:.4f} .. {hi:.4f} mm (travel {tlo:g} .. {thi:g})")
+    return "\n".join(lines)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("program", help="G-code program file")
+    parser.add_argument("--config", help="machine config file or built-in name")
+    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        config = load_config(args.config)
+        summary = check_program(args.program, config)
+    except ConfigError as exc:
+        print(f"cncctl: config error: {exc}", file=sys.stderr)
+        return 2
+    except NcError as exc:
+        print(exc.format(), file=sys.stderr)
+        if args.json:
+            print(json.dumps({"ok": False, "error": {
+                "program": exc.path, "line": exc.line, "col": exc.col, "word": exc.word,
+                "message": exc.message}}))
+        return 2
+    if args.json:
+        print(json.dumps({"ok": True, **asdict(summary)}, indent=2))
+    else:
+        print(format_summary(summary))
+    return 0

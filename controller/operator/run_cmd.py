@@ -1,0 +1,108 @@
+"""`cncctl run PROGRAM`: check the whole program, then run it through the three-process runtime."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from pathlib import Path
+from typing import Any
+
+from controller.config import load_config
+from controller.errors import CncError, ConfigError, NcError
+from controller.motion.types import Outcome
+from controller.operator.run_view import JsonView, PlainView, RichView
+from controller.runtime.processes import Runtime, RuntimeOptions
+
+EXIT_CODES = {Outcome.DONE: 0, Outcome.FAULT: 3, Outcome.ABORTED: 4}
+EXIT_REJECTED = 2
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("program", help="G-code program to run")
+    parser.add_argument("--config", help="machine configuration (file or built-in name)")
+    parser.add_argument("--json", action="store_true", help="one JSON object per line")
+    parser.add_argument("--virtual-time", action="store_true",
+                        help="clock the simulated card as fast as possible (no wall clock)")
+    parser.add_argument("--daemon", metavar="SOCKET",
+                        help="send the job to a running cncd (python -m "
+                             "controller.operator.daemon) and relay its JSON lines")
+
+
+def check_program(path: str, config: Any) -> None:
+    """The whole program through `cncctl check` (syntax, travel limits, feeds), no motion:
+    raises NcError at the first error."""
+    from controller.operator.check_cmd import check_program as check_whole_program
+
+    check_whole_program(path, config)
+
+
+def _view(args: argparse.Namespace, lines: list[str]) -> Any:
+    if args.json:
+        return JsonView()
+    return RichView(lines) if sys.stdout.isatty() else PlainView(lines)
+
+
+def _program_lines(path: str) -> list[str]:
+    try:
+        return Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return []
+
+
+def run_on_daemon(args: argparse.Namespace) -> int:
+    """Client of controller.operator.daemon: relays JSON lines; SIGINT asks the daemon to abort."""
+    import json
+    import socket
+
+    def send(request: dict[str, Any]) -> socket.socket:
+        conn = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        conn.connect(args.daemon)
+        conn.sendall((json.dumps(request) + "\n").encode())
+        return conn
+    conn = send({"cmd": "run", "program": str(Path(args.program).resolve()),
+                 "virtual_time": args.virtual_time})
+    previous = signal.signal(signal.SIGINT, lambda *_: send({"cmd": "abort"}).close())
+    last: dict[str, Any] = {}
+    try:
+        for line in conn.makefile("r"):
+            sys.stdout.write(line)
+            sys.stdout.flush()
+            last = json.loads(line)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        conn.close()
+    codes = {"done": 0, "rejected": EXIT_REJECTED, "fault": 3, "aborted": 4}
+    return codes.get(last.get("event", ""), 3)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.daemon:
+        return run_on_daemon(args)
+    try:
+        config = load_config(args.config)
+        check_program(args.program, config)
+    except (NcError, ConfigError) as exc:
+        print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
+        return EXIT_REJECTED
+    view = _view(args, _program_lines(args.program))
+    runtime = Runtime(args.program, config, RuntimeOptions(virtual_time=args.virtual_time,
+                                                           on_progress=view.progress))
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        # Never a silent kill: decelerate along the path, then exit 4.
+        runtime.request_abort("aborted by operator (SIGINT)")
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        view.event("start", program=args.program, config=config.name,
+                   drive=config.drive.backend, virtual_time=args.virtual_time)
+        result = runtime.run()
+    except CncError as exc:
+        view.close()
+        print(f"cncctl: {exc}", file=sys.stderr)
+        return 3
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    view.close()
+    view.final(result)
+    return EXIT_CODES[result.outcome]

@@ -1,0 +1,149 @@
+"""What `cncctl run` shows: a rich progress bar, plain lines, or JSON lines."""
+
+from __future__ import annotations
+
+import json
+import sys
+from typing import Any, TextIO
+
+from controller.motion.types import MotionProgress, MotionResult
+
+
+def result_summary(result: MotionResult) -> dict[str, Any]:
+    """The final JSON object (issue 5): event done/fault/aborted plus the measured figures."""
+    names = result.commanded_counts.keys()
+    return {
+        "event": result.outcome.value,
+        "message": result.message,
+        "line": result.line,
+        "motion_time_s": round(result.motion_time_s, 4),
+        "planned_time_s": round(result.planned_time_s, 4),
+        "contour_error_um": {k: round(v, 3) for k, v in result.contour_error_um.items()},
+        "following_error_um_max": round(result.following_error_um_max, 3),
+        "underruns": result.underruns,
+        "late_cycles": result.late_cycles,
+        "min_fifo_ms": round(result.min_fifo_ms, 1),
+        "pulses": {n: {"commanded": result.commanded_counts[n],
+                       "executed": result.executed_counts[n]} for n in names},
+        "final_position_mm": {k: round(v, 6) for k, v in result.final_position_mm.items()},
+        "position_known": result.position_known,
+        "time_to_first_motion_s": result.time_to_first_motion_s,
+        **{k: v for k, v in result.extra.items()},
+    }
+
+
+class JsonView:
+    """One JSON object per line: start, progress (every 0.5 s), fault/abort notices, final."""
+
+    def __init__(self, out: TextIO | None = None, every_s: float = 0.5) -> None:
+        self.out, self.every_s, self._next_s = out or sys.stdout, every_s, 0.0
+
+    def _emit(self, obj: dict[str, Any]) -> None:
+        self.out.write(json.dumps(obj) + "\n")
+        self.out.flush()
+
+    def event(self, name: str, **fields: Any) -> None:
+        self._emit({"event": name, **fields})
+
+    def progress(self, p: MotionProgress) -> None:
+        if p.elapsed_s < self._next_s:
+            return
+        self._next_s = p.elapsed_s + self.every_s
+        self._emit({"event": "progress", "state": p.state.value, "line": p.line,
+                    "feed_mm_s": round(p.feed_mm_s, 3), "ferror_um": round(p.ferror_um, 1),
+                    "fifo_ms": round(p.fifo_ms, 1), "executed_s": round(p.executed_s, 3),
+                    "planned_s": p.planned_s})
+
+    def final(self, result: MotionResult) -> None:
+        self._emit(result_summary(result))
+
+    def close(self) -> None:
+        pass
+
+
+class PlainView:
+    """Not a terminal: a status line a second, then a short summary."""
+
+    def __init__(self, lines: list[str], out: TextIO | None = None) -> None:
+        self.lines, self.out, self._next_s = lines, out or sys.stdout, 0.0
+
+    def event(self, name: str, **fields: Any) -> None:
+        extra = " ".join(f"{k}={v}" for k, v in fields.items())
+        print(f"cncctl: {name} {extra}".rstrip(), file=self.out, flush=True)
+
+    def progress(self, p: MotionProgress) -> None:
+        if p.elapsed_s < self._next_s:
+            return
+        self._next_s = p.elapsed_s + 1.0
+        print(status_text(p, self.lines), file=self.out, flush=True)
+
+    def final(self, result: MotionResult) -> None:
+        s = result_summary(result)
+        print(f"cncctl: {s['event']}{': ' + s['message'] if s['message'] else ''}\n"
+              f"  motion {s['motion_time_s']:.3f} s (planned {s['planned_time_s']:.3f} s), "
+              f"contour error max {s['contour_error_um']['max']:.1f} um "
+              f"rms {s['contour_error_um']['rms']:.1f} um, following error max "
+              f"{s['following_error_um_max']:.0f} um\n"
+              f"  underruns {s['underruns']}, late cycles {s['late_cycles']}, "
+              f"lowest FIFO {s['min_fifo_ms']:.0f} ms, final position "
+              f"{s['final_position_mm']}, pulses {s['pulses']}", file=self.out, flush=True)
+
+    def close(self) -> None:
+        pass
+
+
+def status_text(p: MotionProgress, lines: list[str]) -> str:
+    text = lines_text(lines, p.line)
+    planned = f"/{p.planned_s:.2f}" if p.planned_s is not None else ""
+    return (f"[{p.state.value}] {p.executed_s:.2f}{planned} s  line {p.line} {text!r}  "
+            f"feed {p.feed_mm_s:.1f} mm/s  ferror {p.ferror_um:.0f} um  fifo {p.fifo_ms:.0f} ms")
+
+
+class RichView(PlainView):
+    """On a terminal: a live progress bar by planned time and a status line under it."""
+
+    def __init__(self, lines: list[str]) -> None:
+        super().__init__(lines)
+        from rich.console import Group
+        from rich.live import Live
+        from rich.progress import (
+            BarColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+        self.bar = Progress(TextColumn("{task.fields[state]:>9}"), BarColumn(bar_width=30),
+                            TextColumn("{task.completed:.2f}/{task.fields[planned]} s"),
+                            TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn())
+        self.task = self.bar.add_task("run", total=None, state="start", planned="?")
+        self.status = _StatusLine()
+        self.live = Live(Group(self.bar, self.status), refresh_per_second=8)
+        self.live.start()
+
+    def event(self, name: str, **fields: Any) -> None:
+        self.live.console.print(f"[bold]{name}[/] " + " ".join(f"{k}={v}" for k, v in
+                                                              fields.items()))
+
+    def progress(self, p: MotionProgress) -> None:
+        self.bar.update(self.task, completed=p.executed_s, total=p.planned_s,
+                        state=p.state.value, planned=f"{p.planned_s:.2f}" if p.planned_s else "?")
+        self.status.text = (f"line {p.line}: {lines_text(self.lines, p.line)}\n"
+                            f"feed {p.feed_mm_s * 60:.0f} mm/min   following error "
+                            f"{p.ferror_um:.0f} um   card FIFO {p.fifo_ms:.0f} ms")
+
+    def close(self) -> None:
+        self.live.stop()
+
+
+class _StatusLine:
+    """A renderable whose text the motion thread replaces; rich redraws it on refresh."""
+
+    text = ""
+
+    def __rich__(self) -> str:
+        return self.text
+
+
+def lines_text(lines: list[str], line: int) -> str:
+    return lines[line - 1].strip()[:32] if 0 < line <= len(lines) else ""

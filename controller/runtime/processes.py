@@ -1,0 +1,218 @@
+"""The three-process runtime: interpreter -> NC FIFO -> generator -> shm ring -> motion -> drive."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import queue
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from controller.config import MachineConfig
+from controller.motion.loop import MotionController
+from controller.motion.pacing import VirtualPacer, WallPacer
+from controller.motion.realtime import back_to_normal, try_realtime
+from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
+from controller.motion.source import SourceState
+from controller.motion.types import MotionProgress, MotionResult, MotionSettings, MotionState
+from controller.runtime.stages import (
+    BlocksFn,
+    GenerateFn,
+    blocks_source,
+    generator_main,
+    interpreter_main,
+    preload_stages,
+    reference_source,
+)
+from drivers.base import Drive
+from drivers.registry import make_drive
+
+# fork: children start in ~ms (time to first motion); they are forked before any thread
+# (card clock, UI) exists in this process.
+_CTX = mp.get_context("fork")
+
+
+@dataclass
+class RuntimeOptions:
+    virtual_time: bool = False
+    ring_seconds: float = 30.0  # generator may run this far ahead of the table
+    blocks_fn: BlocksFn = blocks_source
+    generate_fn: GenerateFn = reference_source
+    drive: Drive | None = None  # an unopened drive (tests); default: the configured backend
+    settings: dict[str, Any] = field(default_factory=dict)  # MotionSettings overrides
+    on_progress: Callable[[MotionProgress], None] | None = None
+    rt_priority: int | None = 80  # real-time mode: try SCHED_FIFO for the motion process
+
+
+class _Messages:
+    """Drains the info queue: stage error messages and each child's peak RSS."""
+
+    def __init__(self, info: Any) -> None:
+        self.info = info
+        self.errors: dict[str, str] = {}
+        self.rss_kb: dict[str, int] = {}
+
+    def drain(self, wait_s: float = 0.0) -> None:
+        deadline = time.monotonic() + wait_s
+        while True:
+            try:
+                kind, stage, value = self.info.get(timeout=max(0.0, deadline - time.monotonic()))
+            except (queue.Empty, OSError, ValueError):
+                return
+            (self.errors if kind == "error" else self.rss_kb)[stage] = value
+
+
+class RingSource:
+    """RefSource over the shared ring; FAILED when the generator raised or died."""
+
+    def __init__(self, ring: RefRing, generator: Any, messages: _Messages) -> None:
+        self.ring, self.generator, self.messages = ring, generator, messages
+
+    def read(self, max_rows: int) -> Any:
+        return self.ring.read(max_rows)
+
+    def state(self) -> tuple[SourceState, str]:
+        flags = self.ring.flags
+        if flags & FLAG_FINAL:
+            return SourceState.FINISHED, ""
+        if flags & FLAG_FAILED:
+            self.messages.drain(wait_s=0.05)  # the message may still be in the queue pipe
+            errors = self.messages.errors
+            if "interpreter" in errors:  # the generator only failed because its input did
+                return SourceState.FAILED, f"NC interpreter failed: {errors['interpreter']}"
+            return SourceState.FAILED, errors.get("generator", "reference generator failed")
+        if self.generator.exitcode is not None:
+            return SourceState.FAILED, ("reference generator process died "
+                                        f"(exit code {self.generator.exitcode})")
+        return SourceState.STREAMING, ""
+
+    def total_rows(self) -> int | None:
+        return self.ring.written if self.ring.flags & FLAG_FINAL else None
+
+
+class Runtime:
+    """Runs one program; run() returns the MotionResult (extra: rss, start-up timings)."""
+
+    def __init__(self, path: str, config: MachineConfig, options: RuntimeOptions | None = None):
+        self.path, self.config = path, config
+        self.options = options or RuntimeOptions()
+        self.settings = MotionSettings.from_config(config, **self.options.settings)
+        self.controller: MotionController | None = None
+        self.procs: dict[str, Any] = {}
+
+    def request_abort(self, message: str = "aborted by operator") -> None:
+        if self.controller is not None:
+            self.controller.request_abort(message)
+        else:
+            self._abort_early = message
+
+    def run(self) -> MotionResult:
+        t0_s = time.monotonic()
+        self._abort_early: str | None = None
+        n_cols = len(self.config.axes) + 2
+        ring = RefRing.create(int(self.options.ring_seconds / self.config.sample_period_s), n_cols)
+        messages = _Messages(_CTX.Queue())
+        rt = "off"
+        try:
+            # Built before the fork so that backend imports (scipy) are paid once, not per child.
+            drive = self.options.drive or make_drive(
+                self.config, realtime=not self.options.virtual_time)
+            self._start(ring, messages)
+            if self.options.rt_priority is not None and not self.options.virtual_time:
+                rt = try_realtime(self.options.rt_priority)
+            drive.open()
+            try:
+                result = self._motion(drive, ring, messages)
+            finally:
+                drive.close()
+                back_to_normal()
+        finally:
+            ring.set_flag(FLAG_ABORT)
+            self._stop_children()
+            messages.drain(wait_s=0.05)
+            ring.close()
+        result.extra["realtime"] = rt
+        return self._finish(result, messages, t0_s)
+
+    def _start(self, ring: RefRing, messages: _Messages) -> None:
+        if self.options.blocks_fn is blocks_source or self.options.generate_fn is reference_source:
+            preload_stages()
+        nc_fifo = _CTX.Queue(maxsize=self.config.runtime.nc_fifo_blocks)
+        # Generator first, so that it is waiting on the NC FIFO when the first block lands.
+        self.procs["generator"] = _CTX.Process(
+            target=generator_main, name="cnc-generator", daemon=True,
+            args=(self.config, self.options.generate_fn, nc_fifo, ring, messages.info))
+        self.procs["interpreter"] = _CTX.Process(
+            target=interpreter_main, name="cnc-interpreter", daemon=True,
+            args=(self.path, self.config, self.options.blocks_fn, nc_fifo, ring, messages.info))
+        self.procs["generator"].start()
+        self.procs["interpreter"].start()
+        self._t_started_s = time.monotonic()
+
+    def _watch(self, messages: _Messages) -> Callable[[], str | None]:
+        interp = self.procs["interpreter"]
+
+        def watch() -> str | None:
+            # Called every motion cycle: a dead process is seen within one cycle (~2 ms).
+            code = interp.exitcode
+            if code is None or (code == 0 and "interpreter" not in messages.errors):
+                return None
+            messages.drain(wait_s=0.05)
+            if "interpreter" in messages.errors:
+                return f"NC interpreter failed: {messages.errors['interpreter']}"
+            return f"NC interpreter process died (exit code {code})"
+        return watch
+
+    def _motion(self, drive: Drive, ring: RefRing, messages: _Messages) -> MotionResult:
+        source = RingSource(ring, self.procs["generator"], messages)
+        period_s = self.config.sample_period_s
+        watch = self._watch(messages)
+        if self.options.virtual_time:
+            need = round((self.settings.high_water_ms + self.settings.holdback_ms) * 1e-3
+                         / period_s) + 2 * self.settings.cycle_frames
+
+            def ready() -> bool:
+                # Rows produced but not yet executed (ring + held back + card FIFO) must cover
+                # a full refill; otherwise virtual time waits for the generator.
+                ctrl = self.controller
+                ahead = ring.written - (ctrl.executed if ctrl is not None else 0)
+                aborted = ctrl is not None and (ctrl.abort_requested or ctrl.state not in (
+                    MotionState.WAITING, MotionState.RUNNING))  # stopping needs no new rows
+                return (ahead >= need or aborted or watch() is not None
+                        or source.state()[0] is not SourceState.STREAMING)
+            pacer: Any = VirtualPacer(self.settings.cycle_frames, period_s, drive.advance,
+                                      ready=ready)
+        else:
+            pacer = WallPacer(self.settings.cycle_frames * period_s)
+        self._pacer_t0_s = time.monotonic()
+        self._pacer_t0_epoch_s = time.time()
+        self.controller = MotionController(self.config, drive, source, pacer, self.settings,
+                                           on_progress=self.options.on_progress,
+                                           watch=watch)
+        if self._abort_early is not None:
+            self.controller.request_abort(self._abort_early)
+        return self.controller.run()
+
+    def _stop_children(self) -> None:
+        for proc in self.procs.values():
+            proc.join(timeout=0.5)
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(timeout=0.5)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+
+    def _finish(self, result: MotionResult, messages: _Messages, t0_s: float) -> MotionResult:
+        import resource
+        extra = dict(result.extra)
+        extra["peak_rss_mb"] = {k: v / 1024 for k, v in messages.rss_kb.items()}
+        extra["peak_rss_mb"]["motion"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        extra["process_start_s"] = self._t_started_s - t0_s
+        first = result.time_to_first_motion_s
+        if first is not None and not self.options.virtual_time:
+            # Wall clock of the first executed frame (bench: launch-to-motion of `cncctl run`).
+            extra["first_motion_epoch_s"] = self._pacer_t0_epoch_s + first
+            first = (self._pacer_t0_s - t0_s) + first
+        return replace(result, time_to_first_motion_s=first, extra=extra)

@@ -1,0 +1,132 @@
+"""The two producer processes of the runtime: NC interpreter stage and reference generator stage."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import queue
+import resource
+import signal
+from collections.abc import Callable, Iterable, Iterator
+from multiprocessing.queues import Queue
+from typing import Any
+
+from controller.config import MachineConfig
+from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
+from controller.motion.source import chunk_rows
+from controller.refpoints import RefChunk
+
+END = "__end__"  # last item on the NC FIFO after the final block
+FAILED = "__failed__"  # the interpreter raised; its message is on the error queue
+POLL_S = 0.02  # how often a blocked producer looks for an abort or a dead parent
+
+BlocksFn = Callable[[str, MachineConfig], Iterable[Any]]
+GenerateFn = Callable[[Iterable[Any], MachineConfig], Iterable[RefChunk]]
+
+
+def blocks_source(path: str, config: MachineConfig) -> Iterator[Any]:
+    """The interpreter stage: read_program, block by block (its process is interpreter_main;
+    nc_fifo.NcFifo does the same job standalone and batches blocks, not used here yet)."""
+    from controller.interpreter.program import read_program
+    yield from read_program(path, config)
+
+
+def reference_source(blocks: Iterable[Any], config: MachineConfig) -> Iterator[RefChunk]:
+    """The generator stage: the look-ahead reference-point generator (controller.generator.plan)."""
+    from controller.generator.plan import generate_reference
+    yield from generate_reference(blocks, config)
+
+
+def preload_stages() -> None:
+    """Import the real stages in the parent: forked children then start warm (~0.5 s saved).
+
+    An import error is left for the child to raise and report through the normal path.
+    """
+    import importlib
+    for name in ("controller.interpreter.program", "controller.generator.plan"):
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            pass
+
+
+PRODUCER_NICE = -10  # interpreter and generator outrank ordinary load, below the RT motion loop
+
+
+def _child_setup() -> int:
+    # Ctrl-C goes to the whole process group: only the motion process decides how to stop.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Best effort: on a loaded machine the producers keep the reference ring ahead of the card
+    # and planning the first run reaches the first motion sooner. Without CAP_SYS_NICE (or a
+    # systemd LimitNICE) this is refused, which only costs headroom.
+    try:
+        os.nice(PRODUCER_NICE)
+    except OSError:
+        pass
+    return os.getppid()
+
+
+def _should_stop(ring: RefRing, parent_pid: int) -> bool:
+    return bool(ring.flags & FLAG_ABORT) or os.getppid() != parent_pid
+
+
+def _report_rss(info: Queue, name: str) -> None:
+    info.put(("rss_kb", name, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+
+
+def interpreter_main(path: str, config: MachineConfig, blocks_fn: BlocksFn, nc_fifo: Queue,
+                     ring: RefRing, info: Queue) -> None:
+    """Process 1: NC blocks onto the bounded NC FIFO (put blocks when full: back-pressure)."""
+    parent = _child_setup()
+    try:
+        items = _iter_safe(blocks_fn(path, config), info, "interpreter")
+        for item in itertools.chain(items, [END]):
+            while True:
+                if _should_stop(ring, parent):
+                    return
+                try:
+                    nc_fifo.put(item, timeout=POLL_S)
+                    break
+                except queue.Full:
+                    continue
+    finally:
+        _report_rss(info, "interpreter")
+
+
+def _iter_safe(items: Iterable[Any], info: Queue, stage: str) -> Iterator[Any]:
+    try:
+        yield from items
+    except Exception as exc:  # noqa: BLE001  (any failure is reported, then the stage ends)
+        info.put(("error", stage, str(exc) or type(exc).__name__))
+        yield FAILED
+
+
+def _blocks_from_fifo(nc_fifo: Queue, ring: RefRing, parent: int) -> Iterator[Any]:
+    while True:
+        try:
+            item = nc_fifo.get(timeout=POLL_S)
+        except queue.Empty:
+            if _should_stop(ring, parent):
+                raise SystemExit(0) from None
+            continue
+        if isinstance(item, str) and item == END:
+            return
+        if isinstance(item, str) and item == FAILED:
+            raise RuntimeError("NC interpreter failed")
+        yield item
+
+
+def generator_main(config: MachineConfig, generate_fn: GenerateFn, nc_fifo: Queue,
+                   ring: RefRing, info: Queue) -> None:
+    """Process 2: NC blocks -> reference points into the shared-memory ring."""
+    parent = _child_setup()
+    try:
+        for chunk in generate_fn(_blocks_from_fifo(nc_fifo, ring, parent), config):
+            if not ring.write(chunk_rows(chunk)) or os.getppid() != parent:
+                return
+        ring.set_flag(FLAG_FINAL)
+    except Exception as exc:  # noqa: BLE001  (reported on the queue, flagged in the ring)
+        info.put(("error", "generator", f"{type(exc).__name__}: {exc}"))
+        ring.set_flag(FLAG_FAILED)
+    finally:
+        _report_rss(info, "generator")

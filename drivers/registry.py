@@ -1,0 +1,43 @@
+"""Drive backends by name (python-can style): config `drive.backend` picks one, imported on use."""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from typing import Any
+
+from controller.config import MachineConfig
+from controller.errors import DriveError
+from drivers.base import Drive
+
+# name -> "module:class"; imported only when chosen, so an unused backend's libraries
+# (python-can, pyserial) cost nothing.
+BUILTIN_BACKENDS: dict[str, str] = {
+    "sim": "drivers.sim.card:SimCard",
+}
+_registered: dict[str, Callable[..., Drive]] = {}
+
+
+def register_backend(name: str, factory: Callable[..., Drive]) -> None:
+    """Make a backend from outside this package available under `name` (config drive.backend)."""
+    _registered[name] = factory
+
+
+def backend_names() -> tuple[str, ...]:
+    return tuple(sorted(BUILTIN_BACKENDS.keys() | _registered.keys()))
+
+
+def _factory(name: str) -> Callable[..., Drive]:
+    if name in _registered:
+        return _registered[name]
+    if name not in BUILTIN_BACKENDS:
+        raise DriveError(f"drive backend {name!r} is not available "
+                         f"(have: {', '.join(backend_names())})")
+    module_name, class_name = BUILTIN_BACKENDS[name].split(":")
+    return getattr(importlib.import_module(module_name), class_name)
+
+
+def make_drive(config: MachineConfig, **overrides: Any) -> Drive:
+    """Construct (not open) the configured backend; overrides beat config drive.options."""
+    options = dict(config.drive.options) | overrides
+    return _factory(config.drive.backend)(config, **options)

@@ -1,0 +1,62 @@
+"""The simulated card's axes: Table II servo model per axis plus fault injections."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from controller.config import MachineConfig
+from controller.generator.dynamics.servo import AxisServoStepper, discretise
+
+
+class SimAxes:
+    """Commanded step counters, servo lag, encoders; stall/lag/freeze injections per axis.
+
+    Convention of controller.generator.dynamics.servo: r[k] = accumulated pulses * pulse_mm,
+    v[k] = (r[k] - r[k-1]) / T drives the E/V filter, actual = r - e.
+    """
+
+    def __init__(self, config: MachineConfig, start_counts: np.ndarray) -> None:
+        self.period_s = config.sample_period_s
+        self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
+        self.steppers = [AxisServoStepper(discretise(a.servo, self.period_s)) for a in config.axes]
+        self.commanded = start_counts.astype(np.int64).copy()
+        self.actual_mm = self.commanded * self.pulse_mm
+        n = len(config.axes)
+        self.frozen = np.zeros(n, dtype=bool)  # stalled or coasting after a drive fault
+        self.frozen_mm = np.zeros(n)
+        self.extra_lag_mm = np.zeros(n)
+        self.lag_target_mm = np.zeros(n)
+        self.lag_step_mm = np.zeros(n)
+
+    def step(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Clock frames (n, n_axes) through the axes: (commanded counts, encoder counts) rows."""
+        cmd = self.commanded + np.cumsum(frames, axis=0)
+        r_mm = cmd * self.pulse_mm
+        v_mm_s = frames * self.pulse_mm / self.period_s
+        err = np.column_stack([s.step(v_mm_s[:, i]) for i, s in enumerate(self.steppers)])
+        actual = r_mm - err - self._lag_rows(frames.shape[0])
+        actual[:, self.frozen] = self.frozen_mm[self.frozen]
+        if frames.shape[0]:
+            self.commanded = cmd[-1].copy()
+            self.actual_mm = actual[-1].copy()
+        return cmd, self.encoder(actual)
+
+    def encoder(self, actual_mm: np.ndarray) -> np.ndarray:
+        return np.rint(actual_mm / self.pulse_mm).astype(np.int64)
+
+    def _lag_rows(self, n: int) -> np.ndarray:
+        # Injected lag ramps towards its target so the encoder does not jump.
+        k = np.arange(1, n + 1)[:, None]
+        lag = self.extra_lag_mm + self.lag_step_mm * k
+        lag = np.minimum(lag, np.maximum(self.lag_target_mm, self.extra_lag_mm))
+        if n:
+            self.extra_lag_mm = lag[-1].copy()
+        return lag
+
+    def freeze(self, axis: int) -> None:
+        self.frozen[axis] = True
+        self.frozen_mm[axis] = self.actual_mm[axis]
+
+    def add_lag(self, axis: int, lag_mm: float, ramp_frames: int) -> None:
+        self.lag_target_mm[axis] = self.extra_lag_mm[axis] + lag_mm
+        self.lag_step_mm[axis] = lag_mm / max(1, ramp_frames)

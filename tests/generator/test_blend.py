@@ -1,0 +1,106 @@
+"""G1 corners: PH blends stay within G64 P (or eps_max), G61 stops, limits hold (issue 4)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controller.config import load_config
+from controller.interpreter.program import read_program
+from controller.runtime.simulation import report, simulate
+
+CFG = load_config()
+IP = CFG.interpolator
+CORNERS = [(0, 0), (50, 0), (50, 30), (80, 30), (80, -30), (20, -40), (0, 0)]
+
+
+def _program(tmp_path: Path, mode: str) -> str:
+    lines = ["G17 G21 G90 F3000", mode]
+    lines += [f"G1 X{x} Y{y}" for x, y in CORNERS[1:]]
+    path = tmp_path / "corners.nc"
+    path.write_text("\n".join([*lines, "M2", ""]), encoding="utf-8")
+    return str(path)
+
+
+def _distance_to_polyline_mm(pts: np.ndarray) -> np.ndarray:
+    poly = np.array(CORNERS, float)
+    a, b = poly[:-1], poly[1:]
+    ab = b - a
+    rel = pts[:, None, :] - a[None]
+    t = np.clip(np.einsum("pij,ij->pi", rel, ab) / np.einsum("ij,ij->i", ab, ab), 0.0, 1.0)
+    near = a[None] + t[..., None] * ab[None]
+    return np.linalg.norm(pts[:, None, :] - near, axis=2).min(axis=1)
+
+
+@pytest.mark.parametrize(("mode", "tolerance_mm"), [("G64 P0.05", 0.05), ("G64 P0.01", 0.01),
+                                                    ("G64", IP.contour_error_limit_mm)])
+def test_blends_stay_within_the_path_tolerance(tmp_path: Path, mode: str,
+                                               tolerance_mm: float) -> None:
+    traj = simulate(read_program(_program(tmp_path, mode), CFG), CFG, "ph-lookahead")
+    r = report(traj, "corners", "ph-lookahead", CFG)
+    dev = _distance_to_polyline_mm(traj.ref_mm)
+    assert dev.max() <= tolerance_mm * (1 + 1e-6)
+    assert dev.max() >= 0.2 * tolerance_mm  # the corners really are rounded, not stopped at
+    assert r["ph_segments"] == len(CORNERS) - 2
+    assert r["contour_error_um"]["max"] <= IP.contour_error_limit_mm * 1000
+    assert r["max_tangential_accel_mm_s2"] <= IP.max_accel_mm_s2 * (1 + 1e-6)
+    assert r["max_feed_mm_s"] <= 50.0 * (1 + 1e-9)  # F3000 mm/min
+    assert np.array_equal(traj.ref_mm[-1], [0.0, 0.0])
+
+
+def test_exact_stop_mode_stops_at_every_corner(tmp_path: Path) -> None:
+    traj = simulate(read_program(_program(tmp_path, "G61"), CFG), CFG, "ph-lookahead")
+    assert _distance_to_polyline_mm(traj.ref_mm).max() < 1e-9
+    for corner in CORNERS[1:-1]:
+        k = int(np.argmin(np.linalg.norm(traj.ref_mm - corner, axis=1)))
+        assert np.linalg.norm(traj.ref_mm[k] - corner) < 1e-9  # passes exactly through it
+        assert traj.feed_mm_s[k] < 1.0  # ... at (nearly) zero feed
+
+
+def test_blending_is_faster_than_exact_stop(tmp_path: Path) -> None:
+    times = {mode: report(simulate(read_program(_program(tmp_path, mode), CFG), CFG,
+                                   "ph-lookahead"), "c", "ph", CFG)["motion_time_s"]
+             for mode in ("G61", "G64 P0.05")}
+    assert times["G64 P0.05"] < times["G61"]
+
+
+def test_long_contour_is_planned_in_windows_without_stopping(tmp_path: Path) -> None:
+    """A 1440-block G64 polyline: several look-ahead windows, continued mid-cruise."""
+    ang = np.linspace(0.0, 8.0 * np.pi, 1441)
+    pts = np.column_stack([20.0 * np.cos(ang) - 20.0, 12.0 * np.sin(ang)])
+    lines = ["G17 G21 G90 F3000", "G64 P0.01"] + [f"G1 X{x:.4f} Y{y:.4f}" for x, y in pts[1:]]
+    prog = tmp_path / "spiral.nc"
+    prog.write_text("\n".join([*lines, "M2", ""]), encoding="utf-8")
+    from controller.generator.plan import plan_program
+
+    steps = list(plan_program(read_program(str(prog), CFG), CFG, "ph-lookahead"))
+    assert len(steps) >= 4  # really planned in windows
+    ref = np.vstack([s.chunk.pos_mm for s in steps])
+    t = np.concatenate([s.chunk.t0_s + np.arange(len(s.chunk)) * CFG.sample_period_s
+                        for s in steps])
+    assert np.allclose(np.diff(t), CFG.sample_period_s)
+    speed = np.linalg.norm(np.diff(np.vstack([[0.0, 0.0], ref]), axis=0), axis=1) / 0.001
+    assert speed[200:-200].min() > 0.95 * 50.0  # no stop at the window seams
+    accel = np.diff(speed) / 0.001
+    assert np.abs(accel).max() <= IP.max_accel_mm_s2 * (1 + 1e-6)
+    assert speed.max() <= 50.0 * (1 + 1e-9)
+    poly_dev = _distance_to_points_polyline(ref, pts)
+    assert poly_dev.max() <= 0.01 * (1 + 1e-6)
+    assert np.array_equal(ref[-1], np.round(pts[-1], 4) + 0.0)
+    r = report(simulate(read_program(str(prog), CFG), CFG, "ph-lookahead"), "s", "ph", CFG)
+    assert r["contour_error_um"]["max"] <= IP.contour_error_limit_mm * 1000
+
+
+def _distance_to_points_polyline(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    a, b = poly[:-1], poly[1:]
+    ab = b - a
+    out = np.full(len(pts), np.inf)
+    for i0 in range(0, len(pts), 2000):
+        p = pts[i0:i0 + 2000]
+        rel = p[:, None, :] - a[None]
+        t = np.clip(np.einsum("pij,ij->pi", rel, ab) / np.einsum("ij,ij->i", ab, ab), 0.0, 1.0)
+        near = a[None] + t[..., None] * ab[None]
+        out[i0:i0 + 2000] = np.linalg.norm(p[:, None, :] - near, axis=2).min(axis=1)
+    return out

@@ -1,0 +1,70 @@
+"""Property tests of the arc helpers: R-form centres, LinuxCNC radius check, arc bounding boxes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from controller.blocks import ArcBlock, PathControl, Source
+from controller.interpreter.arcs import arc_box, center_ijk, center_r
+from controller.interpreter.codes import WordError
+
+coord = st.floats(-100, 100, allow_nan=False)
+PROPS = settings(max_examples=150, deadline=None)
+
+
+@PROPS
+@given(coord, coord, coord, coord, st.floats(1.0, 3.0), st.booleans(), st.booleans())
+def test_r_form_centre(sx: float, sy: float, ex: float, ey: float, factor: float,
+                       clockwise: bool, long_way: bool) -> None:
+    half = math.hypot(ex - sx, ey - sy) / 2
+    if half < 1e-3:
+        return
+    radius = half * factor * (-1 if long_way else 1)
+    cx, cy = center_r(sx, sy, ex, ey, radius, clockwise, inch=False)
+    assert math.hypot(sx - cx, sy - cy) == pytest.approx(abs(radius), rel=1e-9, abs=1e-9)
+    assert math.hypot(ex - cx, ey - cy) == pytest.approx(abs(radius), rel=1e-9, abs=1e-9)
+    arc = ArcBlock((sx, sy, 0.0), (ex, ey, 0.0), (cx, cy), clockwise, 0, 1.0, PathControl(),
+                   Source("p", 1, 1))
+    sweep = abs(arc.sweep_rad)
+    assert (sweep >= math.pi - 1e-6) if long_way else (sweep <= math.pi + 1e-6)
+    assert (arc.sweep_rad < 0) == clockwise
+
+
+@PROPS
+@given(coord, coord, st.floats(0.5, 50), st.floats(-7, 7), st.floats(-7, 7),
+       st.floats(-0.05, 0.05))
+def test_ijk_radius_check_follows_linuxcnc(cx: float, cy: float, r: float, a0: float,
+                                           a1: float, dr: float) -> None:
+    sx, sy = cx + r * math.cos(a0), cy + r * math.sin(a0)
+    ex, ey = cx + (r + dr) * math.cos(a1), cy + (r + dr) * math.sin(a1)
+    r2 = math.hypot(ex - cx, ey - cy)
+    err = abs(r2 - r)
+    ok = err <= 2 * 0.01 * math.sqrt(2) and err / max(r, r2) <= 0.001
+    if ok:
+        assert center_ijk(sx, sy, ex, ey, cx, cy, inch=False) == (cx, cy)
+    else:
+        with pytest.raises(WordError, match="differs"):
+            center_ijk(sx, sy, ex, ey, cx, cy, inch=False)
+
+
+@PROPS
+@given(coord, coord, st.floats(0.1, 50), st.floats(-7, 7),
+       st.floats(-2 * math.pi + 1e-3, 2 * math.pi - 1e-3))
+def test_arc_box_is_the_tight_box_of_the_arc(cx: float, cy: float, r: float, a0: float,
+                                             sweep: float) -> None:
+    sx, sy = cx + r * math.cos(a0), cy + r * math.sin(a0)
+    ex, ey = cx + r * math.cos(a0 + sweep), cy + r * math.sin(a0 + sweep)
+    x0, y0, x1, y1 = arc_box(sx, sy, ex, ey, cx, cy, sweep)
+    ang = a0 + np.linspace(0.0, sweep, 20001)
+    px, py = cx + r * np.cos(ang), cy + r * np.sin(ang)
+    tol = 1e-9 * (1 + abs(cx) + abs(cy) + r)
+    assert px.min() >= x0 - tol and px.max() <= x1 + tol
+    assert py.min() >= y0 - tol and py.max() <= y1 + tol
+    slack = r * (1 - math.cos(abs(sweep) / 20000)) + tol  # sampling misses at most this much
+    assert px.min() <= x0 + slack and px.max() >= x1 - slack
+    assert py.min() <= y0 + slack and py.max() >= y1 - slack

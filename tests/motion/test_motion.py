@@ -1,0 +1,181 @@
+"""Motion controller in virtual time: streaming, water marks, following error, controlled stops."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from refgen import circle_chunks, line_chunks
+from runtime_helpers import Recorder, assert_smooth, virtual_card, xy_config
+
+from controller.generator.dynamics.servo import contour_error_mm, discretise, tracking_error_mm
+from controller.motion.checks import FerrorCheck
+from controller.motion.loop import MotionController
+from controller.motion.pacing import VirtualPacer
+from controller.motion.source import ChunkSource, chunk_rows
+from controller.motion.types import MotionProgress, MotionResult, MotionSettings, Outcome
+
+CFG = xy_config()
+T = CFG.sample_period_s
+Inject = Callable[[object, MotionController, VirtualPacer], None]
+
+
+def run(chunks: list, inject: Inject | None = None, at_s: float = 0.3,
+        source_kw: dict | None = None, **overrides: float) -> tuple[MotionResult, object,
+                                                                    Recorder, list]:
+    card = virtual_card(CFG)
+    rec = Recorder(card)
+    pacer = VirtualPacer(2, T, card.advance)
+    seen: list[MotionProgress] = []
+    ctrl: MotionController
+
+    def progress(p: MotionProgress) -> None:
+        seen.append(p)
+        if inject is not None and p.executed_s >= at_s and not getattr(ctrl, "_injected", 0):
+            ctrl._injected = 1  # type: ignore[attr-defined]
+            inject(card, ctrl, pacer)
+
+    s = MotionSettings.from_config(CFG, progress_every_s=0.002, **overrides)
+    ctrl = MotionController(CFG, card, ChunkSource(chunks, **(source_kw or {})), pacer, s,
+                            on_progress=progress)
+    return ctrl.run(), card, rec, seen
+
+
+def accounted(result: MotionResult, card: object) -> None:
+    """No pulse lost: commanded = executed + whatever the card still held (discarded by reset)."""
+    card.reset()  # type: ignore[attr-defined]
+    executed = np.array(list(result.executed_counts.values()))
+    commanded = np.array(list(result.commanded_counts.values()))
+    assert np.array_equal(commanded, executed + card.discarded_counts)  # type: ignore[attr-defined]
+
+
+def on_circle(result: MotionResult, radius_mm: float = 10.0, tol_mm: float = 0.01) -> None:
+    p = np.array([result.final_position_mm["x"], result.final_position_mm["y"]])
+    assert abs(np.linalg.norm(p - [radius_mm, 0.0]) - radius_mm) < tol_mm
+
+
+def predicted_contour_um(chunks: list) -> tuple[float, float]:
+    """Offline prediction (servo model over the whole reference), as `cncctl simulate` does."""
+    pos = np.vstack([c.pos_mm for c in chunks])
+    v = np.diff(pos, axis=0, prepend=pos[:1]) / T
+    e = np.column_stack([tracking_error_mm(discretise(a.servo, T), v[:, i])
+                         for i, a in enumerate(CFG.axes)])
+    moving = np.hypot(v[:, 0], v[:, 1]) >= 0.05
+    eps = np.abs(contour_error_mm(e[:, 0], e[:, 1], np.arctan2(v[:, 1], v[:, 0])))[moving]
+    return float(eps.max() * 1e3), float(np.sqrt(np.mean(eps ** 2)) * 1e3)
+
+
+def test_circle_runs_to_the_pulse_and_matches_the_servo_prediction() -> None:
+    chunks = list(circle_chunks())
+    result, card, rec, _ = run(chunks)
+    assert result.outcome is Outcome.DONE and result.underruns == 0
+    assert result.final_position_mm == {"x": 0.0, "y": 0.0}
+    assert result.commanded_counts == result.executed_counts
+    assert result.planned_time_s == pytest.approx(sum(len(c) for c in chunks) * T)
+    max_um, rms_um = predicted_contour_um(chunks)
+    assert result.contour_error_um["max"] == pytest.approx(max_um, rel=0.1, abs=2.0)
+    assert result.contour_error_um["rms"] == pytest.approx(rms_um, rel=0.1, abs=2.0)
+    assert_smooth(rec.commanded(), np.zeros(2), CFG)
+
+
+@pytest.mark.parametrize("low_ms,high_ms", [(20.0, 100.0), (40.0, 60.0)])
+def test_fifo_stays_between_the_water_marks(low_ms: float, high_ms: float) -> None:
+    result, _, _, seen = run(list(circle_chunks()), low_water_ms=low_ms, high_water_ms=high_ms)
+    assert result.outcome is Outcome.DONE
+    running = [p.fifo_ms for p in seen if p.state.value == "running" and p.executed_s > 0.05]
+    assert max(running) <= high_ms
+    assert low_ms <= result.min_fifo_ms <= high_ms
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(-150, 150), st.floats(-150, 150)), min_size=1, max_size=5))
+def test_ferror_limit_is_the_linuxcnc_rule(v: list) -> None:
+    check = FerrorCheck(CFG, np.zeros(2, dtype=np.int64))
+    limits = check.limits_mm(np.array(v))
+    expected = [[a.ferror_limit_mm(row[i]) for i, a in enumerate(CFG.axes)] for row in v]
+    assert np.allclose(limits, expected)
+
+
+def test_small_lag_at_low_speed_does_not_trip() -> None:
+    chunks = list(line_chunks((3.0, 0.0), v_mm_s=5.0))
+    result, _, _, _ = run(chunks, inject=lambda c, *_: c.inject_lag(0, 0.2), at_s=0.1)
+    assert result.outcome is Outcome.DONE, result.message
+    assert 190.0 <= result.following_error_um_max < 250.0
+
+
+@pytest.mark.parametrize("fault", ["lag", "stall"])
+def test_following_error_trips_into_a_controlled_stop(fault: str) -> None:
+    def inject(card: object, ctrl: MotionController, pacer: VirtualPacer) -> None:
+        if fault == "lag":
+            card.inject_lag(1, 0.6)  # type: ignore[attr-defined]
+        else:
+            card.inject_stall(1)  # type: ignore[attr-defined]
+    result, card, rec, _ = run(list(circle_chunks()), inject=inject)
+    assert result.outcome is Outcome.FAULT
+    assert result.message.startswith("Y axis following error") and "at line 3" in result.message
+    assert result.underruns == 0 and result.position_known
+    assert result.commanded_counts == result.executed_counts
+    assert_smooth(rec.commanded(), np.zeros(2), CFG)
+
+
+def test_drive_fault_latches_with_its_message_and_pulses_accounted() -> None:
+    result, card, _, _ = run(list(circle_chunks()),
+                             inject=lambda c, *_: c.inject_drive_fault(0, 0x2310))
+    assert result.outcome is Outcome.FAULT and result.message == "X axis drive fault 0x2310"
+    assert result.position_known
+    assert result.commanded_counts != result.executed_counts  # the card halted with frames
+    accounted(result, card)
+
+
+def test_operator_abort_decelerates_along_the_path() -> None:
+    result, card, rec, _ = run(list(circle_chunks()),
+                               inject=lambda c, ctrl, p: ctrl.request_abort(), at_s=0.4)
+    assert result.outcome is Outcome.ABORTED and result.underruns == 0
+    assert result.commanded_counts == result.executed_counts
+    on_circle(result, tol_mm=0.002)  # stopped on the path, not on a tangent
+    assert_smooth(rec.commanded(), np.zeros(2), CFG)
+
+
+@pytest.mark.parametrize("kw,needle", [({"starve_after_rows": 500}, "feed hold"),
+                                        ({"fail_after_rows": 500}, "process died")])
+def test_late_or_dead_generator_stops_without_underrun(kw: dict, needle: str) -> None:
+    result, card, rec, _ = run(list(circle_chunks()), source_kw=kw)
+    assert result.outcome is Outcome.FAULT and needle in result.message
+    assert result.underruns == 0 and result.commanded_counts == result.executed_counts
+    on_circle(result, tol_mm=0.002)
+    assert_smooth(rec.commanded(), np.zeros(2), CFG)
+
+
+def test_stalled_host_underruns_and_the_card_latches() -> None:
+    def stall(card: object, ctrl: MotionController, pacer: VirtualPacer) -> None:
+        pacer.stall_cycles = 100  # the motion process slept 200 ms
+    result, card, _, _ = run(list(circle_chunks()), inject=stall)
+    assert result.outcome is Outcome.FAULT and "underrun" in result.message
+    assert result.underruns == 1 and result.late_cycles >= 1
+    accounted(result, card)
+
+
+def test_lost_communication_is_a_fault_and_the_card_stops_itself() -> None:
+    result, card, _, _ = run(list(circle_chunks()), inject=lambda c, *_: c.inject_lost_comm())
+    assert result.outcome is Outcome.FAULT and "lost communication" in result.message
+    assert not result.position_known
+    card.advance(200)  # the card runs its FIFO dry and latches, as hostmot2 would
+    card.restore_comm()
+    cmd, _ = card.position_counts()
+    assert np.array_equal(cmd, list(result.commanded_counts.values()))
+
+
+def test_reference_not_starting_at_the_machine_position_is_refused() -> None:
+    chunks = list(line_chunks((5.0, 0.0), start_mm=(1.0, 0.0)))
+    result, _, rec, _ = run(chunks)
+    assert result.outcome is Outcome.FAULT and "machine is at" in result.message
+    assert result.commanded_counts == {"x": 0, "y": 0} and not rec.parts[-1].seq.size
+
+
+def test_chunk_rows_layout() -> None:
+    chunk = next(iter(line_chunks((1.0, 2.0))))
+    rows = chunk_rows(chunk)
+    assert rows.shape == (len(chunk), 4) and np.all(rows[:, 3] == 2)

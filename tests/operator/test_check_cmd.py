@@ -1,0 +1,65 @@
+"""`cncctl check`: exit codes, the compiler-style error line, the summary and --json."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from controller.operator.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_good_program_summary(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", str(REPO / "nc_programs/arcs.nc")]) == 0
+    out = capsys.readouterr().out
+    assert "OK (config xy_table)" in out and "ArcBlock 5" in out and "X: 0.0000 .. 80.0000" in out
+
+
+def test_json_summary(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", str(REPO / "nc_programs/g64_corners.nc"), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["ok"] and data["blocks"] == {"LineBlock": 10, "StopBlock": 1}
+    assert data["extents_mm"]["x"] == [-40.0, 80.0] and data["travel_mm"]["y"] == [-150, 150]
+    corners = [(0, 0), (50, 0), (50, 30), (80, 30), (80, -30), (20, -40), (0, -20), (-40, -20),
+               (-40, 20), (-10, 40), (0, 0)]
+    length = sum(((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2) ** 0.5
+                 for a, b in zip(corners, corners[1:], strict=False))
+    assert data["path_length_mm"] == pytest.approx(length)
+
+
+def test_error_line_on_stderr_and_exit_2(tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    prog = tmp_path / "bad.nc"
+    prog.write_text("G21\nG1 X10\n")
+    assert main(["check", str(prog)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"{prog}:2:1: error: G1 feed move with no feed rate: program F first\n"
+
+
+def test_json_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    prog = tmp_path / "bad.nc"
+    prog.write_text("G0 X200\n")
+    assert main(["check", str(prog), "--json"]) == 2
+    data = json.loads(capsys.readouterr().out)
+    assert not data["ok"] and data["error"]["line"] == 1 and data["error"]["word"] == "X"
+
+
+def test_mill_config_accepts_z(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    prog = tmp_path / "z.nc"
+    prog.write_text("G0 Z5\nG1 Z-2 F100\n")
+    assert main(["check", str(prog)]) == 2
+    assert main(["check", str(prog), "--config", "xyz_mill"]) == 0
+    assert "Z: -2.0000 .. 5.0000 mm" in capsys.readouterr().out
+
+
+def test_config_error_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", str(REPO / "nc_programs/arcs.nc"), "--config", "no_such"]) == 2
+    assert "no_such" in capsys.readouterr().err
+
+
+def test_missing_program_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", "/nonexistent.nc"]) == 2
+    assert "/nonexistent.nc:0:0: error: cannot open program" in capsys.readouterr().err

@@ -1,0 +1,72 @@
+"""`cncctl simulate`: the JSON form of issue 4, Table IV layout, trajectory CSV, plot, bad input."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from controller.operator.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
+NACA = str(REPO / "nc_programs/naca2415.nc")
+KEYS = {"program", "algorithm", "motion_time_s", "samples", "sample_period_s",
+        "tracking_error_um", "contour_error_um", "max_feed_mm_s", "max_tangential_accel_mm_s2",
+        "sharp_corners", "ph_segments", "ph_fit_error_um", "dynamics_rounds", "planning_cpu_s"}
+
+
+def test_json_has_every_field_of_the_issue(capsys: pytest.CaptureFixture[str],
+                                           tmp_path: Path) -> None:
+    csv_path, png = tmp_path / "t.csv", tmp_path / "p.png"
+    assert main(["simulate", NACA, "--json", "--trajectory", str(csv_path),
+                 "--plot", str(png)]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert KEYS <= set(r)
+    assert set(r["tracking_error_um"]) == {"x", "y"}
+    assert set(r["tracking_error_um"]["x"]) == {"max", "rms"}
+    assert set(r["contour_error_um"]) == {"max", "rms", "mean"}
+    assert set(r["ph_fit_error_um"]) == {"max", "rms"}
+    assert r["algorithm"] == "ph-lookahead"
+    assert r["samples"] * r["sample_period_s"] == pytest.approx(r["motion_time_s"])
+    with csv_path.open() as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["t", "x_ref", "y_ref", "x_act", "y_act", "feed"]
+    assert len(rows) == r["samples"] + 1
+    assert png.stat().st_size > 10_000
+
+
+def test_compare_prints_table_iv_and_json_of_four(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", NACA, "--compare"]) == 0
+    text = capsys.readouterr().out
+    for label in ("X tracking error max", "Contour error mean", "Time (s)", "adaptive",
+                  "curvature", "nurbs-lookahead", "ph-lookahead"):
+        assert label in text
+    assert main(["simulate", NACA, "--compare", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [r["algorithm"] for r in out["results"]] == ["adaptive", "curvature",
+                                                        "nurbs-lookahead", "ph-lookahead"]
+
+
+def test_bad_program_is_rejected_before_planning(capsys: pytest.CaptureFixture[str],
+                                                 tmp_path: Path) -> None:
+    bad = tmp_path / "bad.nc"
+    bad.write_text("G21 G90 F600\nG1 X10\nG1 Y5 Q\n", encoding="utf-8")
+    assert main(["simulate", str(bad), "--json"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith(f"{bad}:3:")
+    assert "error:" in captured.err
+
+
+def test_run_and_simulate_reject_a_program_beyond_travel(capsys: pytest.CaptureFixture[str],
+                                                         tmp_path: Path) -> None:
+    far = tmp_path / "far.nc"
+    far.write_text("G21 G90 F600\nG1 X10\nG1 X500\nM2\n", encoding="utf-8")
+    for command in (["run", str(far), "--virtual-time", "--json"], ["simulate", str(far)]):
+        assert main(command) == 2
+        captured = capsys.readouterr()
+        assert "error: X travel limit exceeded" in captured.err
+        assert captured.err.startswith(f"{far}:3:")
+        assert '"event": "start"' not in captured.out  # nothing was started, nothing moved
