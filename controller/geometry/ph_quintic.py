@@ -69,8 +69,8 @@ class PhQuintic:
         if _tame(d0 / dp) and _tame(d1 / dp):
             # Both end derivatives within 80 degrees of the chord and 0.5-2 chords long: the
             # canonical (+,+) solution is then the best (ALGORITHMS.md 1.2; checked by
-            # tests/test_ph_quintic.py), so skip ranking (root finding and energy quadrature
-            # cost ~1 ms per corner blend).
+            # tests/geometry/test_ph_quintic.py), so skip ranking (root finding and energy
+            # quadrature cost ~1 ms per corner blend).
             return candidates[0]
         return _best(candidates)
 

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import itertools
 import os
-import queue
 import resource
 import signal
 from collections.abc import Callable, Iterable, Iterator
@@ -12,21 +10,17 @@ from multiprocessing.queues import Queue
 from typing import Any
 
 from controller.config import MachineConfig
+from controller.interpreter.fifo import FAILED, drain_fifo, feed_fifo
 from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
 from controller.motion.source import chunk_rows
 from controller.refpoints import RefChunk
-
-END = "__end__"  # last item on the NC FIFO after the final block
-FAILED = "__failed__"  # the interpreter raised; its message is on the error queue
-POLL_S = 0.02  # how often a blocked producer looks for an abort or a dead parent
 
 BlocksFn = Callable[[str, MachineConfig], Iterable[Any]]
 GenerateFn = Callable[[Iterable[Any], MachineConfig], Iterable[RefChunk]]
 
 
 def blocks_source(path: str, config: MachineConfig) -> Iterator[Any]:
-    """The interpreter stage: read_program, block by block (its process is interpreter_main;
-    nc_fifo.NcFifo does the same job standalone and batches blocks, not used here yet)."""
+    """The interpreter stage: read_program, block by block (its process is interpreter_main)."""
     from controller.interpreter.program import read_program
     yield from read_program(path, config)
 
@@ -80,15 +74,7 @@ def interpreter_main(path: str, config: MachineConfig, blocks_fn: BlocksFn, nc_f
     parent = _child_setup()
     try:
         items = _iter_safe(blocks_fn(path, config), info, "interpreter")
-        for item in itertools.chain(items, [END]):
-            while True:
-                if _should_stop(ring, parent):
-                    return
-                try:
-                    nc_fifo.put(item, timeout=POLL_S)
-                    break
-                except queue.Full:
-                    continue
+        feed_fifo(items, nc_fifo, lambda: _should_stop(ring, parent))
     finally:
         _report_rss(info, "interpreter")
 
@@ -101,27 +87,12 @@ def _iter_safe(items: Iterable[Any], info: Queue, stage: str) -> Iterator[Any]:
         yield FAILED
 
 
-def _blocks_from_fifo(nc_fifo: Queue, ring: RefRing, parent: int) -> Iterator[Any]:
-    while True:
-        try:
-            item = nc_fifo.get(timeout=POLL_S)
-        except queue.Empty:
-            if _should_stop(ring, parent):
-                raise SystemExit(0) from None
-            continue
-        if isinstance(item, str) and item == END:
-            return
-        if isinstance(item, str) and item == FAILED:
-            raise RuntimeError("NC interpreter failed")
-        yield item
-
-
 def generator_main(config: MachineConfig, generate_fn: GenerateFn, nc_fifo: Queue,
                    ring: RefRing, info: Queue) -> None:
     """Process 2: NC blocks -> reference points into the shared-memory ring."""
     parent = _child_setup()
     try:
-        for chunk in generate_fn(_blocks_from_fifo(nc_fifo, ring, parent), config):
+        for chunk in generate_fn(drain_fifo(nc_fifo, lambda: _should_stop(ring, parent)), config):
             if not ring.write(chunk_rows(chunk)) or os.getppid() != parent:
                 return
         ring.set_flag(FLAG_FINAL)

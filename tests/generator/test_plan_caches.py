@@ -16,7 +16,7 @@ from controller.runtime.simulation import simulate
 
 CFG = load_config()
 
-# Found by tests/test_generator_fuzz.py: G1 corners blended within G64 P0.01, arcs and a rapid,
+# Found by test_generator_fuzz.py: G1 corners blended within G64 P0.01, arcs and a rapid,
 # seven dynamics rounds. Each round rebuilds the blends; a freed blend's id, recycled by a new
 # one, used to return the old blend's curvature samples, and the plan varied from run to run
 # (tangential acceleration up to 3700 mm/s^2 against Amax 2450).

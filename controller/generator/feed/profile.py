@@ -38,7 +38,7 @@ def quintic_distance(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray,
                      ve: np.ndarray) -> np.ndarray:
     """bernstein6_distance in power form, T (vs tau + (ve - vs)(5/2 tau^4 - 3 tau^5 + tau^6)):
     the integral of quintic_speed. A third of the operations, for the planner's checks; it
-    agrees with the Bernstein form to round-off (tests/test_feed_profile.py)."""
+    agrees with the Bernstein form to round-off (tests/generator/test_feed_profile.py)."""
     t2 = tau * tau
     t4 = t2 * t2
     return duration_s * (vs * tau + (ve - vs) * (t4 * (2.5 + tau * (tau - 3.0))))
