@@ -71,9 +71,6 @@ class DriveConfig:
     backend: str
     options: tuple[tuple[str, Any], ...] = ()
 
-    def option(self, key: str, default: Any = None) -> Any:
-        return dict(self.options).get(key, default)
-
 
 @dataclass(frozen=True, slots=True)
 class RuntimeConfig:

@@ -258,6 +258,3 @@ class Nurbs:
         return math.copysign(1.0, cross) * dcross / g**1.5 * (cross != 0.0) \
             - 3.0 * abs(cross) * dot12 / g**2.5
 
-    def point_scalar(self, u: float) -> tuple[float, float]:
-        p = self.evaluate(u, 0)[0, 0]
-        return float(p[0]), float(p[1])

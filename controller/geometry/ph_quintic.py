@@ -75,10 +75,6 @@ class PhQuintic:
         return _best(candidates)
 
     # --- Bernstein data -------------------------------------------------------------------------
-    @cached_property
-    def _w(self) -> np.ndarray:
-        return np.array([self.w0, self.w1, self.w2], dtype=complex)
-
     def control_points(self) -> np.ndarray:
         """The 6 Bezier control points (complex)."""
         w0, w1, w2 = self.w0, self.w1, self.w2

@@ -57,13 +57,6 @@ def nurbs_length_and_box(block: NurbsBlock) -> tuple[float, Box]:
     return length, ((float(lo[0]), float(lo[1]), z), (float(hi[0]), float(hi[1]), z))
 
 
-def hull_box(block: NurbsBlock) -> Box:
-    """Box of the control points: contains the curve (positive weights, convex hull property)."""
-    lo, hi = block.control_points.min(axis=0), block.control_points.max(axis=0)
-    z = block.z_mm
-    return (float(lo[0]), float(lo[1]), z), (float(hi[0]), float(hi[1]), z)
-
-
 def line_length_and_box(block: LineBlock) -> tuple[float, Box]:
     s, e = block.start, block.end
     length = math.dist(s, e)
