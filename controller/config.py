@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -101,6 +101,13 @@ class MachineConfig:
 
     def has_axis(self, name: str) -> bool:
         return name in self.axis_names
+
+    def with_drive_options(self, overrides: dict[str, Any]) -> MachineConfig:
+        """The same machine with drive.options overridden (`--drive-option KEY=VALUE`)."""
+        if not overrides:
+            return self
+        options = dict(self.drive.options) | overrides
+        return replace(self, drive=replace(self.drive, options=tuple(sorted(options.items()))))
 
 
 class _Section:

@@ -101,6 +101,12 @@ class Drive(ABC):
         self._require_open()
         self._reset()
 
+    def probe(self) -> None:
+        """Check, before any motion, that the backend can be opened and configured as the
+        config says (device present, peer answering); nothing is enabled and nothing moves.
+        Raises DriveError naming what failed."""
+        self._probe()
+
     def close(self) -> None:
         if self._is_open:
             self._close()
@@ -148,6 +154,11 @@ class Drive(ABC):
 
     def _fault_message(self) -> str:
         return ""
+
+    def _probe(self) -> None:
+        """Backend hook; the default opens and closes the drive."""
+        self.open()
+        self.close()
 
     @abstractmethod
     def _reset(self) -> None:

@@ -14,6 +14,15 @@ from drivers.base import Drive
 # (python-can, pyserial) cost nothing.
 BUILTIN_BACKENDS: dict[str, str] = {
     "sim": "drivers.sim.card:SimCard",
+    "canopen": "drivers.canopen.backend:CanopenDrive",
+    "serial": "drivers.serial.backend:SerialCard",
+}
+# name -> "module:function" of a simulated peer that speaks the backend's wire protocol in its
+# own process (`cncctl simdrive NAME`): serve(config, options, announce, stop) prints the
+# device path through announce(path) once it can be opened, then serves until stop is set.
+SIMULATED_PEERS: dict[str, str] = {
+    "canopen": "drivers.canopen.sim_peer:serve",
+    "serial": "drivers.serial.sim_peer:serve",
 }
 _registered: dict[str, Callable[..., Drive]] = {}
 
@@ -35,6 +44,14 @@ def _factory(name: str) -> Callable[..., Drive]:
                          f"(have: {', '.join(backend_names())})")
     module_name, class_name = BUILTIN_BACKENDS[name].split(":")
     return getattr(importlib.import_module(module_name), class_name)
+
+
+def simulated_peer(name: str) -> Callable[..., None]:
+    """The serve function of a backend's simulated peer."""
+    if name not in SIMULATED_PEERS:
+        raise DriveError(f"no simulated peer for {name!r} (have: {', '.join(SIMULATED_PEERS)})")
+    module_name, func_name = SIMULATED_PEERS[name].split(":")
+    return getattr(importlib.import_module(module_name), func_name)
 
 
 def make_drive(config: MachineConfig, **overrides: Any) -> Drive:

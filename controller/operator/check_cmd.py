@@ -10,13 +10,18 @@ from dataclasses import asdict, dataclass, field
 
 from controller.blocks import ArcBlock, LineBlock, NcBlock, NurbsBlock
 from controller.config import MachineConfig, load_config
-from controller.errors import ConfigError, NcError
+from controller.errors import ConfigError, DriveError, NcError
 from controller.interpreter.extent import (
     arc_length_and_box,
     line_length_and_box,
     nurbs_length_and_box,
 )
 from controller.interpreter.program import read_program
+from controller.operator.drive_args import (
+    add_drive_option_argument,
+    config_with_drive_options,
+    probe_drive,
+)
 
 _AXES = ("x", "y", "z")
 
@@ -113,14 +118,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("program", help="G-code program file")
     parser.add_argument("--config", help="machine config file or built-in name")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    add_drive_option_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     try:
-        config = load_config(args.config)
+        config = config_with_drive_options(load_config(args.config), args.drive_option)
         summary = check_program(args.program, config)
+        probe_drive(config)
     except ConfigError as exc:
         print(f"cncctl: config error: {exc}", file=sys.stderr)
+        return 2
+    except DriveError as exc:
+        print(f"cncctl: drive {config.drive.backend!r} cannot be opened: {exc}", file=sys.stderr)
         return 2
     except NcError as exc:
         print(exc.format(), file=sys.stderr)

@@ -16,6 +16,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("inspect", _OPS + "inspect_cmd", "show NURBS blocks, sharp corners and PH segments"),
     ("simulate", _OPS + "simulate_cmd", "plan a program headless and report its errors"),
     ("run", _OPS + "run_cmd", "run a program on the configured drive (sim card by default)"),
+    ("simdrive", _OPS + "simdrive_cmd", "serve a simulated CANopen drive set or serial card"),
 )
 
 

@@ -11,6 +11,7 @@ from typing import Any
 from controller.config import load_config
 from controller.errors import CncError, ConfigError, NcError
 from controller.motion.types import Outcome
+from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 from controller.operator.run_view import JsonView, PlainView, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
 
@@ -22,6 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("program", help="G-code program to run")
     parser.add_argument("--config", help="machine configuration (file or built-in name)")
     parser.add_argument("--json", action="store_true", help="one JSON object per line")
+    add_drive_option_argument(parser)
     parser.add_argument("--virtual-time", action="store_true",
                         help="clock the simulated card as fast as possible (no wall clock)")
     parser.add_argument("--daemon", metavar="SOCKET",
@@ -80,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     if args.daemon:
         return run_on_daemon(args)
     try:
-        config = load_config(args.config)
+        config = config_with_drive_options(load_config(args.config), args.drive_option)
         check_program(args.program, config)
     except (NcError, ConfigError) as exc:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
