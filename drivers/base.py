@@ -49,7 +49,14 @@ class Feedback:
 class Drive(ABC):
     """Base class of every backend; subclasses implement the `_hooks` only."""
 
+    # The drive.options a backend reads; any other key is an error naming it (None: unchecked).
+    OPTIONS: frozenset[str] | None = None
+
     def __init__(self, config: MachineConfig, **options: Any) -> None:
+        unknown = sorted(set(options) - self.OPTIONS) if self.OPTIONS is not None else []
+        if unknown:
+            raise DriveError(f"{config.drive.backend}: unknown drive option "
+                             f"{unknown[0]!r} (known: {', '.join(sorted(self.OPTIONS or ()))})")
         self.config = config
         self.options = options
         self.n_axes = len(config.axes)

@@ -17,5 +17,10 @@ class LostCommunicationError(DriveError):
     """The card stopped answering the host."""
 
 
+class DriveUnavailableError(DriveError):
+    """The drive could not be built or opened (bad option, no device, peer silent at bring-up):
+    nothing has moved."""
+
+
 class BadFrameError(DriveError):
     """The host sent a frame the card cannot execute (too many pulses, FIFO overflow, shape)."""

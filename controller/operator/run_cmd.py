@@ -14,6 +14,7 @@ from controller.motion.types import Outcome
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 from controller.operator.run_view import JsonView, PlainView, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
+from drivers.errors import DriveUnavailableError
 
 EXIT_CODES = {Outcome.DONE: 0, Outcome.FAULT: 3, Outcome.ABORTED: 4}
 EXIT_REJECTED = 2
@@ -99,6 +100,10 @@ def run(args: argparse.Namespace) -> int:
         view.event("start", program=args.program, config=config.name,
                    drive=config.drive.backend, virtual_time=args.virtual_time)
         result = runtime.run()
+    except DriveUnavailableError as exc:
+        view.close()
+        print(f"cncctl: {exc} (nothing moved)", file=sys.stderr)
+        return EXIT_REJECTED
     except CncError as exc:
         view.close()
         print(f"cncctl: {exc}", file=sys.stderr)

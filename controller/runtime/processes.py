@@ -10,6 +10,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from controller.config import MachineConfig
+from controller.errors import DriveError
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.realtime import back_to_normal, try_realtime
@@ -26,6 +27,7 @@ from controller.runtime.stages import (
     reference_source,
 )
 from drivers.base import Drive
+from drivers.errors import DriveUnavailableError
 from drivers.registry import make_drive
 
 # fork: children start in ~ms (time to first motion); they are forked before any thread
@@ -116,12 +118,11 @@ class Runtime:
         rt = "off"
         try:
             # Built before the fork so that backend imports (scipy) are paid once, not per child.
-            drive = self.options.drive or make_drive(
-                self.config, realtime=not self.options.virtual_time)
+            drive = self.options.drive or _build_drive(self.config, self.options.virtual_time)
             self._start(ring, messages)
             if self.options.rt_priority is not None and not self.options.virtual_time:
                 rt = try_realtime(self.options.rt_priority)
-            drive.open()
+            _open_drive(drive)
             try:
                 result = self._motion(drive, ring, messages)
             finally:
@@ -216,3 +217,23 @@ class Runtime:
             extra["first_motion_epoch_s"] = self._pacer_t0_epoch_s + first
             first = (self._pacer_t0_s - t0_s) + first
         return replace(result, time_to_first_motion_s=first, extra=extra)
+
+
+def _build_drive(config: MachineConfig, virtual_time: bool) -> Drive:
+    try:
+        return make_drive(config, realtime=not virtual_time)
+    except DriveUnavailableError:
+        raise
+    except DriveError as exc:
+        raise DriveUnavailableError(f"drive {config.drive.backend!r}: {exc}") from exc
+
+
+def _open_drive(drive: Drive) -> None:
+    """Open (bring up) the drive; a failure here is before any motion."""
+    try:
+        drive.open()
+    except DriveUnavailableError:
+        raise
+    except DriveError as exc:
+        raise DriveUnavailableError(f"drive {drive.config.drive.backend!r} cannot be opened: "
+                                    f"{exc}") from exc

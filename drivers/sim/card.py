@@ -24,6 +24,8 @@ class SimCard(Drive):
     UNDERRUN until reset(); an empty FIFO after an end-of-stream frame is simply idle.
     """
 
+    OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm"})
+
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
         self.period_s = config.sample_period_s

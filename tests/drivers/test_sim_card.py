@@ -10,7 +10,13 @@ from runtime_helpers import virtual_card, xy_config
 
 from controller.generator.dynamics.servo import discretise
 from drivers.base import CardStatus
-from drivers.errors import BadFrameError, DriveFaultError, LostCommunicationError, UnderrunError
+from drivers.errors import (
+    BadFrameError,
+    DriveError,
+    DriveFaultError,
+    LostCommunicationError,
+    UnderrunError,
+)
 from drivers.registry import make_drive
 
 
@@ -139,3 +145,9 @@ def test_realtime_mode_clocks_on_the_wall_clock() -> None:
     finally:
         card.close()
     assert 80 <= 200 - level <= 140  # ~100 frames in 100 ms (loose: a shared CI machine)
+
+
+def test_an_unknown_drive_option_is_an_error_naming_it() -> None:
+    config = xy_config().with_drive_options({"fifo_frame": 64})
+    with pytest.raises(DriveError, match="unknown drive option 'fifo_frame'"):
+        make_drive(config, realtime=False)

@@ -63,3 +63,15 @@ def test_config_error_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
 def test_missing_program_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["check", "/nonexistent.nc"]) == 2
     assert "/nonexistent.nc:0:0: error: cannot open program" in capsys.readouterr().err
+
+
+def test_check_opens_the_configured_drive_before_any_motion(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    program = str(REPO / "nc_programs/naca2415.nc")
+    assert main(["check", program, "--drive-option", "realtime=false"]) == 0
+    capsys.readouterr()
+    assert main(["check", program, "--drive-option", "fifo_frame=16"]) == 2
+    err = capsys.readouterr().err
+    assert "drive 'sim' cannot be opened" in err and "'fifo_frame'" in err
+    assert main(["check", program, "--drive-option", "noequals"]) == 2
+    assert "expected KEY=VALUE" in capsys.readouterr().err

@@ -35,3 +35,12 @@ def test_json_run_ends_with_the_done_summary(tmp_path: Path,
     assert final["final_position_mm"] == {"x": 0.0, "y": 0.0} and final["underruns"] == 0
     assert all(p["commanded"] == p["executed"] for p in final["pulses"].values())
     assert set(final["contour_error_um"]) == {"max", "rms", "mean"}
+
+
+def test_a_drive_that_cannot_be_built_is_rejected_before_motion(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    prog = tmp_path / "l.nc"
+    prog.write_text("G21 G90 F1200\nG1 X3 Y1\nM2\n")
+    assert main(["run", str(prog), "--virtual-time", "--drive-option", "fifo=3"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown drive option 'fifo'" in err and "nothing moved" in err
