@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_feed_planner import limit_curves
@@ -126,14 +125,11 @@ def test_equal_segments_plan_the_same_bits_cold_and_warm() -> None:
     assert np.array_equal(warm.profile._arr, cold.profile._arr)
 
 
-@pytest.mark.xfail(strict=True, reason="known bug: SegmentWindows offsets segment k by k * big, "
-                   "so a segment's plan rounds differently at another index and a memo row "
-                   "(keyed without the index) is not the cold plan; see the closing note of "
-                   "the issue-14 session")
 def test_memo_row_from_another_segment_index_plans_like_cold() -> None:
     """Found by the test above with a fresh hypothesis database: the path's last segment is the
-    same in the first call (index 27) and after a local change (index 29); the memo's row for
-    it differs from planning it cold by 8e-5 mm/s in cruise speed."""
+    same in the first call (index 27) and after a local change (index 29). When SegmentWindows'
+    keys were inexact sums (vlim + k * big), the memo's row for it differed from planning it
+    cold by 8e-5 mm/s in cruise speed; the keys are exact now (segments.KEY_STEP_MM_S)."""
     case = np.load(REPO / "tests/data/feed_memo_index_case.npz")
     s, vlim = case["s"], case["vlim"]
     accel, v0, v1 = float(case["accel"]), float(case["v0"]), float(case["v1"])

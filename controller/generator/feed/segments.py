@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +31,13 @@ _W = bernstein6_weights(_SHAPE_TAU)
 _SHAPE_A = (_W[0] + 2.0 * _W[1] + 3.0 * (_W[2] + _W[3] + _W[4] + _W[5])) / 6.0
 _SHAPE_B = (_W[3] + 2.0 * _W[4] + 3.0 * _W[5]) / 6.0
 _SHAPE_C = quintic_speed(_SHAPE_TAU, 0.0, 1.0)
+
+
+KEY_STEP_MM_S = 2.0 ** -20  # speeds in search keys: on this grid, so k * big + v is exact
+
+
+def _on_key_grid(v: np.ndarray) -> np.ndarray:
+    return np.rint(v * (1.0 / KEY_STEP_MM_S)) * KEY_STEP_MM_S
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,10 +77,14 @@ class SegmentWindows:
         n_in = np.maximum(hi - lo + 1, 0)
         seg = clamp(np.searchsorted(nodes_s, s, side="right") - 1, 0, len(a) - 1)
         # Offsetting each segment by k * big makes one global accumulate restart per segment.
-        big = 2.0 * float(v.max()) + 1.0
+        # The keys are exact sums (big a power of two, vlim on the KEY_STEP grid), so which
+        # slot a level reaches does not depend on k: a segment plans the same bits at any
+        # index (the planner's memo relies on it).
+        big = 2.0 ** math.ceil(math.log2(2.0 * float(v.max()) + 1.0))
         off = seg * big
-        fkey = np.maximum.accumulate(v + off)
-        bkey = -np.maximum.accumulate((v - off)[::-1])[::-1]
+        vq = _on_key_grid(v)
+        fkey = np.maximum.accumulate(vq + off)
+        bkey = -np.maximum.accumulate((vq - off)[::-1])[::-1]
         va, vb = curve.at(a), curve.at(b)
         # Slots of segment k: first[k] (a), the samples inside, last[k] (b). The end slots'
         # sources (the samples either side) may lie off the grid; they are overwritten below.
@@ -119,8 +131,9 @@ class SegmentWindows:
         # g: the first (last) slot where the running max reaches level, b (a) when no sample
         # inside does; p: the slot before it (toward near).
         g = np.empty(level.shape, np.intp)
-        g[:n_up] = np.searchsorted(self.fkey, level[:n_up] + kbig[:n_up], side="left")
-        g[n_up:] = np.searchsorted(self.bkey, kbig[n_up:] - level[n_up:], side="right") - 1
+        lq = _on_key_grid(level)
+        g[:n_up] = np.searchsorted(self.fkey, lq[:n_up] + kbig[:n_up], side="left")
+        g[n_up:] = np.searchsorted(self.bkey, kbig[n_up:] - lq[n_up:], side="right") - 1
         p = g.copy()
         p[:n_up] -= 1
         p[n_up:] += 1
