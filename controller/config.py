@@ -292,11 +292,19 @@ def resolve_config_path(explicit: str | None = None) -> Path:
     raise ConfigError(chosen, "<file>", "no such configuration file")
 
 
+MAX_CONFIG_BYTES = 1 << 20  # a machine config is a few kB; a larger file is refused unread
+
+
 def load_config(explicit: str | None = None) -> MachineConfig:
     """Load and check a machine configuration (see resolve_config_path for which one)."""
     path = resolve_config_path(explicit)
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as fh:
+            raw = fh.read(MAX_CONFIG_BYTES + 1)
+        if len(raw) > MAX_CONFIG_BYTES:
+            raise ConfigError(str(path), "<file>", f"larger than {MAX_CONFIG_BYTES} bytes: "
+                              "not a machine configuration")
+        text = raw.decode("utf-8")
         data = yaml.safe_load(text)
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(str(path), "<file>", f"cannot read: {exc}") from exc

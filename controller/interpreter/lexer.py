@@ -10,13 +10,21 @@ MAX_LINE_CHARS = 4096  # LinuxCNC allows 256; CAM output never needs more than t
 _NUMBER = r"[-+]?(?:\d{1,20}(?:\.\d{0,20})?|\.\d{1,20})"  # no exponents (RS274), bounded size
 # A line of plain words only (possessive: no backtracking, the check costs ~0.5 us a line).
 CLEAN_RE = re.compile(
-    r"\s*+(?:[A-Z]\s*+[-+]?+(?:\d{1,20}+(?:\.\d{0,20}+)?+|\.\d{1,20}+)\s*+)*+")
+    r"\s*+(?:[A-Z]\s*+[-+]?+(?:\d{1,20}+(?:\.\d{0,20}+)?+|\.\d{1,20}+)\s*+)*+", re.ASCII)
 # Splits a line that CLEAN_RE accepted: there every run of [-+.0-9] is exactly one number.
-WORD_RE = re.compile(r"([A-Z])\s*([-+.\d]+)")
-_NUMBER_RE = re.compile(_NUMBER)
-_PARAM_REF_RE = re.compile(r"#\s*(\d{1,5})")
-_ASSIGN_RE = re.compile(r"#\s*(\d{1,5})\s*=\s*")
-_SPACE_RE = re.compile(r"\s*")
+WORD_RE = re.compile(r"([A-Z])\s*([-+.\d]+)", re.ASCII)
+# Every pattern is ASCII-only: Python's \d also matches other scripts' digits (X١٢ and X１２
+# would read as X12), and str.upper() turns some non-ASCII letters into ASCII ones (long s).
+_NUMBER_RE = re.compile(_NUMBER, re.ASCII)
+_PARAM_REF_RE = re.compile(r"#\s*(\d{1,5})", re.ASCII)
+_ASSIGN_RE = re.compile(r"#\s*(\d{1,5})\s*=\s*", re.ASCII)
+_SPACE_RE = re.compile(r"\s*", re.ASCII)
+_ASCII_UPPER = str.maketrans("abcdefghijklmnopqrstuvwxyz", "ABCDEFGHIJKLMNOPQRSTUVWXYZ")
+
+
+def ascii_upper(raw: str) -> str:
+    """Upper case for ASCII letters only (comments may hold any text; words never do)."""
+    return raw.upper() if raw.isascii() else raw.translate(_ASCII_UPPER)
 
 
 class Line:
@@ -53,7 +61,7 @@ def lex_line(raw: str, path: str, lineno: int) -> Line | str | None:
     if len(raw) > MAX_LINE_CHARS:
         raise NcError(path, lineno, MAX_LINE_CHARS + 1, "",
                       f"line longer than {MAX_LINE_CHARS} characters")
-    text = raw.upper()
+    text = ascii_upper(raw)
     if CLEAN_RE.fullmatch(text) is not None:  # the fast path: plain words, nothing else
         return Line(WORD_RE.findall(text), text)
     return _lex_slow(text, path, lineno)
@@ -123,7 +131,7 @@ def _lex_word(text: str, pos: int, path: str, lineno: int, words: list[tuple[str
     value = m.group(0)
     if value.startswith("#"):
         value = "#" + m.group(1)
-    elif m.end() < len(text) and text[m.end()].isdigit():
+    elif m.end() < len(text) and text[m.end()] in "0123456789":
         raise NcError(path, lineno, pos + 1, letter, "number too long (more than 20 digits)")
     words.append((letter, value))
     cols.append(pos + 1)

@@ -58,8 +58,8 @@ class Interpreter:
         for raw in _raw_lines(handle, self.path):
             lineno += 1
             text = raw.upper()
-            # The hot path (almost every line of a CAM program): plain words, no comment.
-            if len(text) <= MAX_LINE_CHARS and CLEAN_RE.fullmatch(text) is not None:
+            # The hot path (almost every line of a CAM program): plain ASCII words, no comment.
+            if raw.isascii() and len(text) <= MAX_LINE_CHARS and CLEAN_RE.fullmatch(text):
                 words = WORD_RE.findall(text)
                 if words:
                     self._execute_plain(words, text, lineno)

@@ -18,6 +18,7 @@ from drivers.errors import DriveUnavailableError
 
 EXIT_CODES = {Outcome.DONE: 0, Outcome.FAULT: 3, Outcome.ABORTED: 4}
 EXIT_REJECTED = 2
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -92,10 +93,11 @@ def run(args: argparse.Namespace) -> int:
     runtime = Runtime(args.program, config, RuntimeOptions(virtual_time=args.virtual_time,
                                                            on_progress=view.progress))
 
-    def on_sigint(signum: int, frame: Any) -> None:
-        # Never a silent kill: decelerate along the path, then exit 4.
-        runtime.request_abort("aborted by operator (SIGINT)")
-    previous = signal.signal(signal.SIGINT, on_sigint)
+    def on_stop_signal(signum: int, frame: Any) -> None:
+        # Never a silent kill: decelerate along the path, then exit 4. SIGTERM is what systemd
+        # and kill send, SIGHUP a closed terminal: both stop like Ctrl-C.
+        runtime.request_abort(f"aborted by operator ({signal.Signals(signum).name})")
+    previous = {sig: signal.signal(sig, on_stop_signal) for sig in STOP_SIGNALS}
     try:
         view.event("start", program=args.program, config=config.name,
                    drive=config.drive.backend, virtual_time=args.virtual_time)
@@ -109,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"cncctl: {exc}", file=sys.stderr)
         return 3
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     view.close()
     view.final(result)
     return EXIT_CODES[result.outcome]

@@ -1,0 +1,91 @@
+"""`cncctl` as a real process: SIGTERM and SIGHUP stop a run under control, a closed pipe ends
+quietly, an oversized config is refused unread."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+CNCCTL = [sys.executable, "-m", "controller.operator.cli"]
+
+
+def _children_of(pid: int) -> list[int]:
+    """Live processes whose parent is pid (from /proc)."""
+    kids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                kids.append(int(entry.name))
+    return kids
+
+
+def _running(pid: int, wait_s: float = 2.0) -> bool:
+    """Still running after wait_s (an exited child waiting to be reaped does not count)."""
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            return False
+        if state in ("Z", "X"):
+            return False
+        time.sleep(0.02)
+    return True
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_a_stop_signal_decelerates_and_exits_4(sig: signal.Signals) -> None:
+    proc = subprocess.Popen([*CNCCTL, "run", str(REPO / "nc_programs/naca2415.nc"), "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        while True:  # wait until it moves
+            event = json.loads(proc.stdout.readline())
+            if event["event"] == "progress" and event.get("executed_s", 0) > 0.1:
+                break
+        children = _children_of(proc.pid)
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=20)
+        final = json.loads(out.splitlines()[-1])
+        assert proc.returncode == 4, err
+        assert final["event"] == "aborted" and sig.name in final["message"]
+        assert final["underruns"] == 0
+        assert all(p["commanded"] == p["executed"] for p in final["pulses"].values())
+        assert [c for c in children if _running(c)] == []
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_a_closed_pipe_ends_without_a_traceback() -> None:
+    shell = (f"{sys.executable} -m controller.operator.cli inspect "
+             f"{REPO / 'nc_programs/naca2415.nc'} --json | head -c 10 > /dev/null")
+    done = subprocess.run(["bash", "-o", "pipefail", "-c", shell], capture_output=True,
+                          text=True, timeout=60)
+    assert "Traceback" not in done.stderr and "BrokenPipe" not in done.stderr
+
+
+def test_an_oversized_config_is_refused_before_parsing(tmp_path: Path) -> None:
+    big = tmp_path / "big.yaml"
+    with big.open("w") as fh:
+        fh.write("name: x\n")
+        fh.write(("# " + "x" * 98 + "\n") * 20_000)  # 2 MB of comment
+    t0 = time.monotonic()
+    done = subprocess.run([*CNCCTL, "check", str(REPO / "nc_programs/arcs.nc"), "--config",
+                           str(big)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "larger than 1048576 bytes" in done.stderr
+    assert time.monotonic() - t0 < 10
+    assert os.path.getsize(big) > 1 << 20
