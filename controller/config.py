@@ -73,6 +73,17 @@ class DriveConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class ServiceConfig:
+    """Who may use cncd's control socket, and its limits (the `service` section, optional)."""
+
+    socket_group: str | None = None  # group of the socket file (default: the daemon's own)
+    allowed_groups: tuple[str, ...] = ()  # besides root, the daemon's user and socket group
+    allowed_users: tuple[str, ...] = ()
+    max_connections: int = 64
+    log_events: int = 1000  # kept in memory for `cncctl log`
+
+
+@dataclass(frozen=True, slots=True)
 class RuntimeConfig:
     nc_fifo_blocks: int
     card_fifo_low_water_ms: float
@@ -88,6 +99,7 @@ class MachineConfig:
     interpolator: InterpolatorConfig
     drive: DriveConfig
     runtime: RuntimeConfig = field(default_factory=lambda: RuntimeConfig(64, 20.0, 100.0))
+    service: ServiceConfig = field(default_factory=ServiceConfig)
 
     @property
     def axis_names(self) -> tuple[str, ...]:
@@ -168,6 +180,12 @@ class _Section:
             raise ConfigError(self.path, self._key(key), f"must be one of {', '.join(choices)}")
         return value
 
+    def names(self, key: str) -> tuple[str, ...]:
+        value = self._raw(key, [])
+        if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+            raise ConfigError(self.path, self._key(key), "must be a list of names")
+        return tuple(value)
+
     def range(self, key: str) -> tuple[float, float]:
         value = self._raw(key, _REQUIRED)
         if not isinstance(value, list) or len(value) != 2:
@@ -247,6 +265,21 @@ def _read_runtime(sec: _Section) -> RuntimeConfig:
     return cfg
 
 
+def _read_service(sec: _Section) -> ServiceConfig:
+    group = sec._raw("socket_group", None)
+    if group is not None and not (isinstance(group, str) and group):
+        raise ConfigError(sec.path, sec._key("socket_group"), "must be a group name")
+    cfg = ServiceConfig(
+        socket_group=group,
+        allowed_groups=sec.names("allowed_groups"),
+        allowed_users=sec.names("allowed_users"),
+        max_connections=sec.int("max_connections", 64, minval=4, maxval=4096),
+        log_events=sec.int("log_events", 1000, minval=10, maxval=1_000_000),
+    )
+    sec.finish()
+    return cfg
+
+
 def parse_config(data: Any, path: str) -> MachineConfig:
     """Build a MachineConfig from parsed YAML; any mistake is a ConfigError naming the key."""
     top = _Section(data, path, "")
@@ -269,6 +302,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         interpolator=_read_interpolator(top.section("interpolator")),
         drive=_read_drive(top.section("drive")),
         runtime=_read_runtime(top.section("runtime", {})),
+        service=_read_service(top.section("service", {})),
     )
     top.finish()
     return cfg

@@ -32,22 +32,25 @@ _VALUE_LETTERS = frozenset("XYZIJKRPQLFSTH")
 _CHUNK_CHARS = 1 << 16
 
 
-def read_program(path: str, config: MachineConfig) -> Iterator[NcBlock]:
-    """Yield the NC blocks of a program one by one; raise NcError at the first mistake."""
+def read_program(path: str, config: MachineConfig,
+                 start_mm: tuple[float, float, float] | None = None) -> Iterator[NcBlock]:
+    """Yield the NC blocks of a program one by one; raise NcError at the first mistake. The
+    machine starts at start_mm (default X0 Y0 Z0: where a freshly opened drive stands)."""
     try:
         handle = open(path, encoding="utf-8-sig", errors="replace", newline=None)  # noqa: SIM115
     except OSError as exc:
         raise NcError(path, 0, 0, "", f"cannot open program: {exc.strerror or exc}") from exc
     with handle:
-        yield from Interpreter(path, config).run(handle)
+        yield from Interpreter(path, config, start_mm).run(handle)
 
 
 class Interpreter:
     """Reads lines, checks words and modal groups, and hands each line to InterpState."""
 
-    def __init__(self, path: str, config: MachineConfig) -> None:
+    def __init__(self, path: str, config: MachineConfig,
+                 start_mm: tuple[float, float, float] | None = None) -> None:
         self.path = path
-        self.state = InterpState(path, config)
+        self.state = InterpState(path, config, start_mm)
         self.params: dict[int, float] = {}
         self.percent_seen = False
         self.words_seen = False

@@ -35,13 +35,14 @@ _ARC_LETTERS = frozenset("XYZFIJR")
 class InterpState(MotionMixin):
     """Position (absolute mm), modal codes, feed and spindle; collects blocks in `out`."""
 
-    def __init__(self, path: str, config: MachineConfig) -> None:
+    def __init__(self, path: str, config: MachineConfig,
+                 start_mm: tuple[float, float, float] | None = None) -> None:
         self.path = path
         self.config = config
         self.has_z = config.has_axis("z")
         self.rapid_mm_s = config.interpolator.rapid_feed_mm_s
         self.out: list[NcBlock] = []
-        self.pos = (0.0, 0.0, 0.0)
+        self.pos = start_mm if start_mm is not None else (0.0, 0.0, 0.0)
         self.scale = 1.0  # mm per program unit (G21 / G20)
         self.absolute = True  # G90
         self.arc_absolute = False  # G91.1 is LinuxCNC's default

@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
 from controller.blocks import ArcBlock, LineBlock, NcBlock, NurbsBlock
@@ -62,14 +63,26 @@ def _travel_error(path: str, block: NcBlock, name: str, reached: float, lo: floa
                    f"travel is [{lo:g}, {hi:g}] mm")
 
 
-def check_program(path: str, config: MachineConfig) -> CheckSummary:
-    """Parse and check the whole program; raise NcError at the first problem."""
+CHECK_BEAT_BLOCKS = 4096  # on_block is called every this many blocks
+
+
+def check_program(path: str, config: MachineConfig,
+                  on_block: Callable[[int], None] | None = None,
+                  start_mm: tuple[float, float, float] | None = None) -> CheckSummary:
+    """Parse and check the whole program; raise NcError at the first problem. on_block(n), if
+    given, is called every CHECK_BEAT_BLOCKS blocks (the daemon's watchdog sees the check
+    alive on a program of millions of lines)."""
     kinds: Counter[type] = Counter()
-    lo, hi = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]  # the machine starts at X0 Y0 Z0
+    start = start_mm if start_mm is not None else (0.0, 0.0, 0.0)
+    lo, hi = list(start), list(start)  # where the machine stands (X0 Y0 Z0 by default)
     limits = _limits(config)
     feed_mm = rapid_mm = time_s = 0.0
     nurbs_points = 0
-    for block in read_program(path, config):
+    n = 0
+    for block in read_program(path, config, start_mm):
+        n += 1
+        if on_block is not None and n % CHECK_BEAT_BLOCKS == 0:
+            on_block(n)
         kind = type(block)
         kinds[kind] += 1
         geometry = _GEOMETRY.get(kind)

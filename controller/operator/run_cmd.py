@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 from pathlib import Path
@@ -11,7 +12,9 @@ from typing import Any
 from controller.config import load_config
 from controller.errors import CncError, ConfigError, NcError
 from controller.motion.types import Outcome
+from controller.operator.client import DaemonUnavailable, daemon_answers, default_socket_path
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
+from controller.operator.run_remote import run_on_daemon
 from controller.operator.run_view import JsonView, PlainView, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.errors import DriveUnavailableError
@@ -28,9 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_drive_option_argument(parser)
     parser.add_argument("--virtual-time", action="store_true",
                         help="clock the simulated card as fast as possible (no wall clock)")
-    parser.add_argument("--daemon", metavar="SOCKET",
-                        help="send the job to a running cncd (python -m "
-                             "controller.operator.daemon) and relay its JSON lines")
+    parser.add_argument("--socket", metavar="PATH",
+                        help="run through the cncd answering here (default: the one at "
+                             "$CNCD_SOCKET or /run/cncd/cncd.sock if it answers, else embedded)")
 
 
 def check_program(path: str, config: Any) -> None:
@@ -54,35 +57,25 @@ def _program_lines(path: str) -> list[str]:
         return []
 
 
-def run_on_daemon(args: argparse.Namespace) -> int:
-    """Client of controller.operator.daemon: relays JSON lines; SIGINT asks the daemon to abort."""
-    import json
-    import socket
-
-    def send(request: dict[str, Any]) -> socket.socket:
-        conn = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        conn.connect(args.daemon)
-        conn.sendall((json.dumps(request) + "\n").encode())
-        return conn
-    conn = send({"cmd": "run", "program": str(Path(args.program).resolve()),
-                 "virtual_time": args.virtual_time})
-    previous = signal.signal(signal.SIGINT, lambda *_: send({"cmd": "abort"}).close())
-    last: dict[str, Any] = {}
-    try:
-        for line in conn.makefile("r"):
-            sys.stdout.write(line)
-            sys.stdout.flush()
-            last = json.loads(line)
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        conn.close()
-    codes = {"done": 0, "rejected": EXIT_REJECTED, "fault": 3, "aborted": 4}
-    return codes.get(last.get("event", ""), 3)
+def _daemon_socket(args: argparse.Namespace) -> str | None:
+    """The daemon to run through: --socket, or the default one if a daemon answers there.
+    Without one, the run is embedded (the drive is opened by this process)."""
+    if args.socket:
+        return str(args.socket)
+    path = default_socket_path()
+    return path if os.path.exists(path) and daemon_answers(path) else None
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.daemon:
-        return run_on_daemon(args)
+    socket_path = _daemon_socket(args)
+    if socket_path is not None:
+        view = _view(args, _program_lines(args.program))
+        try:
+            return run_on_daemon(args, socket_path, view)
+        except DaemonUnavailable as exc:
+            view.close()
+            print(f"cncctl: {exc}", file=sys.stderr)
+            return 3
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
         check_program(args.program, config)

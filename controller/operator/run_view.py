@@ -6,7 +6,7 @@ import json
 import sys
 from typing import Any, TextIO
 
-from controller.motion.types import MotionProgress, MotionResult
+from controller.motion.types import MotionProgress, MotionResult, MotionState
 
 
 def result_summary(result: MotionResult) -> dict[str, Any]:
@@ -55,7 +55,10 @@ class JsonView:
                     "planned_s": p.planned_s})
 
     def final(self, result: MotionResult) -> None:
-        self._emit(result_summary(result))
+        self.final_summary(result_summary(result))
+
+    def final_summary(self, summary: dict[str, Any]) -> None:
+        self._emit(summary)
 
     def close(self) -> None:
         pass
@@ -78,7 +81,9 @@ class PlainView:
         print(status_text(p, self.lines), file=self.out, flush=True)
 
     def final(self, result: MotionResult) -> None:
-        s = result_summary(result)
+        self.final_summary(result_summary(result))
+
+    def final_summary(self, s: dict[str, Any]) -> None:
         print(f"cncctl: {s['event']}{': ' + s['message'] if s['message'] else ''}\n"
               f"  motion {s['motion_time_s']:.3f} s (planned {s['planned_time_s']:.3f} s), "
               f"contour error max {s['contour_error_um']['max']:.1f} um "
@@ -147,3 +152,12 @@ class _StatusLine:
 
 def lines_text(lines: list[str], line: int) -> str:
     return lines[line - 1].strip()[:32] if 0 < line <= len(lines) else ""
+
+
+def progress_from_event(event: dict[str, Any]) -> MotionProgress:
+    """A progress event as the daemon sends it, back into the object the views show."""
+    return MotionProgress(state=MotionState(event["state"]), line=int(event["line"]),
+                          feed_mm_s=float(event["feed_mm_s"]), ferror_um=float(event["ferror_um"]),
+                          fifo_ms=float(event.get("fifo_ms", 0.0)),
+                          elapsed_s=float(event.get("elapsed_s", 0.0)),
+                          executed_s=float(event["executed_s"]), planned_s=event.get("planned_s"))

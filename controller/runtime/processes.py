@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import functools
 import multiprocessing as mp
+import os
 import queue
 import time
 from collections.abc import Callable
@@ -42,6 +44,8 @@ class RuntimeOptions:
     blocks_fn: BlocksFn = blocks_source
     generate_fn: GenerateFn = reference_source
     drive: Drive | None = None  # an unopened drive (tests); default: the configured backend
+    keep_drive_open: bool = False  # the caller owns `drive`, already open (the daemon)
+    start_mm: tuple[float, float, float] | None = None  # where the machine is (default origin)
     settings: dict[str, Any] = field(default_factory=dict)  # MotionSettings overrides
     on_progress: Callable[[MotionProgress], None] | None = None
     rt_priority: int | None = 80  # real-time mode: try SCHED_FIFO for the motion process
@@ -122,11 +126,13 @@ class Runtime:
             self._start(ring, messages)
             if self.options.rt_priority is not None and not self.options.virtual_time:
                 rt = try_realtime(self.options.rt_priority)
-            _open_drive(drive)
+            if not self.options.keep_drive_open:
+                _open_drive(drive)
             try:
                 result = self._motion(drive, ring, messages)
             finally:
-                drive.close()
+                if not self.options.keep_drive_open:
+                    drive.close()
                 back_to_normal()
         finally:
             ring.set_flag(FLAG_ABORT)
@@ -139,14 +145,19 @@ class Runtime:
     def _start(self, ring: RefRing, messages: _Messages) -> None:
         if self.options.blocks_fn is blocks_source or self.options.generate_fn is reference_source:
             preload_stages()
+        blocks_fn = self.options.blocks_fn
+        if self.options.start_mm is not None and blocks_fn is blocks_source:
+            blocks_fn = functools.partial(blocks_source, start_mm=self.options.start_mm)
         nc_fifo = _CTX.Queue(maxsize=self.config.runtime.nc_fifo_blocks)
         # Generator first, so that it is waiting on the NC FIFO when the first block lands.
         self.procs["generator"] = _CTX.Process(
             target=generator_main, name="cnc-generator", daemon=True,
-            args=(self.config, self.options.generate_fn, nc_fifo, ring, messages.info))
+            args=(self.config, self.options.generate_fn, nc_fifo, ring, messages.info,
+                  os.getpid()))
         self.procs["interpreter"] = _CTX.Process(
             target=interpreter_main, name="cnc-interpreter", daemon=True,
-            args=(self.path, self.config, self.options.blocks_fn, nc_fifo, ring, messages.info))
+            args=(self.path, self.config, blocks_fn, nc_fifo, ring, messages.info,
+                  os.getpid()))
         self.procs["generator"].start()
         self.procs["interpreter"].start()
         self._t_started_s = time.monotonic()

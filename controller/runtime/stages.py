@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import os
 import resource
 import signal
@@ -19,10 +20,11 @@ BlocksFn = Callable[[str, MachineConfig], Iterable[Any]]
 GenerateFn = Callable[[Iterable[Any], MachineConfig], Iterable[RefChunk]]
 
 
-def blocks_source(path: str, config: MachineConfig) -> Iterator[Any]:
+def blocks_source(path: str, config: MachineConfig,
+                  start_mm: tuple[float, float, float] | None = None) -> Iterator[Any]:
     """The interpreter stage: read_program, block by block (its process is interpreter_main)."""
     from controller.interpreter.program import read_program
-    yield from read_program(path, config)
+    yield from read_program(path, config, start_mm)
 
 
 def reference_source(blocks: Iterable[Any], config: MachineConfig) -> Iterator[RefChunk]:
@@ -47,7 +49,24 @@ def preload_stages() -> None:
 PRODUCER_NICE = -10  # interpreter and generator outrank ordinary load, below the RT motion loop
 
 
-def _child_setup() -> int:
+def _die_with_parent(parent_pid: int) -> None:
+    """The kernel kills this child when the thread that forked it ends (PR_SET_PDEATHSIG):
+    no producer outlives a killed `cncctl run` or cncd, even one busy planning that would not
+    look at its parent for a while. A parent already gone by now: exit at once."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):
+        pass  # not Linux: the parent checks in every wait loop remain
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
+PR_SET_PDEATHSIG = 1
+
+
+def _child_setup(parent_pid: int) -> int:
+    _die_with_parent(parent_pid)
     # Ctrl-C goes to the whole process group: only the motion process decides how to stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # Best effort: on a loaded machine the producers keep the reference ring ahead of the card
@@ -57,7 +76,7 @@ def _child_setup() -> int:
         os.nice(PRODUCER_NICE)
     except OSError:
         pass
-    return os.getppid()
+    return parent_pid
 
 
 def _should_stop(ring: RefRing, parent_pid: int) -> bool:
@@ -69,9 +88,9 @@ def _report_rss(info: Queue, name: str) -> None:
 
 
 def interpreter_main(path: str, config: MachineConfig, blocks_fn: BlocksFn, nc_fifo: Queue,
-                     ring: RefRing, info: Queue) -> None:
+                     ring: RefRing, info: Queue, parent_pid: int) -> None:
     """Process 1: NC blocks onto the bounded NC FIFO (put blocks when full: back-pressure)."""
-    parent = _child_setup()
+    parent = _child_setup(parent_pid)
     try:
         items = _iter_safe(blocks_fn(path, config), info, "interpreter")
         feed_fifo(items, nc_fifo, lambda: _should_stop(ring, parent))
@@ -88,9 +107,9 @@ def _iter_safe(items: Iterable[Any], info: Queue, stage: str) -> Iterator[Any]:
 
 
 def generator_main(config: MachineConfig, generate_fn: GenerateFn, nc_fifo: Queue,
-                   ring: RefRing, info: Queue) -> None:
+                   ring: RefRing, info: Queue, parent_pid: int) -> None:
     """Process 2: NC blocks -> reference points into the shared-memory ring."""
-    parent = _child_setup()
+    parent = _child_setup(parent_pid)
     try:
         for chunk in generate_fn(drain_fifo(nc_fifo, lambda: _should_stop(ring, parent)), config):
             if not ring.write(chunk_rows(chunk)) or os.getppid() != parent:

@@ -1,0 +1,102 @@
+"""The control socket's client side, as `cncctl` uses it: one request, a reply, then events."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+from collections.abc import Iterator
+from typing import Any
+
+from controller.errors import CncError
+
+CONNECT_TIMEOUT_S = 2.0
+SOCKET_NAME = "cncd.sock"
+
+
+def default_socket_path() -> str:
+    """$CNCD_SOCKET, else the systemd runtime directory's cncd.sock, else /run/cncd/."""
+    explicit = os.environ.get("CNCD_SOCKET")
+    if explicit:
+        return explicit
+    return os.path.join(os.environ.get("RUNTIME_DIRECTORY", "/run/cncd").split(":")[0],
+                        SOCKET_NAME)
+
+
+class DaemonUnavailable(CncError):
+    """No daemon answers on the socket (absent, stopped, or not allowed to connect)."""
+
+
+class DaemonError(CncError):
+    """The daemon refused a request; `code` is its reason (busy, estop, unauthorised...)."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+class DaemonClient:
+    """One connection; requests carry increasing ids, replies are matched by id."""
+
+    def __init__(self, path: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+        self.path = path
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
+        self.sock.settimeout(timeout_s)
+        try:
+            self.sock.connect(path)
+        except OSError as exc:
+            self.sock.close()
+            raise DaemonUnavailable(f"no daemon on {path}: {exc.strerror or exc}") from None
+        self._file = self.sock.makefile("rb")
+        self._next_id = 0
+
+    def request(self, cmd: str, payload: bytes = b"", **fields: Any) -> dict[str, Any]:
+        """Send one request (with payload after the line, for run) and return its reply; a
+        refusal raises DaemonError."""
+        self._next_id += 1
+        line = json.dumps({"id": self._next_id, "cmd": cmd, **fields}).encode() + b"\n"
+        try:
+            self.sock.sendall(line + payload)
+        except OSError as exc:
+            raise DaemonUnavailable(f"daemon connection lost: {exc}") from None
+        for message in self.messages():
+            if message.get("id") in (self._next_id, None) and "ok" in message:
+                if not message["ok"]:
+                    raise DaemonError(message.get("error", "error"), message.get("message", ""))
+                return message
+        raise DaemonUnavailable("the daemon closed the connection")
+
+    def messages(self, timeout_s: float | None = None) -> Iterator[dict[str, Any]]:
+        """Every message as it arrives (replies and pushed events) until the daemon hangs up."""
+        self.sock.settimeout(timeout_s)
+        while True:
+            try:
+                line = self._file.readline()
+            except (TimeoutError, OSError):
+                return
+            if not line:
+                return
+            try:
+                yield json.loads(line)
+            except ValueError:
+                continue
+
+    def close(self) -> None:
+        self._file.close()
+        self.sock.close()
+
+    def __enter__(self) -> DaemonClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def daemon_answers(path: str) -> bool:
+    """True when a daemon accepts connections on path (cncctl run then goes through it)."""
+    try:
+        with DaemonClient(path, timeout_s=0.5) as client:
+            client.request("status")
+        return True
+    except (DaemonUnavailable, DaemonError, OSError):
+        return False

@@ -1,0 +1,108 @@
+"""`cncctl status | abort | estop | reset | log`: the daemon's state, and commands to it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+from controller.operator.client import (
+    DaemonClient,
+    DaemonError,
+    DaemonUnavailable,
+    default_socket_path,
+)
+
+EXIT_REFUSED = 2
+EXIT_NO_DAEMON = 3
+
+
+def add_socket_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--socket", default=None,
+                        help=f"the daemon's control socket (default: {default_socket_path()})")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_socket_argument(parser)
+    command = parser.prog.split()[-1]
+    if command == "status":
+        parser.add_argument("--json", action="store_true", help="one JSON object")
+        parser.add_argument("--watch", action="store_true", help="print every change")
+    elif command == "log":
+        parser.add_argument("-n", "--lines", type=int, default=50, help="last events")
+        parser.add_argument("-f", "--follow", action="store_true", help="then follow")
+
+
+def run(args: argparse.Namespace) -> int:
+    path = args.socket or default_socket_path()
+    try:
+        with DaemonClient(path) as client:
+            return _COMMANDS[args.command](client, args)
+    except DaemonUnavailable as exc:
+        print(f"cncctl: {exc} (is cncd running? `systemctl status cncd`)", file=sys.stderr)
+        return EXIT_NO_DAEMON
+    except DaemonError as exc:
+        print(f"cncctl {args.command}: {exc.code}: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+
+
+def _status(client: DaemonClient, args: argparse.Namespace) -> int:
+    reply = client.request("status")
+    _print_status(reply, args.json)
+    if not args.watch:
+        return 0
+    client.request("subscribe", topics=["state", "progress"])
+    last_s = 0.0
+    for event in client.messages():
+        if event.get("event") == "progress" and time.monotonic() - last_s < 0.5:
+            continue
+        last_s = time.monotonic()
+        _print_status(client.request("status"), args.json)
+    return 0
+
+
+def _print_status(s: dict[str, Any], as_json: bool) -> None:
+    s = {k: v for k, v in s.items() if k not in ("id", "ok")}
+    if as_json:
+        print(json.dumps(s), flush=True)
+        return
+    pos = s.get("position_mm") or {}
+    where = " ".join(f"{k.upper()}{v:.3f}" for k, v in pos.items()) or "unknown"
+    print(f"{s['state']}" + (f": {s['fault']}" if s.get("fault") else ""), flush=True)
+    if s.get("program"):
+        print(f"  job {s['job']} {s['program']!r} line {s['line']}  feed "
+              f"{s['feed_mm_s']:.1f} mm/s  following error {s['ferror_um']:.0f} um")
+    print(f"  position {where}")
+    last = s.get("last_job") or {}
+    if last.get("program"):
+        print(f"  last job {last['program']!r}: {last.get('state', '?').lower()} at line "
+              f"{last.get('last_line')}" + (f" ({last['fault']})" if last.get("fault") else ""),
+              flush=True)
+
+
+def _simple(client: DaemonClient, args: argparse.Namespace) -> int:
+    reply = client.request(args.command)
+    print(f"cncctl {args.command}: {reply['state']}")
+    return 0
+
+
+def _log(client: DaemonClient, args: argparse.Namespace) -> int:
+    reply = client.request("log", lines=max(0, args.lines), follow=args.follow)
+    for event in reply["events"]:
+        _print_event(event)
+    if args.follow:
+        for event in client.messages():
+            if event.get("event") == "log":
+                _print_event(event)
+    return 0
+
+
+def _print_event(event: dict[str, Any]) -> None:
+    stamp = time.strftime("%H:%M:%S", time.localtime(event["time"]))
+    print(f"{stamp} {event['priority']:<7} {event['message']}", flush=True)
+
+
+_COMMANDS = {"status": _status, "abort": _simple, "estop": _simple, "reset": _simple,
+             "log": _log}

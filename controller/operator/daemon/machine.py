@@ -1,0 +1,299 @@
+"""The daemon's machine: ESTOP -> IDLE -> CHECKING -> RUNNING -> IDLE, and FAULT; one job at a
+time, run on the drive the daemon holds open; e-stop and faults latch until reset."""
+
+from __future__ import annotations
+
+import enum
+import hashlib
+import os
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from controller.config import MachineConfig
+from controller.errors import CncError, NcError
+from controller.motion.types import MotionProgress, MotionResult, Outcome
+from controller.operator.check_cmd import check_program
+from controller.operator.daemon.journal import Journal
+from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
+from controller.operator.daemon.protocol import ProtocolError
+from controller.operator.run_view import result_summary
+from controller.runtime.processes import Runtime, RuntimeOptions
+from drivers.base import Drive
+
+Emit = Callable[[dict[str, Any]], None]
+JOURNAL_EVERY_S = 0.5  # the journal's last line is at most this old after a crash
+MOTION_STALL_S = 1.0  # no motion-loop cycle for this long while running: unhealthy
+CHECK_STALL_S = 2.0  # no checked block for this long while checking: unhealthy
+
+
+class State(enum.StrEnum):
+    ESTOP = "ESTOP"
+    IDLE = "IDLE"
+    CHECKING = "CHECKING"
+    RUNNING = "RUNNING"
+    FAULT = "FAULT"
+
+
+@dataclass
+class Job:
+    number: int
+    name: str
+    sha256: str
+    text: bytes
+    lines: int
+    emit: Emit  # events for the connection that started it (and the state subscribers)
+    runtime: Runtime | None = None
+    cancel: str | None = None  # abort or e-stop asked while checking
+    start_mm: tuple[float, float, float] | None = None  # where the machine stood
+    progress: MotionProgress | None = None
+    done: threading.Event = field(default_factory=threading.Event)
+
+
+def progress_event(p: MotionProgress) -> dict[str, Any]:
+    return {"event": "progress", "state": p.state.value, "line": p.line,
+            "feed_mm_s": round(p.feed_mm_s, 3), "ferror_um": round(p.ferror_um, 1),
+            "fifo_ms": round(p.fifo_ms, 1), "elapsed_s": round(p.elapsed_s, 3),
+            "executed_s": round(p.executed_s, 3), "planned_s": p.planned_s}
+
+
+class Machine:
+    """All state changes go through here, under one lock; jobs run in a thread of their own."""
+
+    def __init__(self, config: MachineConfig, drive: Drive, state_dir: Path, log: EventLog,
+                 publish: Callable[[str, dict[str, Any]], None],
+                 runtime_options: Callable[[], RuntimeOptions] | None = None) -> None:
+        self.config, self.drive, self.log, self.publish = config, drive, log, publish
+        self.state_dir = state_dir
+        self.runtime_options = runtime_options or RuntimeOptions
+        self._lock = threading.RLock()
+        self.state = State.ESTOP  # after any (re)start: never moves by itself
+        self.fault: str | None = "e-stop latched at start-up: reset to enable"
+        self.job: Job | None = None
+        self._jobs = 0
+        self.beat_s = time.monotonic()  # last sign of life of the check or the motion loop
+        self.journal = Journal(state_dir)
+        self.last_job = self.journal.after_restart()
+        threading.Thread(target=self._journal_loop, name="journal", daemon=True).start()
+        if self.last_job.get("state") == "INTERRUPTED":
+            log.log(WARNING, f"the last job {self.last_job.get('program')!r} was interrupted "
+                             f"at line {self.last_job.get('last_line')}; it will not resume")
+
+    # -- commands ---------------------------------------------------------------------------
+    def start_job(self, name: str, text: bytes, emit: Emit) -> int:
+        with self._lock:
+            self._require_idle()
+            self._jobs += 1
+            job = Job(self._jobs, name, hashlib.sha256(text).hexdigest(), text,
+                      text.count(b"\n"), emit)
+            self.job = self._last_job_started = job
+            self._set_state(State.CHECKING)
+        threading.Thread(target=self._run_job, args=(job,), name=f"job-{job.number}",
+                         daemon=True).start()
+        return job.number
+
+    def abort(self, reason: str) -> None:
+        with self._lock:
+            job = self.job
+            if job is None:
+                raise ProtocolError("not-running", "no job is running")
+            self._stop_job(job, reason)
+
+    def estop(self, reason: str) -> None:
+        with self._lock:
+            self.fault = reason
+            self._set_state(State.ESTOP)
+            if self.job is not None:
+                self._stop_job(self.job, reason)
+        self.log.log(ERR, f"e-stop: {reason}")
+
+    def reset(self) -> None:
+        with self._lock:
+            if self.job is not None:
+                raise ProtocolError("busy", f"a job is {self.state.value.lower()}: abort it "
+                                            "first")
+            try:
+                if self.drive.status().halted:
+                    self.drive.reset()
+            except CncError as exc:
+                raise ProtocolError("drive", f"drive reset failed: {exc}") from None
+            self.fault = None
+            self._set_state(State.IDLE)
+        self.log.log(NOTICE, "reset: idle")
+
+    def terminate(self, reason: str) -> None:
+        """SIGTERM: stop a running job along the path (the caller waits for wait_idle)."""
+        with self._lock:
+            if self.job is not None:
+                self._stop_job(self.job, reason)
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """True once the last job started has ended and sent its last event."""
+        job = self._last_job_started
+        return job is None or job.done.wait(timeout_s)
+
+    _last_job_started: Job | None = None
+
+    # -- status and health --------------------------------------------------------------------
+    def status(self) -> dict[str, Any]:
+        with self._lock:
+            job, p = self.job, (self.job.progress if self.job else None)
+            out: dict[str, Any] = {"state": self.state.value, "fault": self.fault,
+                                   "program": job.name if job else None,
+                                   "job": job.number if job else None}
+        out["line"] = p.line if p else self.last_job.get("last_line")
+        out["feed_mm_s"] = round(p.feed_mm_s, 3) if p else 0.0
+        out["ferror_um"] = round(p.ferror_um, 1) if p else 0.0
+        out["position_mm"] = self._position_mm()
+        out["last_job"] = self.last_job
+        return out
+
+    def healthy(self) -> str | None:
+        with self._lock:
+            state = self.state
+        quiet_s = time.monotonic() - self.beat_s
+        if state is State.RUNNING and quiet_s > MOTION_STALL_S:
+            return f"motion loop silent for {quiet_s:.1f} s"
+        if state is State.CHECKING and quiet_s > CHECK_STALL_S:
+            return f"program check silent for {quiet_s:.1f} s"
+        return None
+
+    def _start_mm(self) -> tuple[float, float, float]:
+        """Where the machine stands (its step counters): the next program starts there."""
+        cmd, _ = self.drive.position_counts()
+        xyz = dict.fromkeys("xyz", 0.0)
+        for axis, counts in zip(self.config.axes, cmd, strict=True):
+            xyz[axis.name] = float(counts) * axis.pulse_mm
+        return xyz["x"], xyz["y"], xyz["z"]
+
+    def _position_mm(self) -> dict[str, float] | None:
+        try:
+            _, enc = self.drive.position_counts()
+        except CncError:
+            return None
+        return {a.name: round(float(c) * a.pulse_mm, 6)
+                for a, c in zip(self.config.axes, enc, strict=True)}
+
+    # -- internals ----------------------------------------------------------------------------
+    def _require_idle(self) -> None:
+        if self.job is not None:
+            raise ProtocolError("busy", f"busy: a job is {self.state.value.lower()} "
+                                        "(one job at a time; nothing was queued)")
+        if self.state is State.ESTOP:
+            raise ProtocolError("estop", f"e-stop is latched ({self.fault}): reset first")
+        if self.state is State.FAULT:
+            raise ProtocolError("fault", f"fault latched ({self.fault}): reset first")
+
+    def _stop_job(self, job: Job, reason: str) -> None:
+        job.cancel = job.cancel or reason
+        if job.runtime is not None:
+            job.runtime.request_abort(reason)
+
+    def _set_state(self, state: State) -> None:
+        self.state = state
+        self.publish("state", {"event": "state", "state": state.value, "fault": self.fault})
+
+    def _run_job(self, job: Job) -> None:
+        workdir = tempfile.mkdtemp(prefix="job-", dir=self.state_dir)
+        path = os.path.join(workdir, "program.nc")
+        try:
+            with open(path, "wb") as fh:
+                fh.write(job.text)
+            job.text = b""
+            self._check_and_run(job, path)
+        except Exception as exc:  # noqa: BLE001 - a job must never take the daemon down
+            self._finish(job, State.FAULT, f"job failed: {type(exc).__name__}: {exc}")
+            job.emit({"event": "fault", "message": f"job failed: {exc}"})
+        finally:
+            for p in (path, workdir):
+                try:
+                    os.unlink(p) if p == path else os.rmdir(p)
+                except OSError:
+                    pass
+            job.done.set()
+
+    def _check_and_run(self, job: Job, path: str) -> None:
+        self.log.log(INFO, f"job {job.number}: checking {job.name!r} ({job.sha256[:12]})")
+        start_mm = self._start_mm()
+        try:
+            check_program(path, self.config, on_block=self._beat, start_mm=start_mm)
+        except NcError as exc:
+            message = NcError(job.name, exc.line, exc.col, exc.word, exc.message).format()
+            self.log.log(NOTICE, f"job {job.number} rejected: {message}")
+            job.emit({"event": "rejected", "message": message})
+            self._finish(job, None, None)
+            return
+        with self._lock:
+            if job.cancel is not None:
+                job.emit({"event": "aborted", "message": job.cancel})
+                self._finish(job, None, None)
+                return
+            job.start_mm = start_mm
+            job.runtime = Runtime(path, self.config, self._options(job))
+            self.journal.start(job.name, job.sha256, job.lines)
+            self._beat()
+            self._set_state(State.RUNNING)
+        job.emit({"event": "start", "program": job.name, "config": self.config.name,
+                  "drive": self.config.drive.backend, "job": job.number})
+        result = job.runtime.run()
+        self._record(job, result)
+
+    def _options(self, job: Job) -> RuntimeOptions:
+        base = self.runtime_options()
+
+        def progress(p: MotionProgress) -> None:
+            self._beat()
+            job.progress = p
+            if base.on_progress is not None:
+                base.on_progress(p)
+            event = progress_event(p)
+            job.emit(event)
+            self.publish("progress", event)
+        return replace(base, drive=self.drive, keep_drive_open=True, on_progress=progress,
+                       start_mm=job.start_mm)
+
+    def _record(self, job: Job, result: MotionResult) -> None:
+        summary = result_summary(result)
+        position = summary["final_position_mm"] if result.position_known else None
+        self.journal.update(state=result.outcome.value.upper(), last_line=result.line,
+                            position_mm=position, fault=result.message or None)
+        self.last_job = dict(self.journal.entry)
+        if result.outcome is Outcome.FAULT:
+            self.log.log(ERR, f"job {job.number} fault at line {result.line}: "
+                              f"{result.message}")
+            self._finish(job, State.FAULT, result.message)
+        else:
+            self.log.log(INFO, f"job {job.number} {result.outcome.value} at line "
+                               f"{result.line}{': ' + result.message if result.message else ''}")
+            self._finish(job, None, None)
+        job.emit(summary)
+
+    def _finish(self, job: Job, state: State | None, fault: str | None) -> None:
+        """The job is over: FAULT latches, an e-stop latched meanwhile stays, else IDLE."""
+        with self._lock:
+            if self.job is job:
+                self.job = None
+            if state is State.FAULT:
+                self.fault = fault
+                self._set_state(State.FAULT)
+            elif self.state is not State.ESTOP:
+                self._set_state(State.IDLE)
+
+    def _journal_loop(self) -> None:
+        """Off the motion thread (a journal write syncs to disk): the line reached, twice a
+        second while a job runs."""
+        written = None
+        while True:
+            time.sleep(JOURNAL_EVERY_S)
+            job = self.job
+            p = job.progress if job is not None else None
+            if p is not None and self.state is State.RUNNING and p.line != written:
+                self.journal.update(last_line=p.line)
+                written = p.line
+
+    def _beat(self, *_: object) -> None:
+        self.beat_s = time.monotonic()

@@ -1,0 +1,164 @@
+"""`cncd`: the controller as a service. Owns the drive for its whole life, serves the control
+socket, runs one job at a time, speaks systemd's notify protocol, stops under control on
+SIGTERM. Runs in the foreground, with or without systemd."""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import os
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from controller.config import MachineConfig, load_config
+from controller.errors import CncError
+from controller.operator.client import default_socket_path
+from controller.operator.daemon.log import ERR, INFO, NOTICE, EventLog
+from controller.operator.daemon.machine import Machine
+from controller.operator.daemon.notify import run_watchdog, sd_notify
+from controller.operator.daemon.protocol import ProtocolError
+from controller.operator.daemon.server import AccessPolicy, Server, bind_socket, socket_gid
+from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
+
+STOP_TIMEOUT_S = 20.0  # SIGTERM: the running job's controlled stop must end within this
+SERVER_STALL_S = 1.0  # the socket loop silent this long: unhealthy (no WATCHDOG=1)
+
+
+def default_state_dir() -> str:
+    return os.environ.get("STATE_DIRECTORY", "/var/lib/cncd").split(":")[0]
+
+
+def _arguments(argv: list[str] | None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog="cncd", description="phcnc controller daemon")
+    ap.add_argument("--config", help="machine configuration (file or built-in name)")
+    ap.add_argument("--socket", help=f"control socket (default: {default_socket_path()})")
+    ap.add_argument("--state-dir", help=f"job journal (default: {default_state_dir()})")
+    add_drive_option_argument(ap)
+    return ap.parse_args(argv)
+
+
+def _lock_memory(log: EventLog) -> None:
+    """mlockall where permitted (LimitMEMLOCK), one warning otherwise: page faults on the
+    motion thread's path are the latency a service can avoid."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    mcl_current, mcl_future = 1, 2
+    if libc.mlockall(mcl_current | mcl_future) != 0:
+        err = ctypes.get_errno()
+        log.warn_once("mlock", f"memory not locked ({os.strerror(err)}): raise LimitMEMLOCK "
+                               "for fewer latency spikes")
+    else:
+        log.log(INFO, "memory locked")
+
+
+class Daemon:
+    def __init__(self, config: MachineConfig, socket_path: str, state_dir: Path,
+                 log: EventLog) -> None:
+        from drivers.registry import make_drive
+
+        self.config, self.socket_path, self.log = config, socket_path, log
+        self.stop = threading.Event()
+        self.drive = make_drive(config, realtime=True)
+        self.drive.open()
+        self.server: Server | None = None
+        self.machine = Machine(config, self.drive, state_dir, log, self._publish)
+
+    def _publish(self, topic: str, event: dict) -> None:
+        if self.server is not None:
+            self.server.publish(topic, event)
+        if topic == "state":
+            sd_notify(f"STATUS={event['state']}" + (f": {event['fault']}"
+                                                    if event.get("fault") else ""))
+
+    def serve(self) -> None:
+        gid = socket_gid(self.config.service)
+        listener = bind_socket(self.socket_path, gid)
+        policy = AccessPolicy(self.config.service, gid)
+        self.server = Server(listener, self.machine, self.log, policy,
+                             self.config.service.max_connections)
+        self.log.listeners.append(lambda event: self.server.publish("log", {  # type: ignore
+            "event": "log", **event}))
+        threading.Thread(target=run_watchdog, args=(self._healthy, self.stop, self._unhealthy),
+                         name="watchdog", daemon=True).start()
+        sd_notify(f"READY=1\nSTATUS={self.machine.state.value}\nMAINPID={os.getpid()}")
+        self.log.log(NOTICE, f"ready on {self.socket_path} ({self.config.name}, drive "
+                             f"{self.config.drive.backend}); state {self.machine.state.value}")
+        try:
+            self.server.serve(self._keep_going)
+        finally:
+            listener.close()
+            try:
+                os.unlink(self.socket_path)
+            except OSError:
+                pass
+
+    def _keep_going(self) -> bool:
+        if not self.stop.is_set():
+            return True
+        # Stopping: serve on until the running job has come to rest, so its client sees it.
+        if self._stop_deadline_s is None:
+            self._stop_deadline_s = time.monotonic() + STOP_TIMEOUT_S
+        return not self.machine.wait_idle(0.0) and time.monotonic() < self._stop_deadline_s
+
+    _stop_deadline_s: float | None = None
+
+    def terminate(self, signum: int) -> None:
+        name = signal.Signals(signum).name
+        sd_notify("STOPPING=1")
+        self.log.log(NOTICE, f"{name}: stopping (a running job stops along the path)")
+        self.machine.terminate(f"daemon stopping ({name})")
+        self.stop.set()
+
+    def _healthy(self) -> str | None:
+        quiet_s = time.monotonic() - (self.server.beat_s if self.server else 0.0)
+        if quiet_s > SERVER_STALL_S:
+            return f"control socket loop silent for {quiet_s:.1f} s"
+        return self.machine.healthy()
+
+    def _unhealthy(self, problem: str) -> None:
+        self.log.log(ERR, f"watchdog withheld: {problem}")
+
+    def close(self) -> None:
+        self.machine.wait_idle(STOP_TIMEOUT_S)
+        try:
+            self.drive.close()
+        except CncError as exc:
+            self.log.log(ERR, f"closing the drive: {exc}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _arguments(argv)
+    try:
+        config = config_with_drive_options(load_config(args.config), args.drive_option)
+    except CncError as exc:
+        print(f"<3>cncd: {exc}", file=sys.stderr)
+        return 2
+    log = EventLog(config.service.log_events)
+    state_dir = Path(args.state_dir or default_state_dir())
+    socket_path = args.socket or default_socket_path()
+    try:
+        state_dir.mkdir(mode=0o750, parents=True, exist_ok=True)
+        _lock_memory(log)
+        daemon = Daemon(config, socket_path, state_dir, log)
+    except (CncError, OSError, ProtocolError) as exc:
+        log.log(ERR, f"cncd: cannot start: {exc}")
+        return 1
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda signum, _frame: daemon.terminate(signum))
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)  # no config reload: restart to apply one
+    try:
+        daemon.serve()
+    except OSError as exc:
+        log.log(ERR, f"cncd: control socket: {exc}")
+        daemon.machine.terminate("daemon stopping (control socket failed)")
+        daemon.close()
+        return 1
+    daemon.close()
+    log.log(NOTICE, "stopped")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

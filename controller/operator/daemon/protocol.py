@@ -1,0 +1,145 @@
+"""The control socket's wire format: JSON lines, size limits, request checks (docs/)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import Any
+
+MAX_LINE_BYTES = 64 * 1024  # any request line
+MAX_PROGRAM_BYTES = 64 * 1024 * 1024  # the program text that follows a run request
+COMMANDS = frozenset({"status", "run", "abort", "estop", "reset", "log", "subscribe"})
+TOPICS = frozenset({"state", "progress", "log"})
+
+
+class ProtocolError(Exception):
+    """A request the daemon refuses; `code` is the machine-readable reason. The message never
+    repeats what the client sent (a reply must not echo a 100 MB line or a secret)."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+@dataclass(frozen=True)
+class Request:
+    id: Any  # echoed in the reply (int, str or None)
+    cmd: str
+    fields: dict[str, Any]
+
+
+def encode(obj: dict[str, Any]) -> bytes:
+    return (json.dumps(obj, separators=(",", ":")) + "\n").encode()
+
+
+def reply_ok(request_id: Any, **fields: Any) -> bytes:
+    return encode({"id": request_id, "ok": True, **fields})
+
+
+def reply_error(request_id: Any, code: str, message: str) -> bytes:
+    return encode({"id": request_id, "ok": False, "error": code, "message": message})
+
+
+def _id_of(obj: dict[str, Any]) -> Any:
+    rid = obj.get("id")
+    if rid is None or isinstance(rid, bool) or not isinstance(rid, int | str):
+        return None
+    return rid if not isinstance(rid, str) or len(rid) <= 64 else None
+
+
+def parse_request(line: bytes) -> Request:
+    """One request line (without its newline) -> Request, or ProtocolError."""
+    try:
+        obj = json.loads(line.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+        raise ProtocolError("malformed", "a request is one JSON object per line") from None
+    if not isinstance(obj, dict):
+        raise ProtocolError("malformed", "a request is one JSON object per line")
+    cmd = obj.get("cmd")
+    if not isinstance(cmd, str) or cmd not in COMMANDS:
+        raise ProtocolError("unknown-command",
+                            f"unknown command; known: {', '.join(sorted(COMMANDS))}")
+    fields = {k: v for k, v in obj.items() if k not in ("id", "cmd")}
+    request = Request(_id_of(obj), cmd, fields)
+    _CHECKS.get(cmd, _no_fields)(request)
+    return request
+
+
+def _no_fields(request: Request) -> None:
+    extra = set(request.fields)
+    if extra:
+        raise ProtocolError("bad-field", f"{request.cmd} takes no field "
+                                         f"{sorted(extra)[0][:32]!r}")
+
+
+def _check_run(request: Request) -> None:
+    f = request.fields
+    _known(request, {"name", "program_bytes", "follow"})
+    size = f.get("program_bytes")
+    if not isinstance(size, int) or isinstance(size, bool) or size < 0:
+        raise ProtocolError("bad-field", "run needs program_bytes, the size of the program "
+                                         "text that follows the line")
+    if size > MAX_PROGRAM_BYTES:
+        raise ProtocolError("too-large", f"program larger than {MAX_PROGRAM_BYTES} bytes")
+    name = f.get("name", "program.nc")
+    if not isinstance(name, str) or not 0 < len(name) <= 255 or "\n" in name:
+        raise ProtocolError("bad-field", "name must be a short one-line text")
+
+
+def _check_log(request: Request) -> None:
+    _known(request, {"lines", "follow"})
+    lines = request.fields.get("lines", 50)
+    if not isinstance(lines, int) or isinstance(lines, bool) or not 0 <= lines <= 100_000:
+        raise ProtocolError("bad-field", "lines must be an integer 0..100000")
+
+
+def _check_subscribe(request: Request) -> None:
+    _known(request, {"topics"})
+    topics = request.fields.get("topics", ["state"])
+    if not isinstance(topics, list) or not topics or not all(
+            isinstance(t, str) and t in TOPICS for t in topics):
+        raise ProtocolError("bad-field", f"topics: a list of {', '.join(sorted(TOPICS))}")
+
+
+def _known(request: Request, allowed: set[str]) -> None:
+    extra = set(request.fields) - allowed
+    if extra:
+        raise ProtocolError("bad-field", f"{request.cmd} takes no field "
+                                         f"{sorted(extra)[0][:32]!r}")
+
+
+_CHECKS = {"run": _check_run, "log": _check_log, "subscribe": _check_subscribe}
+
+
+class LineReader:
+    """Bytes in; request lines or raw program bytes out, one at a time (the program text after a
+    run line holds newlines of its own). A request line longer than MAX_LINE_BYTES is an error
+    at once: the daemon never buffers more than that waiting for a newline."""
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+
+    def feed(self, data: bytes) -> None:
+        self._buf += data
+
+    def next_line(self) -> bytes | None:
+        end = self._buf.find(b"\n", 0, MAX_LINE_BYTES + 1)
+        if end < 0:
+            if len(self._buf) > MAX_LINE_BYTES:
+                raise ProtocolError("too-large",
+                                    f"request line longer than {MAX_LINE_BYTES} bytes")
+            return None
+        line = bytes(self._buf[:end])
+        del self._buf[: end + 1]
+        return line
+
+    def take(self, n: int) -> bytes:
+        """Up to n bytes already buffered (the program text after a run line)."""
+        out = bytes(self._buf[:n])
+        del self._buf[:n]
+        return out
+
+    @property
+    def pending(self) -> int:
+        return len(self._buf)

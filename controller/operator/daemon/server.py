@@ -1,0 +1,396 @@
+"""The control socket: one selector thread serves every connection, checks who is calling
+(SO_PEERCRED), caps sizes, connections and idle time, and hands commands to the Machine."""
+
+from __future__ import annotations
+
+import errno
+import grp
+import os
+import pwd
+import queue
+import selectors
+import socket
+import stat
+import struct
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from controller.config import ServiceConfig
+from controller.operator.daemon.log import INFO, WARNING, EventLog
+from controller.operator.daemon.machine import Machine
+from controller.operator.daemon.protocol import (
+    LineReader,
+    ProtocolError,
+    Request,
+    encode,
+    parse_request,
+    reply_error,
+    reply_ok,
+)
+
+READ_TIMEOUT_S = 10.0  # a request begun (partial line or program) must be complete by then
+IDLE_TIMEOUT_S = 300.0  # a connection with nothing pending and no subscription is closed
+MAX_OUTPUT_BYTES = 4 << 20  # a subscriber this far behind is dropped (never blocks the daemon)
+_RECV_BYTES = 1 << 16
+
+
+@dataclass(eq=False)
+class Conn:
+    sock: socket.socket
+    uid: int
+    reader: LineReader = field(default_factory=LineReader)
+    out: bytearray = field(default_factory=bytearray)
+    topics: set[str] = field(default_factory=set)
+    last_s: float = field(default_factory=time.monotonic)
+    run: tuple[Request, bytearray] | None = None  # a run request waiting for its program
+    discard: int = 0  # program bytes still to skip after a refused run
+    closing: bool = False  # close once `out` is sent
+
+    @property
+    def idle(self) -> bool:
+        return not self.topics and self.run is None and not self.reader.pending
+
+
+class AccessPolicy:
+    """Root, the daemon's own user, and members of the allowed groups (socket group first)."""
+
+    def __init__(self, service: ServiceConfig, socket_gid: int) -> None:
+        self.uids = {0, os.geteuid()} | {_uid(u) for u in service.allowed_users}
+        self.gids = {socket_gid} | {_gid(g) for g in service.allowed_groups}
+
+    def allows(self, pid: int, uid: int, gid: int) -> bool:
+        return uid in self.uids or gid in self.gids or bool(self.gids & _groups_of(pid))
+
+
+def _uid(name: str) -> int:
+    try:
+        return pwd.getpwnam(name).pw_uid
+    except KeyError:
+        raise ProtocolError("config", f"service.allowed_users: no user {name!r}") from None
+
+
+def _gid(name: str) -> int:
+    try:
+        return grp.getgrnam(name).gr_gid
+    except KeyError:
+        raise ProtocolError("config", f"service group {name!r} does not exist") from None
+
+
+def _groups_of(pid: int) -> set[int]:
+    """The peer process's supplementary groups (what it runs with, not what /etc/group says)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("Groups:"):
+                return {int(g) for g in line.split()[1:]}
+    except (OSError, ValueError):
+        pass
+    return set()
+
+
+def socket_gid(service: ServiceConfig) -> int:
+    return _gid(service.socket_group) if service.socket_group else os.getegid()
+
+
+def bind_socket(path: str, gid: int) -> socket.socket:
+    """Listening socket at path, mode 0660 and group gid whatever the umask; a stale socket
+    file is replaced, a live one (another daemon) is an error."""
+    if os.path.exists(path):
+        if not stat.S_ISSOCK(os.lstat(path).st_mode):
+            raise OSError(errno.EEXIST, f"{path} exists and is not a socket")
+        probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            probe.connect(path)
+            raise OSError(errno.EADDRINUSE, f"another daemon answers on {path}")
+        except (ConnectionRefusedError, FileNotFoundError):
+            os.unlink(path)
+        finally:
+            probe.close()
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
+    old = os.umask(0o177)  # the file is born 0600: nobody else can connect before the chmod
+    try:
+        sock.bind(path)
+    finally:
+        os.umask(old)
+    if gid != os.getegid() or os.geteuid() == 0:
+        os.chown(path, -1, gid)
+    os.chmod(path, 0o660)
+    sock.listen(128)
+    sock.setblocking(False)
+    return sock
+
+
+class Server:
+    def __init__(self, listener: socket.socket, machine: Machine, log: EventLog,
+                 policy: AccessPolicy, max_connections: int) -> None:
+        self.listener, self.machine, self.log, self.policy = listener, machine, log, policy
+        self.max_connections = _connection_cap(max_connections)
+        self.sel = selectors.DefaultSelector()
+        self.sel.register(listener, selectors.EVENT_READ, None)
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+        self.sel.register(self._wake_r, selectors.EVENT_READ, "wake")
+        self.inbox: queue.SimpleQueue[tuple[Conn | None, str | None, dict[str, Any]]] = (
+            queue.SimpleQueue())
+        self.conns: set[Conn] = set()
+        self.beat_s = time.monotonic()
+        self._accept_paused_until = 0.0
+
+    # -- from other threads -------------------------------------------------------------------
+    def publish(self, topic: str, event: dict[str, Any]) -> None:
+        self._post(None, topic, event)
+
+    def emitter(self, conn: Conn) -> Any:
+        return lambda event: self._post(conn, None, event)
+
+    def _post(self, conn: Conn | None, topic: str | None, event: dict[str, Any]) -> None:
+        self.inbox.put((conn, topic, event))
+        try:
+            self._wake_w.send(b"\0")
+        except OSError:
+            pass  # the wake-up pipe is full: the loop is already awake
+
+    # -- the loop -----------------------------------------------------------------------------
+    def serve(self, keep_going: Any) -> None:
+        while keep_going():
+            self.beat_s = time.monotonic()
+            for key, mask in self.sel.select(timeout=0.1):
+                if key.data is None:
+                    self._accept()
+                elif key.data == "wake":
+                    self._drain_wake()
+                else:
+                    self._service(key.data, mask)
+            self._deliver()
+            self._expire()
+        self._deliver()
+        self._drain_output(deadline_s=time.monotonic() + 1.0)
+        for conn in list(self.conns):
+            self._close(conn)
+
+    def _drain_output(self, deadline_s: float) -> None:
+        """On the way out: give clients up to a second to take what is owed to them."""
+        while time.monotonic() < deadline_s and any(c.out for c in self.conns):
+            for conn in [c for c in self.conns if c.out]:
+                self._flush(conn)
+            time.sleep(0.01)
+
+    def _accept(self) -> None:
+        if time.monotonic() < self._accept_paused_until:
+            return
+        for _ in range(64):
+            try:
+                sock, _ = self.listener.accept()
+            except BlockingIOError:
+                return
+            except OSError as exc:
+                if exc.errno in (errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM):
+                    # Out of descriptors: free idle ones and retry shortly, never stop accepting.
+                    self.log.warn_once("emfile", f"control socket: {exc.strerror}; closing "
+                                                 "idle connections")
+                    self._evict_idle(all_of_them=True)
+                    self._accept_paused_until = time.monotonic() + 0.05
+                return
+            self._admit(sock)
+
+    def _admit(self, sock: socket.socket) -> None:
+        sock.setblocking(False)
+        pid, uid, gid = struct.unpack("3i", sock.getsockopt(
+            socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i")))
+        if not self.policy.allows(pid, uid, gid):
+            self.log.log(WARNING, f"control socket: refused uid {uid} gid {gid} (pid {pid})")
+            _send_now(sock, reply_error(None, "unauthorised", "not allowed: ask to be added to "
+                                                              "the service group"))
+            sock.close()
+            return
+        if len(self.conns) >= self.max_connections and not self._evict_idle():
+            _send_now(sock, reply_error(None, "too-many-connections",
+                                        f"too many connections ({self.max_connections})"))
+            sock.close()
+            return
+        conn = Conn(sock, uid)
+        self.conns.add(conn)
+        self.sel.register(sock, selectors.EVENT_READ, conn)
+
+    def _evict_idle(self, all_of_them: bool = False) -> bool:
+        idle = sorted((c for c in self.conns if c.idle and not c.out), key=lambda c: c.last_s)
+        for conn in idle if all_of_them else idle[:1]:
+            self._close(conn)
+        return bool(idle)
+
+    def _service(self, conn: Conn, mask: int) -> None:
+        if mask & selectors.EVENT_WRITE:
+            self._flush(conn)
+        if mask & selectors.EVENT_READ and conn in self.conns:
+            try:
+                data = conn.sock.recv(_RECV_BYTES)
+            except BlockingIOError:
+                return
+            except OSError:
+                data = b""
+            if not data:
+                self._close(conn)
+                return
+            conn.last_s = time.monotonic()
+            try:
+                conn.reader.feed(data)
+                self._consume(conn)
+            except ProtocolError as exc:  # framing lost: answer, then hang up
+                self._send(conn, reply_error(None, exc.code, exc.message))
+                conn.closing = True
+                self._flush(conn)
+
+    def _consume(self, conn: Conn) -> None:
+        while not conn.closing:
+            if conn.discard:
+                conn.discard -= len(conn.reader.take(conn.discard))
+                if conn.discard:
+                    return
+            if conn.run is not None:
+                request, text = conn.run
+                text += conn.reader.take(request.fields["program_bytes"] - len(text))
+                if len(text) < request.fields["program_bytes"]:
+                    return
+                conn.run = None
+                self._start_run(conn, request, bytes(text))
+                continue
+            line = conn.reader.next_line()
+            if line is None:
+                return
+            self._request(conn, line)
+
+    def _request(self, conn: Conn, line: bytes) -> None:
+        try:
+            request = parse_request(line)
+        except ProtocolError as exc:
+            self._send(conn, reply_error(None, exc.code, exc.message))
+            return
+        try:
+            self._dispatch(conn, request)
+        except ProtocolError as exc:
+            self._send(conn, reply_error(request.id, exc.code, exc.message))
+
+    def _dispatch(self, conn: Conn, request: Request) -> None:
+        who = f"control socket, uid {conn.uid}"
+        cmd, rid = request.cmd, request.id
+        if cmd == "status":
+            self._send(conn, reply_ok(rid, **self.machine.status()))
+        elif cmd == "run":
+            size = request.fields["program_bytes"]
+            if self.machine.job is not None or self.machine.state.value != "IDLE":
+                conn.discard = size  # refused at once: the program text is skipped unread
+                self.machine._require_idle()
+            conn.run = (request, bytearray())
+        elif cmd in ("abort", "estop"):
+            getattr(self.machine, cmd)(f"{'aborted' if cmd == 'abort' else 'e-stop'} by "
+                                       f"operator ({who})")
+            self._send(conn, reply_ok(rid, state=self.machine.state.value))
+        elif cmd == "reset":
+            self.machine.reset()
+            self._send(conn, reply_ok(rid, state=self.machine.state.value))
+        elif cmd == "log":
+            self._send(conn, reply_ok(rid, events=self.log.last(request.fields.get("lines", 50))))
+            if request.fields.get("follow"):
+                conn.topics.add("log")
+        elif cmd == "subscribe":
+            conn.topics.update(request.fields.get("topics", ["state"]))
+            self._send(conn, reply_ok(rid, topics=sorted(conn.topics)))
+
+    def _start_run(self, conn: Conn, request: Request, text: bytes) -> None:
+        name = request.fields.get("name", "program.nc")
+        follow = request.fields.get("follow", True)
+        emit = self.emitter(conn) if follow else (lambda event: None)
+        try:
+            job = self.machine.start_job(name, text, emit)
+        except ProtocolError as exc:
+            self._send(conn, reply_error(request.id, exc.code, exc.message))
+            return
+        self.log.log(INFO, f"job {job}: {name!r} ({len(text)} bytes) from uid {conn.uid}")
+        self._send(conn, reply_ok(request.id, job=job, state=self.machine.state.value))
+
+    # -- output -------------------------------------------------------------------------------
+    def _drain_wake(self) -> None:
+        try:
+            while self._wake_r.recv(4096):
+                pass
+        except BlockingIOError:
+            pass
+
+    def _deliver(self) -> None:
+        while True:
+            try:
+                conn, topic, event = self.inbox.get_nowait()
+            except queue.Empty:
+                return
+            data = encode(event)
+            targets = ([conn] if conn is not None else
+                       [c for c in self.conns if topic in c.topics])
+            for target in targets:
+                if target in self.conns:
+                    self._send(target, data)
+
+    def _send(self, conn: Conn, data: bytes) -> None:
+        conn.out += data
+        if len(conn.out) > MAX_OUTPUT_BYTES:
+            self.log.log(WARNING, f"control socket: dropped a client {len(conn.out)} bytes "
+                                  "behind")
+            self._close(conn)
+            return
+        self._flush(conn)
+
+    def _flush(self, conn: Conn) -> None:
+        if conn not in self.conns:
+            return
+        try:
+            sent = conn.sock.send(conn.out) if conn.out else 0
+            del conn.out[:sent]
+        except BlockingIOError:
+            pass
+        except OSError:
+            self._close(conn)
+            return
+        if conn.closing and not conn.out:
+            self._close(conn)
+            return
+        want = selectors.EVENT_READ | (selectors.EVENT_WRITE if conn.out else 0)
+        self.sel.modify(conn.sock, want, conn)
+
+    def _expire(self) -> None:
+        now = time.monotonic()
+        for conn in list(self.conns):
+            quiet_s = now - conn.last_s
+            busy = conn.run is not None or conn.discard or conn.reader.pending
+            if busy and quiet_s > READ_TIMEOUT_S:
+                self._send(conn, reply_error(None, "timeout", f"request not completed within "
+                                                              f"{READ_TIMEOUT_S:.0f} s"))
+                conn.closing = True
+                self._flush(conn)
+            elif conn.idle and not conn.out and quiet_s > IDLE_TIMEOUT_S:
+                self._close(conn)
+
+    def _close(self, conn: Conn) -> None:
+        if conn in self.conns:
+            self.conns.discard(conn)
+            try:
+                self.sel.unregister(conn.sock)
+            except (KeyError, ValueError):
+                pass
+            conn.sock.close()
+
+
+def _send_now(sock: socket.socket, data: bytes) -> None:
+    try:
+        sock.send(data)
+    except OSError:
+        pass
+
+
+def _connection_cap(configured: int) -> int:
+    """At most the configured count, and always well inside the descriptor limit."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    return max(4, min(configured, (soft - 64) // 2 if soft > 0 else configured))
+
