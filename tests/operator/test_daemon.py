@@ -292,3 +292,41 @@ def test_a_long_check_keeps_the_watchdog_fed(tmp_path: Path) -> None:
         pings = d.notify.times("WATCHDOG=1")
         gaps = [b - a for a, b in zip(pings, pings[1:], strict=False)]
         assert max(gaps) < 0.6, gaps  # pinged every 0.3 s all through the check
+
+
+def test_a_client_that_hangs_up_mid_run_does_not_stop_the_daemon(tmp_path: Path) -> None:
+    program = tmp_path / "loops.nc"  # ends where it starts, so it can run twice in a row
+    moves = "".join(f"G1 X{x} Y{y}\n" for _ in range(12) for x, y in
+                    ((1, 0), (1, 1), (0, 1), (0, 0)))
+    program.write_text("G21 G90 G64 F1200\n" + moves + "M2\n")
+    with running_cncd(tmp_path) as d:
+        d.cncctl("reset")
+        run = start_run(d, program)
+        wait_moving(run)
+        run.kill()  # the client dies; the job is the machine's, it goes on to its end
+        run.wait()
+        deadline = time.monotonic() + 20
+        while d.status()["state"] != "IDLE":
+            assert time.monotonic() < deadline and d.proc.poll() is None
+            time.sleep(0.1)
+        assert d.status()["last_job"]["state"] == "DONE"
+        assert d.cncctl("run", str(program)).returncode == 0  # and it serves the next one
+
+
+def test_a_run_is_not_evicted_by_a_flood_of_idle_connections(tmp_path: Path) -> None:
+    with running_cncd(tmp_path) as d:
+        d.cncctl("reset")
+        run = start_run(d, AIRFOIL)
+        flood = []
+        try:
+            wait_moving(run)
+            for _ in range(200):  # far over the cap of 64: idle ones make room, not the run
+                s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+                s.connect(d.socket_path)
+                flood.append(s)
+            out, _ = run.communicate(timeout=30)
+        finally:
+            run.kill()
+            for s in flood:
+                s.close()
+        assert run.returncode == 0 and json.loads(out.splitlines()[-1])["event"] == "done"

@@ -47,10 +47,13 @@ class Conn:
     run: tuple[Request, bytearray] | None = None  # a run request waiting for its program
     discard: int = 0  # program bytes still to skip after a refused run
     closing: bool = False  # close once `out` is sent
+    following: bool = False  # receives the events of the job it started
 
     @property
     def idle(self) -> bool:
-        return not self.topics and self.run is None and not self.reader.pending
+        """Nothing owed either way: may be closed to make room for another client."""
+        return (not self.topics and not self.following and self.run is None
+                and not self.reader.pending)
 
 
 class AccessPolicy:
@@ -307,6 +310,7 @@ class Server:
         except ProtocolError as exc:
             self._send(conn, reply_error(request.id, exc.code, exc.message))
             return
+        conn.following = bool(follow)
         self.log.log(INFO, f"job {job}: {name!r} ({len(text)} bytes) from uid {conn.uid}")
         self._send(conn, reply_ok(request.id, job=job, state=self.machine.state.value))
 
