@@ -258,6 +258,9 @@ class Machine:
 
     def _record(self, job: Job, result: MotionResult) -> None:
         summary = result_summary(result)
+        if result.extra.get("realtime") == "SCHED_OTHER":
+            self.log.warn_once("rt", "the motion thread runs without SCHED_FIFO (no "
+                                     "LimitRTPRIO or CAP_SYS_NICE): late cycles are likelier")
         position = summary["final_position_mm"] if result.position_known else None
         self.journal.update(state=result.outcome.value.upper(), last_line=result.line,
                             position_mm=position, fault=result.message or None)
