@@ -1,0 +1,255 @@
+"""The serial pulse card's binary wire protocol: frame encode/decode and a resynchronising decoder.
+
+Every frame is SYNC, TYPE, LEN, PAYLOAD (LEN bytes), CRC16, little-endian throughout. The CRC is
+CRC-16/CCITT-FALSE (`binascii.crc_hqx(data, 0xFFFF)`) over SYNC..PAYLOAD, sent low byte first.
+Host -> card frames start with 0xA5, card -> host frames with 0x5A. See docs/serial-protocol.md.
+"""
+
+from __future__ import annotations
+
+import binascii
+import struct
+from dataclasses import dataclass
+
+HOST_SYNC = 0xA5  # host -> card
+CARD_SYNC = 0x5A  # card -> host
+
+T_SAMPLE8 = 0x01  # one sample, int8 pulse counts per axis
+T_SAMPLE16 = 0x02  # one sample, int16 pulse counts per axis
+T_RESET = 0x10  # clear latched flags, discard the FIFO, answer with a status frame
+T_STATUS_REQUEST = 0x11  # answer with a status frame now
+T_END = 0x12  # end of stream after the samples already sent (no new sample)
+T_STATUS = 0x80  # card -> host status report
+
+FLAG_END_OF_STREAM = 0x01  # sample flag: the last frame of a program
+
+# Latched status bits (cleared only by a reset frame).
+ST_UNDERRUN = 0x01  # FIFO ran empty mid-stream; the card stopped
+ST_BAD_FRAME = 0x02  # a frame with a bad CRC, a bad length or too many pulses; or FIFO overflow
+ST_SEQ_GAP = 0x04  # a sample's sequence number was not the previous one + 1
+ST_DRIVE_FAULT = 0x08  # an axis amplifier faulted (fault_axis, fault_code say which)
+ST_FOLLOWING_ERROR = 0x10  # the card's own following-error limit tripped (fault_axis)
+ST_LATCHED = 0x1F
+ST_EXECUTED = 0x80  # not latched: the last clock tick executed sample exec_seq
+
+AXES_ALLOWED = (2, 3)
+SEQ_MOD = 1 << 16
+_HEADER = 3  # sync, type, len
+_CRC = 2
+_SAMPLE_FIXED = 3  # seq u16, flags u8
+_CONTROL_LEN = 2  # token u16
+_STATUS_FIXED = struct.calcsize("<HHHBBHHH")  # 14 bytes
+_STATUS_AXIS = struct.calcsize("<iihh")  # 12 bytes per axis
+
+
+class ProtocolError(ValueError):
+    """A frame that cannot be encoded (wrong axis count, value out of range)."""
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One sample period of pulse counts; seq is the 16-bit wire sequence number."""
+
+    seq: int
+    counts: tuple[int, ...]
+    end_of_stream: bool = False
+
+
+@dataclass(frozen=True)
+class Reset:
+    token: int = 0
+
+
+@dataclass(frozen=True)
+class StatusRequest:
+    token: int = 0
+
+
+@dataclass(frozen=True)
+class End:
+    token: int = 0
+
+
+@dataclass(frozen=True)
+class Status:
+    """Card report: counters are after the last executed sample (exec_seq); *_delta is the
+    change over that last sample, so the host also knows the sample before it."""
+
+    reply_to: int  # token of the request answered, 0 for a periodic report
+    fifo_level: int
+    fifo_capacity: int
+    latched: int  # ST_* bits (ST_EXECUTED is not latched)
+    fault_axis: int
+    fault_code: int
+    rx_seq: int  # last sample received (queued), 16-bit
+    exec_seq: int  # last sample executed, 16-bit
+    commanded: tuple[int, ...]  # step counters, int32
+    encoder: tuple[int, ...]  # encoder counts, int32
+    commanded_delta: tuple[int, ...]  # int16
+    encoder_delta: tuple[int, ...]  # int16
+
+
+Frame = Sample | Reset | StatusRequest | End | Status
+_CONTROL = {T_RESET: Reset, T_STATUS_REQUEST: StatusRequest, T_END: End}
+
+
+def crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF), via binascii."""
+    return binascii.crc_hqx(data, 0xFFFF)
+
+
+def _wrap(sync: int, ftype: int, payload: bytes) -> bytes:
+    body = bytes((sync, ftype, len(payload))) + payload
+    return body + struct.pack("<H", crc16(body))
+
+
+def _check_axes(n: int) -> None:
+    if n not in AXES_ALLOWED:
+        raise ProtocolError(f"{n} axes: the protocol carries 2 or 3")
+
+
+def encode_sample(seq: int, counts: tuple[int, ...] | list[int], end_of_stream: bool = False
+                  ) -> bytes:
+    """int8 counts when every count fits in [-128, 127], int16 otherwise."""
+    _check_axes(len(counts))
+    values = [int(c) for c in counts]
+    if all(-128 <= c <= 127 for c in values):
+        ftype, fmt = T_SAMPLE8, "b"
+    elif all(-32768 <= c <= 32767 for c in values):
+        ftype, fmt = T_SAMPLE16, "h"
+    else:
+        raise ProtocolError(f"pulse counts {values} do not fit in int16")
+    flags = FLAG_END_OF_STREAM if end_of_stream else 0
+    payload = struct.pack(f"<HB{len(values)}{fmt}", seq % SEQ_MOD, flags, *values)
+    return _wrap(HOST_SYNC, ftype, payload)
+
+
+def encode_reset(token: int = 0) -> bytes:
+    return _wrap(HOST_SYNC, T_RESET, struct.pack("<H", token % SEQ_MOD))
+
+
+def encode_status_request(token: int = 0) -> bytes:
+    return _wrap(HOST_SYNC, T_STATUS_REQUEST, struct.pack("<H", token % SEQ_MOD))
+
+
+def encode_end(token: int = 0) -> bytes:
+    return _wrap(HOST_SYNC, T_END, struct.pack("<H", token % SEQ_MOD))
+
+
+def encode_status(s: Status) -> bytes:
+    n = len(s.commanded)
+    _check_axes(n)
+    if not (len(s.encoder) == len(s.commanded_delta) == len(s.encoder_delta) == n):
+        raise ProtocolError("status: per-axis fields must have one value per axis")
+    payload = struct.pack("<HHHBBHHH", s.reply_to % SEQ_MOD, s.fifo_level, s.fifo_capacity,
+                          s.latched, s.fault_axis, s.fault_code, s.rx_seq % SEQ_MOD,
+                          s.exec_seq % SEQ_MOD)
+    for i in range(n):
+        payload += struct.pack("<iihh", s.commanded[i], s.encoder[i],
+                               _clamp16(s.commanded_delta[i]), _clamp16(s.encoder_delta[i]))
+    return _wrap(CARD_SYNC, T_STATUS, payload)
+
+
+def encode(frame: Frame) -> bytes:
+    if isinstance(frame, Sample):
+        return encode_sample(frame.seq, frame.counts, frame.end_of_stream)
+    if isinstance(frame, Reset):
+        return encode_reset(frame.token)
+    if isinstance(frame, StatusRequest):
+        return encode_status_request(frame.token)
+    if isinstance(frame, End):
+        return encode_end(frame.token)
+    return encode_status(frame)
+
+
+def _clamp16(v: int) -> int:
+    return max(-32768, min(32767, int(v)))
+
+
+def _plausible(sync: int, ftype: int, length: int) -> bool:
+    """Whether a header can start a frame (lets the decoder skip false syncs quickly)."""
+    if sync == HOST_SYNC:
+        if ftype in (T_SAMPLE8, T_SAMPLE16):
+            width = 1 if ftype == T_SAMPLE8 else 2
+            return any(length == _SAMPLE_FIXED + n * width for n in AXES_ALLOWED)
+        return ftype in _CONTROL and length == _CONTROL_LEN
+    return ftype == T_STATUS and any(length == _STATUS_FIXED + n * _STATUS_AXIS
+                                     for n in AXES_ALLOWED)
+
+
+def decode_payload(ftype: int, payload: bytes) -> Frame:
+    """The frame a (type, payload) pair carries; the length must be plausible."""
+    if ftype in (T_SAMPLE8, T_SAMPLE16):
+        fmt = "b" if ftype == T_SAMPLE8 else "h"
+        n = (len(payload) - _SAMPLE_FIXED) // struct.calcsize(fmt)
+        seq, flags, *counts = struct.unpack(f"<HB{n}{fmt}", payload)
+        return Sample(seq, tuple(counts), bool(flags & FLAG_END_OF_STREAM))
+    if ftype in _CONTROL:
+        (token,) = struct.unpack("<H", payload)
+        return _CONTROL[ftype](token)
+    fixed = struct.unpack("<HHHBBHHH", payload[:_STATUS_FIXED])
+    n = (len(payload) - _STATUS_FIXED) // _STATUS_AXIS
+    axes = [struct.unpack_from("<iihh", payload, _STATUS_FIXED + i * _STATUS_AXIS)
+            for i in range(n)]
+    return Status(*fixed, *(tuple(a[k] for a in axes) for k in range(4)))
+
+
+def decode(data: bytes) -> Frame:
+    """Exactly one whole frame; raises ProtocolError if it is not one."""
+    if not data or data[0] not in (HOST_SYNC, CARD_SYNC):
+        raise ProtocolError(f"not a frame: {data[:8].hex()}")
+    dec = Decoder(data[0])
+    frames = dec.feed(data)
+    if len(frames) != 1 or dec.pending or dec.crc_errors or dec.garbage_bytes:
+        raise ProtocolError(f"not one valid frame: {data.hex()}")
+    return frames[0]
+
+
+class Decoder:
+    """Incremental: feed() bytes as they arrive, get whole frames. After garbage or a bad CRC
+    it drops one byte and looks for the next sync byte, so one bad frame costs one frame."""
+
+    def __init__(self, sync: int) -> None:
+        self.sync = sync
+        self._buf = bytearray()
+        self.crc_errors = 0  # plausible headers whose CRC failed
+        self.garbage_bytes = 0  # bytes skipped while looking for a frame
+        self.frames = 0
+
+    @property
+    def pending(self) -> int:
+        return len(self._buf)
+
+    def feed(self, data: bytes) -> list[Frame]:
+        self._buf += data
+        out: list[Frame] = []
+        buf = self._buf
+        while True:
+            start = buf.find(self.sync)
+            if start < 0:
+                self.garbage_bytes += len(buf)
+                buf.clear()
+                break
+            if start:
+                self.garbage_bytes += start
+                del buf[:start]
+            if len(buf) < _HEADER:
+                break
+            ftype, length = buf[1], buf[2]
+            if not _plausible(self.sync, ftype, length):
+                self.garbage_bytes += 1
+                del buf[:1]
+                continue
+            total = _HEADER + length + _CRC
+            if len(buf) < total:
+                break
+            (crc,) = struct.unpack_from("<H", buf, _HEADER + length)
+            if crc != crc16(bytes(buf[: _HEADER + length])):
+                self.crc_errors += 1
+                self.garbage_bytes += 1
+                del buf[:1]
+                continue
+            out.append(decode_payload(ftype, bytes(buf[_HEADER: _HEADER + length])))
+            self.frames += 1
+            del buf[:total]
+        return out

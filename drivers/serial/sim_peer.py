@@ -1,0 +1,255 @@
+"""Simulated serial pulse card on a pseudo-terminal: frame FIFO, Table II axes, fault injection."""
+
+from __future__ import annotations
+
+import os
+import select
+import threading
+import time
+import tty
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from controller.config import MachineConfig
+from controller.errors import DriveError
+from drivers.serial import protocol as p
+from drivers.sim.axes import SimAxes
+from drivers.sim.fifo import FrameFifo
+
+# Option -> default. Times marked "after" count from the first sample frame received.
+PEER_OPTIONS: dict[str, Any] = {
+    "fifo_frames": 256,
+    "status_period_s": 0.010,
+    "max_pulses_per_frame": 32767,
+    "start_mm": None,
+    "drive_fault_after_frames": None,  # axis amplifier fault after N executed samples
+    "drive_fault_axis": 0,
+    "drive_fault_code": 0x2310,
+    "lag_mm": None,  # extra encoder lag (mechanical drag) after lag_after_frames
+    "lag_after_frames": 200,
+    "lag_axis": 0,
+    "silent_after_s": None,  # stop sending anything (status frames, replies)
+    "corrupt_status_after_s": None,  # every status frame sent with a bad CRC
+    "corrupt_rx_after_frames": None,  # line noise: the next received bytes fail their CRC
+    "drop_frame_after_frames": None,  # lose one received sample (a sequence gap follows)
+}
+
+
+def check_options(options: dict[str, Any]) -> dict[str, Any]:
+    """Options merged over the defaults; an unknown one is a DriveError naming it."""
+    unknown = sorted(set(options) - set(PEER_OPTIONS))
+    if unknown:
+        raise DriveError(f"serial simdrive: unknown option {unknown[0]!r} "
+                         f"(known: {', '.join(sorted(PEER_OPTIONS))})")
+    merged = PEER_OPTIONS | options
+    for key, value in merged.items():
+        if key == "start_mm" or value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int | float) or value < 0:
+            raise DriveError(f"serial simdrive: option {key!r} must be a number >= 0, "
+                             f"got {value!r}")
+    return merged
+
+
+class PeerCard:
+    """The card's logic, clocked by run(); frames in through handle_bytes(), reports out
+    through `send` (bytes)."""
+
+    def __init__(self, config: MachineConfig, options: dict[str, Any],
+                 send: Callable[[bytes], None]) -> None:
+        self.opt = check_options(options)
+        self.send_raw = send
+        self.n = len(config.axes)
+        self.period_s = config.sample_period_s
+        self.status_period_s = float(self.opt["status_period_s"])
+        self.max_pulses = int(self.opt["max_pulses_per_frame"])
+        pulse_mm = np.array([a.pulse_mm for a in config.axes])
+        start = self.opt["start_mm"] if self.opt["start_mm"] is not None else [0.0] * self.n
+        self.fifo = FrameFifo(int(self.opt["fifo_frames"]), self.n)
+        self.axes = SimAxes(config, np.rint(np.asarray(start, float) / pulse_mm).astype(np.int64))
+        self.axis_names = config.axis_names
+        self.decoder = p.Decoder(p.HOST_SYNC)
+        self.latched = 0
+        self.fault_axis = self.fault_code = 0
+        self.expect_seq: int | None = None  # None after power-up or reset: any seq is accepted
+        self.rx_seq = self.exec_seq = p.SEQ_MOD - 1
+        self.streaming = False
+        self.executed_last_tick = False
+        self.prev_cmd = self.cur_cmd = self.axes.commanded.copy()
+        self.prev_enc = self.cur_enc = self.axes.encoder(self.axes.actual_mm)
+        self.samples_rx = 0
+        self.samples_exec = 0
+        self.first_rx_s: float | None = None
+        self.injected: set[str] = set()
+        self.t0_s = time.monotonic()
+        self.ticks = 0
+
+    # -- receiving --------------------------------------------------------------------------
+    def handle_bytes(self, data: bytes) -> None:
+        after = self.opt["corrupt_rx_after_frames"]
+        if after is not None and self.samples_rx >= after and "rx" not in self.injected and data:
+            self.injected.add("rx")
+            data = data[:-1] + bytes([data[-1] ^ 0xFF])  # the last CRC byte of this chunk
+        errors = self.decoder.crc_errors
+        frames = self.decoder.feed(data)
+        if self.decoder.crc_errors > errors:
+            self.latched |= p.ST_BAD_FRAME
+        for frame in frames:
+            self.handle(frame)
+
+    def handle(self, frame: p.Frame) -> None:
+        if isinstance(frame, p.Sample):
+            self._sample(frame)
+        elif isinstance(frame, p.Reset):
+            self.fifo.clear()
+            self.latched = 0
+            self.fault_axis = self.fault_code = 0
+            self.expect_seq = None
+            self.streaming = False
+            self.send_status(frame.token)
+        elif isinstance(frame, p.StatusRequest):
+            self.send_status(frame.token)
+        elif isinstance(frame, p.End):
+            if not self.fifo.mark_end():
+                self.streaming = False
+
+    def _sample(self, s: p.Sample) -> None:
+        self.samples_rx += 1
+        if self.first_rx_s is None:
+            self.first_rx_s = time.monotonic()
+        drop = self.opt["drop_frame_after_frames"]
+        if drop is not None and self.samples_rx == drop + 1:
+            return  # lost on the wire
+        if self.latched & p.ST_LATCHED:
+            return  # halted: nothing is queued until a reset
+        if self.expect_seq is not None and s.seq != self.expect_seq:
+            self.latched |= p.ST_SEQ_GAP
+            return
+        if len(s.counts) != self.n or max(abs(c) for c in s.counts) > self.max_pulses \
+                or len(self.fifo) >= self.fifo.capacity:
+            self.latched |= p.ST_BAD_FRAME
+            return
+        self.fifo.push(np.asarray([s.counts], dtype=np.int64), s.seq, s.end_of_stream)
+        self.rx_seq = s.seq
+        self.expect_seq = (s.seq + 1) % p.SEQ_MOD
+        self.streaming = True
+
+    # -- clocking ---------------------------------------------------------------------------
+    def clock(self, n: int) -> None:
+        frames = np.zeros((0, self.n), dtype=np.int64)
+        seq = np.zeros(0, dtype=np.int64)
+        if not self.latched & p.ST_LATCHED:
+            frames, seq, eos = self.fifo.pop(n)
+            if eos.any():
+                self.streaming = bool(len(self.fifo)) or not eos[-1]
+            if len(frames) < n and self.streaming:
+                self.latched |= p.ST_UNDERRUN
+        idle = np.zeros((n - len(frames), self.n), dtype=np.int64)
+        cmd, enc = self.axes.step(np.concatenate([frames, idle]))
+        if n >= 2:
+            self.prev_cmd, self.prev_enc = cmd[-2], enc[-2]
+        elif n == 1:
+            self.prev_cmd, self.prev_enc = self.cur_cmd, self.cur_enc
+        if n:
+            self.cur_cmd, self.cur_enc = cmd[-1], enc[-1]
+        self.executed_last_tick = len(frames) == n and n > 0
+        if len(frames):
+            self.exec_seq = int(seq[-1]) % p.SEQ_MOD
+            self.samples_exec += len(frames)
+        self.ticks += n
+        self._inject_clocked()
+
+    def _inject_clocked(self) -> None:
+        after = self.opt["drive_fault_after_frames"]
+        if after is not None and self.samples_exec >= after and "fault" not in self.injected:
+            self.injected.add("fault")
+            self.fault_axis = int(self.opt["drive_fault_axis"])
+            self.fault_code = int(self.opt["drive_fault_code"])
+            self.axes.freeze(self.fault_axis)
+            self.latched |= p.ST_DRIVE_FAULT
+        lag = self.opt["lag_mm"]
+        if lag is not None and self.samples_exec >= int(self.opt["lag_after_frames"]) \
+                and "lag" not in self.injected:
+            self.injected.add("lag")
+            self.axes.add_lag(int(self.opt["lag_axis"]), abs(float(lag)), 20)
+
+    def _after(self, key: str) -> bool:
+        after = self.opt[key]
+        return (after is not None and self.first_rx_s is not None
+                and time.monotonic() - self.first_rx_s >= float(after))
+
+    def send_status(self, reply_to: int = 0) -> None:
+        if self._after("silent_after_s"):
+            return
+        cur_cmd, cur_enc = self.cur_cmd, self.cur_enc
+        status = p.Status(
+            reply_to=reply_to, fifo_level=len(self.fifo), fifo_capacity=self.fifo.capacity,
+            latched=self.latched | (p.ST_EXECUTED if self.executed_last_tick else 0),
+            fault_axis=self.fault_axis, fault_code=self.fault_code, rx_seq=self.rx_seq,
+            exec_seq=self.exec_seq, commanded=tuple(int(c) for c in cur_cmd),
+            encoder=tuple(int(e) for e in cur_enc),
+            commanded_delta=tuple(int(c) for c in cur_cmd - self.prev_cmd),
+            encoder_delta=tuple(int(e) for e in cur_enc - self.prev_enc))
+        data = p.encode_status(status)
+        if self._after("corrupt_status_after_s"):
+            data = data[:-1] + bytes([data[-1] ^ 0xFF])
+        self.send_raw(data)
+
+    def run(self, read_fd: int, stop: threading.Event) -> None:
+        """Serve until stop is set: one frame per T in wall-clock time (a late wake-up clocks
+        every frame that fell due), a status frame every status period."""
+        self.t0_s = time.monotonic()
+        next_status_s = self.t0_s + self.status_period_s
+        while not stop.is_set():
+            now_s = time.monotonic()
+            next_tick_s = self.t0_s + (self.ticks + 1) * self.period_s
+            wait_s = max(0.0, min(next_tick_s, next_status_s) - now_s)
+            ready, _, _ = select.select([read_fd], [], [], wait_s)
+            if ready:
+                try:
+                    self.handle_bytes(os.read(read_fd, 4096))
+                except BlockingIOError:
+                    pass
+            now_s = time.monotonic()
+            due = int((now_s - self.t0_s) / self.period_s) - self.ticks
+            if due > 0:
+                self.clock(due)
+            if now_s >= next_status_s:
+                self.send_status()
+                next_status_s = max(next_status_s + self.status_period_s, now_s)
+
+
+def _try_realtime(priority: int = 70) -> None:
+    """A card keeps time in hardware; the simulated one asks for SCHED_FIFO to come close (a
+    starved card would look like a silent one). Without the privilege it runs as it is."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (AttributeError, OSError):
+        pass
+
+
+def serve(config: MachineConfig, options: dict[str, Any], announce: Callable[[str], None],
+          stop: threading.Event) -> None:
+    """`cncctl simdrive serial`: the card on a new pty; announce(path) once it can be opened."""
+    check_options(options)
+    master_fd, slave_fd = os.openpty()
+    try:
+        tty.setraw(slave_fd)
+        os.set_blocking(master_fd, False)
+
+        def send(data: bytes) -> None:
+            try:
+                os.write(master_fd, data)
+            except (BlockingIOError, OSError):
+                pass  # nobody reading: the bytes are lost, as on a real UART
+
+        card = PeerCard(config, options, send)
+        _try_realtime()
+        # The slave stays open here too, so the pty survives hosts closing and reopening it.
+        announce(os.ttyname(slave_fd))
+        card.run(master_fd, stop)
+    finally:
+        os.close(master_fd)
+        os.close(slave_fd)
