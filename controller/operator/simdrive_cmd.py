@@ -24,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", help="machine configuration (default: the backend's "
                                          "built-in config, canopen or serial)")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                        help="simulator option (repeatable), e.g. fault_after_s=0.5")
+                        help="simulator option (repeatable), e.g. drive_fault_after_s=0.5")
 
 
 def _announce(path: str) -> None:

@@ -1,0 +1,102 @@
+"""CiA 301/402 numbers shared by the backend and the simulated drive: objects, words, codes."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+EDS_PATH = Path(__file__).with_name("cia402_drive.eds")
+
+# -- objects (index) ----------------------------------------------------------------------
+DEVICE_TYPE = 0x1000
+ERROR_REGISTER = 0x1001
+CONSUMER_HEARTBEAT = 0x1016  # sub 1: (producer node id << 16) | time ms
+PRODUCER_HEARTBEAT = 0x1017  # ms
+IDENTITY = 0x1018
+RPDO1_COMM, RPDO1_MAP, TPDO1_COMM, TPDO1_MAP = 0x1400, 0x1600, 0x1800, 0x1A00
+ABORT_CONNECTION = 0x6007  # 0 nothing, 1 fault, 2 disable voltage, 3 quick stop
+ERROR_CODE = 0x603F
+CONTROLWORD, STATUSWORD = 0x6040, 0x6041
+MODE, MODE_DISPLAY = 0x6060, 0x6061
+POSITION_ACTUAL = 0x6064
+FERROR_WINDOW, FERROR_TIMEOUT = 0x6065, 0x6066  # counts, ms
+TARGET_POSITION = 0x607A
+INTERPOLATION_PERIOD = 0x60C2  # sub 1 mantissa, sub 2 exponent (10^n s)
+SUPPORTED_MODES = 0x6502
+
+MODE_CSP = 8
+SUPPORTS_CSP = 0x80  # 0x6502 bit 7
+DEVICE_PROFILE_402 = 402  # low 16 bits of 0x1000
+
+# The PDO layout the backend relies on (read back at bring-up): (index, subindex, bits).
+RPDO1_LAYOUT = ((CONTROLWORD, 0, 16), (TARGET_POSITION, 0, 32))
+TPDO1_LAYOUT = ((STATUSWORD, 0, 16), (POSITION_ACTUAL, 0, 32))
+PDO1 = struct.Struct("<Hi")  # both PDO1s: a 16-bit word then a 32-bit position
+
+# -- controlword commands -----------------------------------------------------------------
+CW_DISABLE_VOLTAGE = 0x00
+CW_QUICK_STOP = 0x02
+CW_SHUTDOWN = 0x06
+CW_SWITCH_ON = 0x07
+CW_ENABLE_OPERATION = 0x0F
+CW_FAULT_RESET = 0x80
+
+# -- statusword ---------------------------------------------------------------------------
+SW_STATES = (  # (mask, value, name), as canopen.profiles.p402.State402.SW_MASK
+    (0x4F, 0x00, "NOT READY TO SWITCH ON"),
+    (0x4F, 0x40, "SWITCH ON DISABLED"),
+    (0x6F, 0x21, "READY TO SWITCH ON"),
+    (0x6F, 0x23, "SWITCHED ON"),
+    (0x6F, 0x27, "OPERATION ENABLED"),
+    (0x4F, 0x08, "FAULT"),
+    (0x4F, 0x0F, "FAULT REACTION ACTIVE"),
+    (0x6F, 0x07, "QUICK STOP ACTIVE"),
+)
+STATE_BITS = {name: value for _, value, name in SW_STATES}
+SW_VOLTAGE_ENABLED = 0x0010
+SW_QUICK_STOP = 0x0020  # set = quick stop NOT active
+SW_REMOTE = 0x0200
+SW_FOLLOWS_COMMAND = 0x1000  # CSP: drive follows the command value
+SW_FOLLOWING_ERROR = 0x2000  # CSP: following error
+
+
+def state_of(statusword: int) -> str:
+    for mask, value, name in SW_STATES:
+        if statusword & mask == value:
+            return name
+    return "UNKNOWN"
+
+
+# -- EMCY codes ---------------------------------------------------------------------------
+EMCY_FOLLOWING_ERROR = 0x8611
+EMCY_HEARTBEAT = 0x8130
+EMCY_OVERCURRENT = 0x2310
+EMCY_TEXT = {
+    0x2310: "over-current",
+    0x3210: "DC link over-voltage",
+    0x4310: "drive over-temperature",
+    0x5530: "EEPROM error",
+    0x7305: "encoder error",
+    0x8130: "heartbeat lost (the drive lost the master's heartbeat)",
+    0x8611: "following error",
+    0xFF00: "manufacturer-specific fault",
+}
+
+
+def emcy_text(code: int) -> str:
+    """0x8611 -> '0x8611 following error' (the class of the code when it is not listed)."""
+    name = EMCY_TEXT.get(code) or EMCY_TEXT.get(code & 0xFF00) or {
+        0x1000: "generic error", 0x2000: "current", 0x3000: "voltage", 0x4000: "temperature",
+        0x5000: "device hardware", 0x6000: "device software", 0x7000: "additional modules",
+        0x8000: "monitoring", 0x9000: "external error", 0xF000: "additional functions",
+    }.get(code & 0xF000, "error")
+    return f"0x{code:04X} {name}"
+
+
+def period_code(period_s: float) -> tuple[int, int]:
+    """0x60C2 (mantissa u8, exponent i8) for a period: 0.001 s -> (1, -3), 0.0025 -> (25, -4)."""
+    for exponent in range(-3, -7, -1):
+        mantissa = period_s / 10.0**exponent
+        if abs(mantissa - round(mantissa)) < 1e-6 * mantissa and round(mantissa) <= 255:
+            return int(round(mantissa)), exponent
+    raise ValueError(f"sample period {period_s} s cannot be written to 0x60C2")

@@ -1,0 +1,331 @@
+"""Simulated CiA 402 drives: a canopen LocalNode per axis, CSP through the Table II servo model."""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import canopen
+import numpy as np
+from canopen.sdo import SdoAbortedError
+
+from controller.config import AxisConfig, MachineConfig
+from controller.errors import DriveError
+from controller.generator.dynamics.servo import AxisServoStepper, discretise
+from drivers.canopen import cia402 as c
+from drivers.canopen.options import drive_layout
+
+SDO_ABORT_VALUE_RANGE = 0x06090030  # "value range of parameter exceeded"
+LAG_RAMP_SYNCS = 20  # injected lag ramps in over this many cycles (as drivers/sim/axes.py)
+WATCHDOG_PERIOD_S = 0.01
+
+
+@dataclass
+class Injections:
+    """Fault injection for one axis; times count SYNC cycles since the first enable."""
+
+    fault_after_s: float | None = None
+    fault_code: int = c.EMCY_OVERCURRENT
+    lag_mm: float = 0.0
+    lag_after_s: float = 0.0
+    silent_after_s: float | None = None
+    sdo_abort_index: int | None = None
+
+
+class SimAxis402:
+    """One drive: SDO server, NMT slave and EMCY producer (LocalNode) plus what LocalNode lacks:
+    the CiA 402 state machine, synchronous RPDO latching, TPDO1 on SYNC, CSP on the servo model,
+    following-error supervision (0x6065/0x6066) and the master-heartbeat consumer (0x1016)."""
+
+    def __init__(self, network: canopen.Network, node_id: int, axis: AxisConfig,
+                 counts_per_mm: float, period_s: float, inject: Injections) -> None:
+        self.node = canopen.LocalNode(node_id, canopen.import_od(str(c.EDS_PATH), node_id))
+        network.add_node(self.node)
+        self.network, self.id, self.name = network, node_id, axis.name
+        self.counts_per_mm, self.period_s, self.inject = counts_per_mm, period_s, inject
+        self.stepper = AxisServoStepper(discretise(axis.servo, period_s))
+        self.lock = threading.RLock()
+        od = self.node.object_dictionary
+        self.rpdo_cob = od[c.RPDO1_COMM][1].default
+        self.tpdo_cob = od[c.TPDO1_COMM][1].default
+        network.subscribe(self.rpdo_cob, self._on_rpdo)
+        self.node.add_read_callback(self._on_read)
+        self.node.add_write_callback(self._on_write)
+        self.state = "SWITCH ON DISABLED"
+        self.mode = 0
+        self.controlword = 0
+        self.latched: tuple[int, int] | None = None  # RPDO1 (controlword, target), next SYNC
+        self.target = self.ref = self.position = 0  # counts
+        self.actual_mm = 0.0
+        self.error_code = 0
+        self.window, self.timeout_ms, self.abort_option = 2000, 10, 1
+        self.consumer_id, self.consumer_ms = 0, 0
+        self.ferror_syncs = 0
+        self.lag_mm = self.lag_target_mm = 0.0
+        self.silent = False
+        self.syncs_enabled = 0  # SYNC cycles since the first enable: the injection clock
+        self.tpdos_sent = 0
+        self.emcy_sent: list[int] = []
+        self.node.nmt.send_command(0x80)  # boot into PRE-OPERATIONAL
+
+    # -- SDO and RPDO ---------------------------------------------------------------------
+    def _on_read(self, index: int, subindex: int, od: Any) -> int | None:
+        live = {c.STATUSWORD: self.statusword, c.POSITION_ACTUAL: self.position,
+                c.MODE_DISPLAY: self.mode, c.ERROR_CODE: self.error_code,
+                c.ERROR_REGISTER: 0x01 if self.state == "FAULT" else 0,
+                0x6062: self.ref, 0x60F4: self.ref - self.position}
+        with self.lock:
+            return live.get(index)
+
+    def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        if self.silent:
+            raise SdoAbortedError(0x08000000)
+        if index == self.inject.sdo_abort_index:
+            raise SdoAbortedError(SDO_ABORT_VALUE_RANGE)
+        value = od.decode_raw(data)
+        with self.lock:
+            if index == c.CONTROLWORD:
+                self.command(int(value))
+            elif index == c.MODE:
+                self.mode = int(value) if int(value) == c.MODE_CSP else self.mode
+            elif index == c.TARGET_POSITION:
+                self.target = int(value)
+            elif index == c.FERROR_WINDOW:
+                self.window = int(value)
+            elif index == c.FERROR_TIMEOUT:
+                self.timeout_ms = int(value)
+            elif index == c.ABORT_CONNECTION:
+                self.abort_option = int(value)
+            elif index == c.CONSUMER_HEARTBEAT and subindex == 1:
+                self.consumer_id, self.consumer_ms = (int(value) >> 16) & 0x7F, int(value) & 0xFFFF
+
+    def _on_rpdo(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if len(data) != c.PDO1.size or self.node.nmt.state != "OPERATIONAL":
+            return
+        with self.lock:
+            self.latched = c.PDO1.unpack_from(data)
+
+    # -- CiA 402 state machine ------------------------------------------------------------
+    def command(self, cw: int) -> None:
+        """Apply a controlword (an SDO write does it at once, RPDO1 at the next SYNC)."""
+        rising_reset = cw & c.CW_FAULT_RESET and not self.controlword & c.CW_FAULT_RESET
+        self.controlword = cw
+        s = self.state
+        if s == "FAULT":
+            if rising_reset:
+                self.state, self.error_code = "SWITCH ON DISABLED", 0
+                self.node.emcy.reset()
+            return
+        if not cw & 0x02:  # disable voltage (7, 9, 10, 12)
+            self.state = "SWITCH ON DISABLED"
+        elif not cw & 0x04:  # quick stop
+            self.state = "QUICK STOP ACTIVE" if s in ("OPERATION ENABLED", "QUICK STOP ACTIVE") \
+                else "SWITCH ON DISABLED"
+        elif cw & 0x0F == c.CW_SHUTDOWN:  # 2, 6, 8
+            if s in ("SWITCH ON DISABLED", "SWITCHED ON", "OPERATION ENABLED"):
+                self.state = "READY TO SWITCH ON"
+        elif cw & 0x0F == c.CW_SWITCH_ON:  # 3, 5
+            if s in ("READY TO SWITCH ON", "OPERATION ENABLED"):
+                self.state = "SWITCHED ON"
+        elif cw & 0x0F == c.CW_ENABLE_OPERATION:  # 3 + 4, 4, 16
+            if s in ("READY TO SWITCH ON", "SWITCHED ON", "QUICK STOP ACTIVE"):
+                self.state = "OPERATION ENABLED"
+
+    @property
+    def statusword(self) -> int:
+        sw = c.STATE_BITS[self.state] | c.SW_REMOTE
+        if self.state in ("READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED",
+                          "QUICK STOP ACTIVE"):
+            sw |= c.SW_VOLTAGE_ENABLED
+        if self.state == "OPERATION ENABLED" and self.mode == c.MODE_CSP:
+            sw |= c.SW_FOLLOWS_COMMAND
+        if abs(self.ref - self.position) > self.window:
+            sw |= c.SW_FOLLOWING_ERROR
+        return sw
+
+    def fault(self, code: int) -> None:
+        """Fault reaction: power off (the axis holds where it is in the model), EMCY."""
+        with self.lock:
+            if self.state == "FAULT" or self.silent:
+                return
+            self.state, self.error_code = "FAULT", code
+        self.emcy_sent.append(code)
+        self.node.emcy.send(code, 0x01 if code != c.EMCY_HEARTBEAT else 0x11)
+
+    def mute(self) -> None:
+        """Power loss / pulled cable: no heartbeat, no PDO, no EMCY, no SDO answer."""
+        with self.lock:
+            self.silent = True
+        self.node.nmt.stop_heartbeat()
+        self.network.unsubscribe(self.node.sdo.rx_cobid)
+
+    # -- one SYNC -------------------------------------------------------------------------
+    def on_sync(self) -> None:
+        with self.lock:
+            if self.silent or self.node.nmt.state != "OPERATIONAL":
+                return
+            if self.latched is not None:
+                cw, self.target = self.latched
+                self.latched = None
+                self.command(cw)
+            enabled = self.state == "OPERATION ENABLED"
+            if enabled or self.syncs_enabled:
+                self.syncs_enabled += 1
+            self._injections()
+            if self.silent:
+                return
+            if enabled and self.mode == c.MODE_CSP:
+                new_ref = self.target
+            else:  # disabled, quick stop, fault: the reference stays (the motor holds)
+                new_ref = self.ref
+            v_mm_s = (new_ref - self.ref) / self.counts_per_mm / self.period_s
+            self.ref = new_ref
+            err_mm = float(self.stepper.step(np.array([v_mm_s]))[0])
+            self.lag_mm = min(self.lag_target_mm,
+                              self.lag_mm + self.inject.lag_mm / LAG_RAMP_SYNCS)
+            self.actual_mm = self.ref / self.counts_per_mm - err_mm - self.lag_mm
+            self.position = int(round(self.actual_mm * self.counts_per_mm))
+            over = abs(self.ref - self.position) > self.window and enabled
+            self.ferror_syncs = self.ferror_syncs + 1 if over else 0
+            trip = self.ferror_syncs * self.period_s * 1e3 > self.timeout_ms
+            data = c.PDO1.pack(self.statusword, self.position)
+        if trip:
+            self.fault(c.EMCY_FOLLOWING_ERROR)
+            data = c.PDO1.pack(self.statusword, self.position)
+        self.network.send_message(self.tpdo_cob, data)
+        self.tpdos_sent += 1
+
+    def _injections(self) -> None:
+        t_s = self.syncs_enabled * self.period_s
+        inj = self.inject
+        if inj.fault_after_s is not None and t_s >= inj.fault_after_s:
+            inj.fault_after_s = None  # once: a fault reset then clears it
+            self.fault(inj.fault_code)
+        if inj.lag_mm and t_s >= inj.lag_after_s and self.lag_target_mm == 0.0:
+            self.lag_target_mm = abs(inj.lag_mm)
+        if inj.silent_after_s is not None and t_s >= inj.silent_after_s:
+            self.mute()
+
+    def master_heartbeat_lost(self, age_s: float) -> None:
+        """0x1016 consumer time elapsed: 0x6007 says what to do (1 fault, 2 disable, 3 qs)."""
+        with self.lock:
+            if self.state not in ("OPERATION ENABLED", "QUICK STOP ACTIVE", "SWITCHED ON"):
+                return
+            option = self.abort_option
+            if option == 2:
+                self.state = "SWITCH ON DISABLED"
+            elif option == 3:
+                self.state = "QUICK STOP ACTIVE"
+        if option == 1:
+            self.fault(c.EMCY_HEARTBEAT)
+
+
+class SimDriveSet:
+    """The simulated drives of a machine on one CAN bus (in-process python-can `virtual` by
+    default). Options (strict): drive_fault_after_s, drive_fault_code, lag_mm, lag_after_s,
+    silent_after_s, sdo_abort_index, fault_axis (x); times count from the first enable."""
+
+    OPTIONS = frozenset({"drive_fault_after_s", "drive_fault_code", "lag_mm", "lag_after_s",
+                         "silent_after_s", "sdo_abort_index", "fault_axis"})
+
+    def __init__(self, config: MachineConfig, options: dict[str, Any] | None = None,
+                 channel: str = "cncsim", interface: str = "virtual",
+                 watchdog: bool = True) -> None:
+        options = dict(options or {})
+        unknown = sorted(set(options) - self.OPTIONS)
+        if unknown:
+            raise DriveError(f"unknown simulated drive option(s): {', '.join(unknown)} "
+                             f"(have: {', '.join(sorted(self.OPTIONS))})")
+        layout = drive_layout(config)
+        names = config.axis_names
+        fault_axis = str(options.get("fault_axis", names[0]))
+        if fault_axis not in names:
+            raise DriveError(f"fault_axis {fault_axis!r} is not an axis ({', '.join(names)})")
+        self.network = canopen.Network()
+        self.network.NOTIFIER_CYCLE = 0.05  # a quick close
+        self.network.connect(interface=interface, channel=channel, receive_own_messages=False)
+        self.master_id = layout.master_node_id
+        self.axes: list[SimAxis402] = []
+        for axis, node_id, cpm in zip(config.axes, layout.node_ids, layout.counts_per_mm,
+                                      strict=True):
+            inject = _injections(options) if axis.name == fault_axis else Injections(
+                sdo_abort_index=_opt_int(options, "sdo_abort_index"))
+            self.axes.append(SimAxis402(self.network, node_id, axis, cpm,
+                                        config.sample_period_s, inject))
+        self.master_seen_s: float | None = None
+        self.syncs = 0
+        self.network.subscribe(0x80, self._on_sync)
+        self.network.subscribe(0x700 + self.master_id, self._on_master_heartbeat)
+        self._stop = threading.Event()
+        self._thread = None
+        if watchdog:
+            self._thread = threading.Thread(target=self._watchdog, name="sim402-hb", daemon=True)
+            self._thread.start()
+
+    def axis(self, name: str) -> SimAxis402:
+        return next(a for a in self.axes if a.name == name)
+
+    def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
+        self.on_sync()
+
+    def on_sync(self) -> None:
+        """One SYNC: every drive applies its latched RPDO, steps, answers its TPDO1."""
+        self.syncs += 1
+        for axis in self.axes:
+            axis.on_sync()
+
+    def _on_master_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
+        self.master_seen_s = time.monotonic()
+
+    def check_master(self, now_s: float | None = None) -> None:
+        """Heartbeat consumer (CiA 301: armed by the first heartbeat received)."""
+        if self.master_seen_s is None:
+            return
+        age_s = (now_s if now_s is not None else time.monotonic()) - self.master_seen_s
+        for axis in self.axes:
+            if axis.consumer_ms and axis.consumer_id == self.master_id \
+                    and age_s * 1e3 > axis.consumer_ms:
+                axis.master_heartbeat_lost(age_s)
+
+    def _watchdog(self) -> None:
+        while not self._stop.wait(WATCHDOG_PERIOD_S):
+            self.check_master()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=1.0)
+        for axis in self.axes:
+            axis.node.nmt.stop_heartbeat()
+        self.network.disconnect()
+
+
+def _opt_int(options: dict[str, Any], key: str) -> int | None:
+    value = options.get(key)
+    if value is None:
+        return None
+    try:
+        return int(value, 0) if isinstance(value, str) else int(value)
+    except ValueError as exc:
+        raise DriveError(f"simulated drive option {key}: {value!r} is not an integer") from exc
+
+
+def _opt_float(options: dict[str, Any], key: str) -> float | None:
+    value = options.get(key)
+    try:
+        return None if value is None else float(value)
+    except (TypeError, ValueError) as exc:
+        raise DriveError(f"simulated drive option {key}: {value!r} is not a number") from exc
+
+
+def _injections(options: dict[str, Any]) -> Injections:
+    return Injections(
+        fault_after_s=_opt_float(options, "drive_fault_after_s"),
+        fault_code=_opt_int(options, "drive_fault_code") or c.EMCY_OVERCURRENT,
+        lag_mm=_opt_float(options, "lag_mm") or 0.0,
+        lag_after_s=_opt_float(options, "lag_after_s") or 0.0,
+        silent_after_s=_opt_float(options, "silent_after_s"),
+        sdo_abort_index=_opt_int(options, "sdo_abort_index"))
+
