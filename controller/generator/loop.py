@@ -21,6 +21,7 @@ from controller.generator.dynamics.prediction import (
     find_violations,
     predict,
 )
+from controller.generator.dynamics.stops import StopError, near_stops, stop_errors, true_error_mm
 from controller.generator.feed.path_plan import (
     FeedInput,
     FeedOutput,
@@ -86,12 +87,30 @@ class RunPlan:
 
 
 def _feed_input(config: MachineConfig, settings: RunSettings,
-                reductions: tuple[Reduction, ...]) -> FeedInput:
+                reductions: tuple[Reduction, ...], stop_accels: dict[float, float]) -> FeedInput:
     ip = config.interpolator
     budget = INITIAL_BUDGET_SHARE * ip.contour_error_limit_mm / acceleration_gain_s2(config)
     return FeedInput(ip.max_feed_mm_s, ip.max_accel_mm_s2, config.sample_period_s,
                      ip.chord_tolerance_mm, ip.reference_curvature_per_mm, budget,
-                     settings.policy, reductions)
+                     settings.policy, reductions, tuple(sorted(stop_accels.items())))
+
+
+# A stop's overshoot grows about as the square of its braking acceleration (51 um at Amax and
+# 20 um at 0.61 Amax from 58 mm/s on Table II), so each round scales that acceleration by the
+# square root of the ratio it must shrink by; never by more than these bounds in one round.
+STOP_ACCEL_STEP = (0.5, 0.97)
+
+
+def _soften_stops(stop_accels: dict[float, float], errors: list[StopError], limit_mm: float,
+                  accel_mm_s2: float) -> bool:
+    """Lower the braking acceleration of each stop the tool overshoots; True if any."""
+    changed = False
+    for e in errors:
+        if e.error_mm > limit_mm:
+            factor = np.clip(np.sqrt(TARGET_FRACTION * limit_mm / e.error_mm), *STOP_ACCEL_STEP)
+            stop_accels[e.s_mm] = float(stop_accels.get(e.s_mm, accel_mm_s2) * factor)
+            changed = True
+    return changed
 
 
 def _reduction(v: Violation, samples: Samples, limit_mm: float, lookback: int) -> Reduction:
@@ -122,6 +141,7 @@ class _Attempt:
     samples: Samples | None = None
     prediction: ServoPrediction | None = None
     violations: tuple[Violation, ...] = ()
+    stop_errors: tuple[StopError, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,7 +168,14 @@ def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: Mac
     pred = predict(samples.xy_mm, samples.phi_rad, start_xy_mm, axis_servos(config), T,
                    None if cont is None else cont.servo)
     limit = config.interpolator.contour_error_limit_mm
-    return _Attempt(feed, samples, pred, tuple(find_violations(pred.contour_mm, limit)))
+    true_mm = true_error_mm(samples.xy_mm, pred)
+    n = len(samples.xy_mm)
+    stops = stop_errors(true_mm, samples.s_mm, [*geo.path.stops_at_mm, geo.path.length_mm], n, T)
+    # In motion the true distance stands beside eq. 28 (at a sharp curve it can exceed it);
+    # around stops it is handled by the stops' braking (a curvature budget cannot help there).
+    moving = np.where(near_stops(len(true_mm), stops, T, len(true_mm) - n), 0.0, true_mm)
+    measure = np.maximum(np.abs(pred.contour_mm), moving)
+    return _Attempt(feed, samples, pred, tuple(find_violations(measure, limit)), tuple(stops))
 
 
 def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: MachineConfig,
@@ -162,6 +189,7 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
     ip = config.interpolator
     zones = find_corners(curves, ip.kappa_threshold_per_mm)
     reductions: tuple[Reduction, ...] = ()
+    stop_accels: dict[float, float] = {}
     lookback = int(round(LOOKBACK_S / config.sample_period_s))
     status = RunStatus.CONTOUR_LIMIT_NOT_MET
     fit_cache: dict = {}
@@ -172,17 +200,19 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
     for rounds in range(1, ip.max_dynamics_rounds + 1):
         geo = build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph, fit_cache,
                          prefix, tol)
-        inp = _feed_input(config, settings, reductions)
+        inp = _feed_input(config, settings, reductions, stop_accels)
         att = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, cont)
         if att.samples is None:
             status = RunStatus.FEED_PLAN_FAILED
             break
         good = (geo, att)
-        if not att.violations:
+        overshoots = [e for e in att.stop_errors if e.error_mm > ip.contour_error_limit_mm]
+        if not att.violations and not overshoots:
             status = RunStatus.OK
             break
         if rounds == ip.max_dynamics_rounds:
             break
+        _soften_stops(stop_accels, overshoots, ip.contour_error_limit_mm, ip.max_accel_mm_s2)
         samples = att.samples
         reductions += tuple(_reduction(v, samples, ip.contour_error_limit_mm, lookback)
                             for v in att.violations)

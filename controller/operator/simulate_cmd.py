@@ -24,6 +24,7 @@ TABLE_ROWS = (
     ("Contour error max (um)", lambda r: r["contour_error_um"]["max"]),
     ("Contour error RMS (um)", lambda r: r["contour_error_um"]["rms"]),
     ("Contour error mean (um)", lambda r: r["contour_error_um"]["mean"]),
+    ("True contour error max (um)", lambda r: r["contour_error_true_um"]["max"]),
     ("Time (s)", lambda r: r["motion_time_s"]),
 )
 
@@ -75,9 +76,7 @@ def _print_summary(r: dict) -> None:
           f"{r['max_tangential_accel_mm_s2']:.1f} mm/s^2, sharp corners {r['sharp_corners']}, "
           f"PH segments {r['ph_segments']}, dynamics rounds {r['dynamics_rounds']}, "
           f"planning CPU {r['planning_cpu_s']:.3f} s")
-    if not r["contour_limit_met"]:
-        print("warning: the contour error limit could not be met within the allowed dynamics "
-              "rounds", file=sys.stderr)
+
 
 
 def run(args: argparse.Namespace) -> int:
@@ -101,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
 
         plot_simulation(args.plot, [t for _, t in results], [r for r, _ in results], config)
     reports = [r for r, _ in results]
+    code = 0 if chosen[0]["contour_limit_met"] else 1
     if args.json:
         out = {"program": args.program, "results": reports} if args.compare else reports[0]
         print(json.dumps(out, indent=2))
@@ -108,4 +108,17 @@ def run(args: argparse.Namespace) -> int:
         print(format_table(args.program, reports))
     else:
         _print_summary(reports[0])
-    return 0
+    if code:
+        print(limit_message(chosen[0], config), file=sys.stderr)
+    return code
+
+
+def limit_message(r: dict, config: MachineConfig) -> str:
+    """Why the chosen plan breaks the contour limit, naming the worst place."""
+    true, limit_um = r["contour_error_true_um"], config.interpolator.contour_error_limit_mm * 1e3
+    at = true["at"] or {}
+    where = (f"at t {at.get('t_s', 0):.3f} s, line {at.get('line', 0)}, X{at.get('x_mm', 0):.4f} "
+             f"Y{at.get('y_mm', 0):.4f}" + (" (settling after the end)"
+                                              if at.get("after_end") else ""))
+    return (f"cncctl simulate: {r['algorithm']} breaks the contour error limit: the tool is "
+            f"{true['max']:.1f} um from the path (limit {limit_um:g} um) {where}")

@@ -14,7 +14,8 @@ REPO = Path(__file__).resolve().parents[2]
 NACA = str(REPO / "nc_programs/naca2415.nc")
 KEYS = {"program", "algorithm", "motion_time_s", "samples", "sample_period_s",
         "tracking_error_um", "contour_error_um", "max_feed_mm_s", "max_tangential_accel_mm_s2",
-        "sharp_corners", "ph_segments", "ph_fit_error_um", "dynamics_rounds", "planning_cpu_s"}
+        "sharp_corners", "ph_segments", "ph_fit_error_um", "dynamics_rounds", "planning_cpu_s",
+        "contour_error_true_um", "contour_limit_met"}
 
 
 def test_json_has_every_field_of_the_issue(capsys: pytest.CaptureFixture[str],
@@ -70,3 +71,17 @@ def test_run_and_simulate_reject_a_program_beyond_travel(capsys: pytest.CaptureF
         assert "error: X travel limit exceeded" in captured.err
         assert captured.err.startswith(f"{far}:3:")
         assert '"event": "start"' not in captured.out  # nothing was started, nothing moved
+
+
+def test_a_plan_that_breaks_the_limit_exits_1_naming_the_worst_place(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """adaptive runs at full feed into the trailing edge: its true error is far over 30 um."""
+    assert main(["simulate", NACA, "--algorithm", "adaptive", "--json"]) == 1
+    captured = capsys.readouterr()
+    r = json.loads(captured.out)
+    assert not r["contour_limit_met"] and r["contour_error_true_um"]["max"] > 100.0
+    at = r["contour_error_true_um"]["at"]
+    assert f"line {at['line']}" in captured.err and "from the path (limit 30 um)" in captured.err
+    assert main(["simulate", NACA, "--json"]) == 0  # ph-lookahead keeps it, true error included
+    r = json.loads(capsys.readouterr().out)
+    assert r["contour_limit_met"] and r["contour_error_true_um"]["max"] <= 30.0

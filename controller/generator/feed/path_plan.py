@@ -10,6 +10,7 @@ import numpy as np
 from controller.generator.feed.limits import chord_error_feed_mm_s, corner_feed_mm_s
 from controller.generator.feed.planner import PlanResult, plan_feed
 from controller.generator.feed.profile import FeedPhase, FeedProfile
+from controller.generator.feed.stops import approach_split, stop_accel_at
 from controller.geometry.curves import Curve
 from controller.geometry.path import Path, Piece
 from controller.numeric import sorted_unique
@@ -48,6 +49,8 @@ class FeedInput:
     centripetal_accel_mm_s2: float  # normal-acceleration budget (contour-error derived)
     policy: LimitPolicy = LimitPolicy.CONTINUOUS
     reductions: tuple[Reduction, ...] = field(default=())
+    # (s of a stop, braking acceleration into it), from the dynamics module (feed/stops.py)
+    stop_accels: tuple[tuple[float, float], ...] = field(default=())
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,9 +189,13 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
     for a, b in zip(cuts[:-1], cuts[1:], strict=True):
         s_sec, v_sec = _section(s, vlim, a, b)
         v0 = v_start_mm_s if a == 0.0 else 0.0
-        plan = plan_feed(s_sec - a, np.maximum(v_sec, 1e-6), inp.max_accel_mm_s2, v0,
-                         raise_cruises=raise_cruises, grid_step_mm=grid_step_mm(path))
-        if plan.result != PlanResult.OK:
-            result = plan.result
-        profiles.append(plan.profile)
+        accel = stop_accel_at(inp.stop_accels, b)
+        parts = [(s_sec, v_sec, inp.max_accel_mm_s2, v0, 0.0)] if accel is None else \
+            approach_split(s_sec, v_sec, inp.max_accel_mm_s2, accel, v0)
+        for s_part, v_part, a_part, vs, ve in parts:
+            plan = plan_feed(s_part - s_part[0], np.maximum(v_part, 1e-6), a_part, vs, ve,
+                             raise_cruises=raise_cruises, grid_step_mm=grid_step_mm(path))
+            if plan.result != PlanResult.OK:
+                result = plan.result
+            profiles.append(plan.profile)
     return FeedOutput(s, vlim, _concat(profiles), result)

@@ -1,0 +1,77 @@
+"""The tool's true distance from the path (beyond eq. 28): the servo model's actual position
+against the polyline of reference points near it, every sample, the settling after the run
+included. Around a stop it is the overshoot eq. 28 cannot see."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.generator.dynamics.prediction import ServoPrediction
+
+# Reference segments searched each side of a sample's own: the modelled tool is never further
+# along the path than this from its reference (at 1 ms, 40 samples hold 50 um even at 1.25 mm/s).
+NEAR_SAMPLES = 40
+BEFORE_S = 0.05  # a stop's window starts this long before it ...
+
+
+@dataclass(frozen=True)
+class StopError:
+    s_mm: float  # where the stop is on the run's path
+    k: int  # its sample
+    error_mm: float  # largest true distance in its window (the overshoot and its settling)
+
+
+def held_reference(xy_mm: np.ndarray, pred: ServoPrediction) -> np.ndarray:
+    """The reference over the run and the settling after it (the end point held)."""
+    settle = len(pred.ex_mm) - len(xy_mm)
+    return np.vstack([xy_mm, np.repeat(xy_mm[-1:], settle, axis=0)])
+
+
+def true_error_mm(xy_mm: np.ndarray, pred: ServoPrediction,
+                  near: int = NEAR_SAMPLES) -> np.ndarray:
+    """Per sample (run and settling): the distance of the modelled tool from the path."""
+    ref = held_reference(xy_mm, pred)
+    return distance_from_reference_mm(ref, ref - np.column_stack([pred.ex_mm, pred.ey_mm]),
+                                      near)
+
+
+def distance_from_reference_mm(ref: np.ndarray, act: np.ndarray,
+                               near: int = NEAR_SAMPLES) -> np.ndarray:
+    """Each actual point's distance from the reference polyline within `near` segments of its
+    own sample. The polyline is the path to within its chord error, a fraction of a um at the
+    feeds the curvature allows."""
+    n = len(ref)
+    if n < 2:
+        return np.hypot(*(act - ref).T)
+    j = np.clip(np.arange(n)[:, None] + np.arange(-near, near)[None, :], 0, n - 2)
+    a, ab = ref[j], ref[j + 1] - ref[j]
+    ap = act[:, None, :] - a
+    len2 = np.einsum("nij,nij->ni", ab, ab)
+    t = np.clip(np.einsum("nij,nij->ni", ap, ab) / np.where(len2 > 0.0, len2, 1.0), 0.0, 1.0)
+    gap = ap - t[..., None] * ab
+    return np.sqrt(np.min(np.einsum("nij,nij->ni", gap, gap), axis=1))
+
+
+def stop_errors(true_mm: np.ndarray, s_mm: np.ndarray, stops_mm: list[float], n_run: int,
+                sample_period_s: float) -> list[StopError]:
+    """Per stop: the largest true error from BEFORE_S before it to the end of the settling
+    window after it (or to the next stop's window)."""
+    before = int(round(BEFORE_S / sample_period_s))
+    settle = len(true_mm) - n_run
+    out = []
+    for s_stop in stops_mm:
+        k = int(min(np.searchsorted(s_mm, s_stop - 1e-6), n_run - 1))
+        window = true_mm[max(0, k - before):min(len(true_mm), k + settle + 1)]
+        out.append(StopError(float(s_stop), k, float(window.max()) if window.size else 0.0))
+    return out
+
+
+def near_stops(n: int, stops: list[StopError], sample_period_s: float, settle: int) -> np.ndarray:
+    """Mask of the samples inside some stop's window (their error is the stops' business)."""
+    before = int(round(BEFORE_S / sample_period_s))
+    mask = np.zeros(n, bool)
+    for e in stops:
+        mask[max(0, e.k - before):min(n, e.k + settle + 1)] = True
+    return mask

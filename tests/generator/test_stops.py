@@ -1,0 +1,76 @@
+"""The tool's true distance from the path, stops included (issue 17): measured, and held within
+eps_max by gentler braking into each stop."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from nc_helpers import XY_TABLE
+
+from controller.generator.dynamics.stops import distance_from_reference_mm
+from controller.generator.feed.profile import transition_duration_s
+from controller.generator.feed.stops import approach_split
+from controller.interpreter.program import read_program
+from controller.runtime.simulation import report, simulate
+
+LIMIT_UM = XY_TABLE.interpolator.contour_error_limit_mm * 1e3
+
+
+def _run(tmp_path: Path, text: str) -> dict:
+    program = tmp_path / "p.nc"
+    program.write_text(text)
+    traj = simulate(read_program(str(program), XY_TABLE), XY_TABLE, "ph-lookahead")
+    return report(traj, str(program), "ph-lookahead", XY_TABLE)
+
+
+def test_a_g61_square_is_cut_within_the_limit_at_every_corner(tmp_path: Path) -> None:
+    """Before: 51 um into the next wall at each corner while eq. 28 read 0.04 um."""
+    r = _run(tmp_path, "G21 G90 G61 F3000\nG1 X20\nG1 Y20\nG1 X0\nG1 Y0\nM2\n")
+    assert r["contour_error_true_um"]["max"] <= LIMIT_UM
+    assert r["contour_error_true_um"]["max"] > 20.0  # the braking is gentle only as needed
+    assert r["contour_limit_met"] and r["contour_error_um"]["max"] < 1.0
+
+
+def test_m0_dwell_and_program_end_stops_keep_the_limit(tmp_path: Path) -> None:
+    r = _run(tmp_path, "G21 G90 G64 F2400\nG1 X10\nG1 Y10\nM0\nG1 X0\nG4 P0.2\nG1 Y0\nM2\n")
+    assert r["contour_error_true_um"]["max"] <= LIMIT_UM and r["contour_limit_met"]
+
+
+def test_the_overshoot_past_an_end_is_the_distance_to_the_end_point() -> None:
+    ref = np.column_stack([np.linspace(0.0, 1.0, 11), np.zeros(11)])
+    ref = np.vstack([ref, np.repeat(ref[-1:], 5, axis=0)])
+    act = ref.copy()
+    act[-3] = [1.05, 0.0]  # 50 um past the end, along the line
+    act[4] = [0.43, 0.02]  # 20 um beside it
+    d = distance_from_reference_mm(ref, act)
+    assert d[-3] == np.float64(0.05000000000000004) or abs(d[-3] - 0.05) < 1e-12
+    assert abs(d[4] - 0.02) < 1e-12 and d[0] == 0.0
+
+
+def test_an_overshoot_into_the_next_wall_of_a_corner() -> None:
+    ref = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [1.0, 0.5], [1.0, 1.0]])
+    act = ref.copy()
+    act[2] = [1.03, 0.0]  # past the corner: 30 um from the next wall, 30 from the end point
+    assert abs(distance_from_reference_mm(ref, act)[2] - 0.03) < 1e-12
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(1.0, 60.0), st.floats(0.5, 50.0), st.floats(300.0, 2400.0))
+def test_approach_split_joins_at_a_speed_vlim_allows(vmax: float, length: float,
+                                                    stop_accel: float) -> None:
+    s = np.linspace(0.0, length, 400)
+    vlim = vmax * (1.0 - 0.5 * np.exp(-((s - 0.8 * length) / (0.05 * length)) ** 2))
+    parts = approach_split(s, vlim, 2450.0, stop_accel, 0.0)
+    if len(parts) == 1:
+        assert parts[0][2] == stop_accel  # too short: planned whole at the gentle acceleration
+        return
+    (s_h, v_h, a_h, _, v_join), (s_t, v_t, a_t, v_join2, v_end) = parts
+    assert a_h == 2450.0 and a_t == stop_accel and v_join == v_join2 and v_end == 0.0
+    assert s_h[-1] == s_t[0] and s_t[-1] == length
+    assert np.all(v_t >= v_join - 1e-9)  # vlim holds over the whole approach
+    braking_mm = 15.0 * v_join ** 2 / (16.0 * stop_accel)
+    assert abs((length - s_t[0]) - braking_mm) < 1e-9
+    assert transition_duration_s(v_join, 0.0, stop_accel) > 0.0
