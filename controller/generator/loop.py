@@ -95,6 +95,10 @@ def _feed_input(config: MachineConfig, settings: RunSettings,
                      settings.policy, reductions, tuple(sorted(stop_accels.items())))
 
 
+# The true distance is computed exactly only where the tool is this share of eps_max or more
+# from the path next to its own sample (that distance bounds it); elsewhere the bound stands in.
+EXACT_ABOVE_SHARE = 0.9
+
 # A stop's overshoot grows about as the square of its braking acceleration (51 um at Amax and
 # 20 um at 0.61 Amax from 58 mm/s on Table II), so each round scales that acceleration by the
 # square root of the ratio it must shrink by; never by more than these bounds in one round.
@@ -168,7 +172,7 @@ def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: Mac
     pred = predict(samples.xy_mm, samples.phi_rad, start_xy_mm, axis_servos(config), T,
                    None if cont is None else cont.servo)
     limit = config.interpolator.contour_error_limit_mm
-    true_mm = true_error_mm(samples.xy_mm, pred)
+    true_mm = true_error_mm(samples.xy_mm, pred, exact_above_mm=EXACT_ABOVE_SHARE * limit)
     n = len(samples.xy_mm)
     stops = stop_errors(true_mm, samples.s_mm, [*geo.path.stops_at_mm, geo.path.length_mm], n, T)
     # In motion the true distance stands beside eq. 28 (at a sharp curve it can exceed it);

@@ -29,29 +29,50 @@ def held_reference(xy_mm: np.ndarray, pred: ServoPrediction) -> np.ndarray:
     return np.vstack([xy_mm, np.repeat(xy_mm[-1:], settle, axis=0)])
 
 
-def true_error_mm(xy_mm: np.ndarray, pred: ServoPrediction,
+def true_error_mm(xy_mm: np.ndarray, pred: ServoPrediction, exact_above_mm: float = 0.0,
                   near: int = NEAR_SAMPLES) -> np.ndarray:
-    """Per sample (run and settling): the distance of the modelled tool from the path."""
+    """Per sample (run and settling): the distance of the modelled tool from the path (see
+    distance_from_reference_mm for exact_above_mm)."""
     ref = held_reference(xy_mm, pred)
     return distance_from_reference_mm(ref, ref - np.column_stack([pred.ex_mm, pred.ey_mm]),
-                                      near)
+                                      exact_above_mm, near)
 
 
-def distance_from_reference_mm(ref: np.ndarray, act: np.ndarray,
+def distance_from_reference_mm(ref: np.ndarray, act: np.ndarray, exact_above_mm: float = 0.0,
                                near: int = NEAR_SAMPLES) -> np.ndarray:
     """Each actual point's distance from the reference polyline within `near` segments of its
     own sample. The polyline is the path to within its chord error, a fraction of a um at the
-    feeds the curvature allows."""
+    feeds the curvature allows. The distance to the two segments at its own sample bounds it
+    from above: where that bound is at most exact_above_mm, the bound is returned (the loop
+    only needs to know such samples are within the limit, and skips most of the work)."""
     n = len(ref)
     if n < 2:
         return np.hypot(*(act - ref).T)
-    j = np.clip(np.arange(n)[:, None] + np.arange(-near, near)[None, :], 0, n - 2)
+    own = np.arange(n)
+    bound = np.minimum(_segment_distance(act, ref, np.clip(own - 1, 0, n - 2)),
+                       _segment_distance(act, ref, np.clip(own, 0, n - 2)))
+    k = np.flatnonzero(bound > exact_above_mm)
+    if k.size == 0:
+        return bound
+    j = np.clip(k[:, None] + np.arange(-near, near)[None, :], 0, n - 2)
     a, ab = ref[j], ref[j + 1] - ref[j]
-    ap = act[:, None, :] - a
+    ap = act[k, None, :] - a
     len2 = np.einsum("nij,nij->ni", ab, ab)
     t = np.clip(np.einsum("nij,nij->ni", ap, ab) / np.where(len2 > 0.0, len2, 1.0), 0.0, 1.0)
     gap = ap - t[..., None] * ab
-    return np.sqrt(np.min(np.einsum("nij,nij->ni", gap, gap), axis=1))
+    out = bound.copy()
+    out[k] = np.sqrt(np.min(np.einsum("nij,nij->ni", gap, gap), axis=1))
+    return out
+
+
+def _segment_distance(act: np.ndarray, ref: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Distance of act[i] from the reference segment j[i]."""
+    a, ab = ref[j], ref[j + 1] - ref[j]
+    ap = act - a
+    len2 = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(np.einsum("ij,ij->i", ap, ab) / np.where(len2 > 0.0, len2, 1.0), 0.0, 1.0)
+    gap = ap - t[:, None] * ab
+    return np.sqrt(np.einsum("ij,ij->i", gap, gap))
 
 
 def stop_errors(true_mm: np.ndarray, s_mm: np.ndarray, stops_mm: list[float], n_run: int,
