@@ -49,11 +49,15 @@ def markdown(program: str, results: list[dict], paper: bool) -> str:
     head += " | " + " | ".join(f"paper: {n}" for n in names) if paper else ""
     sep = "|---" * (1 + len(names) * (2 if paper else 1)) + "|"
     lines = [f"`{program}`", "", head + " |", sep]
-    for i, (label, get) in enumerate(TABLE_ROWS):
-        row = f"| {label} | " + " | ".join(f"{get(r):.2f}" if i < 7 else f"{get(r):.4f}"
+    paper_rows = [label for label, _ in TABLE_ROWS if not label.startswith("True")]
+    for label, get in TABLE_ROWS:
+        time_row = label.startswith("Time")
+        row = f"| {label} | " + " | ".join(f"{get(r):.4f}" if time_row else f"{get(r):.2f}"
                                            for r in results)
-        if paper:
-            row += " | " + " | ".join(str(PAPER_TABLE_IV[n][i]) for n in names)
+        if paper:  # the paper has no true contour error (it reports eq. 28)
+            i = paper_rows.index(label) if label in paper_rows else None
+            row += " | " + " | ".join("-" if i is None else str(PAPER_TABLE_IV[n][i])
+                                      for n in names)
         lines.append(row + " |")
     return "\n".join(lines)
 

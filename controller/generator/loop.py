@@ -21,7 +21,13 @@ from controller.generator.dynamics.prediction import (
     find_violations,
     predict,
 )
-from controller.generator.dynamics.stops import StopError, near_stops, stop_errors, true_error_mm
+from controller.generator.dynamics.stops import (
+    BrakingModel,
+    StopError,
+    near_stops,
+    stop_errors,
+    true_error_mm,
+)
 from controller.generator.feed.path_plan import (
     FeedInput,
     FeedOutput,
@@ -86,13 +92,35 @@ class RunPlan:
         return self.geometry.corners
 
 
-def _feed_input(config: MachineConfig, settings: RunSettings,
-                reductions: tuple[Reduction, ...], stop_accels: dict[float, float]) -> FeedInput:
+_MODELS: dict[tuple, BrakingModel] = {}  # per machine: the model memoises speeds
+
+
+def _braking_model(config: MachineConfig) -> BrakingModel:
+    ip = config.interpolator
+    key = (config.sample_period_s, ip.max_accel_mm_s2, ip.contour_error_limit_mm,
+           tuple(a.servo for a in config.axes))
+    if key not in _MODELS:
+        _MODELS[key] = BrakingModel(config, TARGET_FRACTION * ip.contour_error_limit_mm)
+    return _MODELS[key]
+
+
+def _stops_mm(geo: Geometry) -> list[float]:
+    """The run's stops in order: its inner stops (corners brought to rest), then its end."""
+    return [*geo.path.stops_at_mm, geo.path.length_mm]
+
+
+def _feed_input(config: MachineConfig, settings: RunSettings, reductions: tuple[Reduction, ...],
+                stop_accels: dict[int, float], geo: Geometry,
+                model: BrakingModel | None) -> FeedInput:
     ip = config.interpolator
     budget = INITIAL_BUDGET_SHARE * ip.contour_error_limit_mm / acceleration_gain_s2(config)
+    # Stops are known by their order: a widened corner zone moves them along the path.
+    stops = _stops_mm(geo)
     return FeedInput(ip.max_feed_mm_s, ip.max_accel_mm_s2, config.sample_period_s,
                      ip.chord_tolerance_mm, ip.reference_curvature_per_mm, budget,
-                     settings.policy, reductions, tuple(sorted(stop_accels.items())))
+                     settings.policy, reductions,
+                     tuple((stops[i], a) for i, a in sorted(stop_accels.items())
+                           if i < len(stops)), None if model is None else model.accel_for)
 
 
 # The true distance is computed exactly only where the tool is this share of eps_max or more
@@ -105,16 +133,14 @@ EXACT_ABOVE_SHARE = 0.9
 STOP_ACCEL_STEP = (0.5, 0.97)
 
 
-def _soften_stops(stop_accels: dict[float, float], errors: list[StopError], limit_mm: float,
-                  accel_mm_s2: float) -> bool:
-    """Lower the braking acceleration of each stop the tool overshoots; True if any."""
-    changed = False
-    for e in errors:
-        if e.error_mm > limit_mm:
+def _soften_stops(stop_accels: dict[int, float], errors: tuple[StopError, ...],
+                  limit_mm: float, used: tuple[float, ...]) -> None:
+    """Lower the braking acceleration of each stop (by its order) the tool overshoots, from
+    the one this round used."""
+    for i, e in enumerate(errors):
+        if e.error_mm > limit_mm and i < len(used):
             factor = np.clip(np.sqrt(TARGET_FRACTION * limit_mm / e.error_mm), *STOP_ACCEL_STEP)
-            stop_accels[e.s_mm] = float(stop_accels.get(e.s_mm, accel_mm_s2) * factor)
-            changed = True
-    return changed
+            stop_accels[i] = float(used[i] * factor)
 
 
 def _reduction(v: Violation, samples: Samples, limit_mm: float, lookback: int) -> Reduction:
@@ -174,7 +200,7 @@ def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: Mac
     limit = config.interpolator.contour_error_limit_mm
     true_mm = true_error_mm(samples.xy_mm, pred, exact_above_mm=EXACT_ABOVE_SHARE * limit)
     n = len(samples.xy_mm)
-    stops = stop_errors(true_mm, samples.s_mm, [*geo.path.stops_at_mm, geo.path.length_mm], n, T)
+    stops = stop_errors(true_mm, samples.s_mm, _stops_mm(geo), n, T)
     # In motion the true distance stands beside eq. 28 (at a sharp curve it can exceed it);
     # around stops it is handled by the stops' braking (a curvature budget cannot help there).
     moving = np.where(near_stops(len(true_mm), stops, T, len(true_mm) - n), 0.0, true_mm)
@@ -193,7 +219,8 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
     ip = config.interpolator
     zones = find_corners(curves, ip.kappa_threshold_per_mm)
     reductions: tuple[Reduction, ...] = ()
-    stop_accels: dict[float, float] = {}
+    stop_accels: dict[int, float] = {}
+    model = _braking_model(config) if settings.use_ph else None
     lookback = int(round(LOOKBACK_S / config.sample_period_s))
     status = RunStatus.CONTOUR_LIMIT_NOT_MET
     fit_cache: dict = {}
@@ -204,7 +231,7 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
     for rounds in range(1, ip.max_dynamics_rounds + 1):
         geo = build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph, fit_cache,
                          prefix, tol)
-        inp = _feed_input(config, settings, reductions, stop_accels)
+        inp = _feed_input(config, settings, reductions, stop_accels, geo, model)
         att = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, cont)
         if att.samples is None:
             status = RunStatus.FEED_PLAN_FAILED
@@ -216,7 +243,8 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
             break
         if rounds == ip.max_dynamics_rounds:
             break
-        _soften_stops(stop_accels, overshoots, ip.contour_error_limit_mm, ip.max_accel_mm_s2)
+        _soften_stops(stop_accels, att.stop_errors, ip.contour_error_limit_mm,
+                      att.feed.stop_accels)
         samples = att.samples
         reductions += tuple(_reduction(v, samples, ip.contour_error_limit_mm, lookback)
                             for v in att.violations)

@@ -74,3 +74,17 @@ def test_approach_split_joins_at_a_speed_vlim_allows(vmax: float, length: float,
     braking_mm = 15.0 * v_join ** 2 / (16.0 * stop_accel)
     assert abs((length - s_t[0]) - braking_mm) < 1e-9
     assert transition_duration_s(v_join, 0.0, stop_accel) > 0.0
+
+
+def test_the_braking_model_finds_the_largest_acceleration_within_the_target() -> None:
+    from controller.generator.dynamics.stops import BrakingModel
+
+    target_mm = 0.95 * XY_TABLE.interpolator.contour_error_limit_mm
+    model = BrakingModel(XY_TABLE, target_mm)
+    amax = XY_TABLE.interpolator.max_accel_mm_s2
+    assert abs(model.overshoot_mm(58.33, amax) - 0.0511) < 0.001  # the 51 um of issue 17
+    for v in (58.33, 30.0, 10.0):
+        accel = model.accel_for(v)
+        assert model.overshoot_mm(v, accel) <= target_mm
+        assert accel == amax or model.overshoot_mm(v, accel * 1.02) > target_mm  # the largest
+    assert model.accel_for(2.0) == amax  # slow approaches need nothing

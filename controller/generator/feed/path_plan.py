@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -10,7 +11,7 @@ import numpy as np
 from controller.generator.feed.limits import chord_error_feed_mm_s, corner_feed_mm_s
 from controller.generator.feed.planner import PlanResult, plan_feed
 from controller.generator.feed.profile import FeedPhase, FeedProfile
-from controller.generator.feed.stops import approach_split, stop_accel_at
+from controller.generator.feed.stops import approach_split, model_stop_accel, stop_accel_at
 from controller.geometry.curves import Curve
 from controller.geometry.path import Path, Piece
 from controller.numeric import sorted_unique
@@ -51,6 +52,8 @@ class FeedInput:
     reductions: tuple[Reduction, ...] = field(default=())
     # (s of a stop, braking acceleration into it), from the dynamics module (feed/stops.py)
     stop_accels: tuple[tuple[float, float], ...] = field(default=())
+    # the dynamics module's first guess for stops without one: approach speed -> acceleration
+    stop_accel_for: Callable[[float], float] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,6 +62,7 @@ class FeedOutput:
     vlim_mm_s: np.ndarray
     profile: FeedProfile
     result: PlanResult
+    stop_accels: tuple[float, ...] = ()  # the braking acceleration used into each stop
 
 
 # Keyed by the curve itself, not id(curve): an id is only unique among live objects, and a
@@ -185,11 +189,17 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
     vlim = feed_limit_mm_s(path, s, kappa, inp)
     cuts = [0.0, *path.stops_at_mm, path.length_mm]
     profiles: list[FeedProfile] = []
+    used: list[float] = []
     result = PlanResult.OK
     for a, b in zip(cuts[:-1], cuts[1:], strict=True):
         s_sec, v_sec = _section(s, vlim, a, b)
         v0 = v_start_mm_s if a == 0.0 else 0.0
         accel = stop_accel_at(inp.stop_accels, b)
+        if accel is None and inp.stop_accel_for is not None:
+            accel = model_stop_accel(s_sec, v_sec, inp.max_accel_mm_s2, inp.stop_accel_for)
+        if accel is not None and accel >= inp.max_accel_mm_s2:
+            accel = None
+        used.append(inp.max_accel_mm_s2 if accel is None else accel)
         parts = [(s_sec, v_sec, inp.max_accel_mm_s2, v0, 0.0)] if accel is None else \
             approach_split(s_sec, v_sec, inp.max_accel_mm_s2, accel, v0)
         for s_part, v_part, a_part, vs, ve in parts:
@@ -198,4 +208,4 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
             if plan.result != PlanResult.OK:
                 result = plan.result
             profiles.append(plan.profile)
-    return FeedOutput(s, vlim, _concat(profiles), result)
+    return FeedOutput(s, vlim, _concat(profiles), result, tuple(used))

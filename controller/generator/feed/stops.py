@@ -7,6 +7,8 @@ dynamics module, and the section is planned in two parts (approach_split)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 STOP_MATCH_MM = 1e-6  # a section end and a stop position closer than this are the same stop
@@ -18,6 +20,26 @@ def stop_accel_at(stops: tuple[tuple[float, float], ...], s_mm: float) -> float 
         if abs(s_stop - s_mm) <= STOP_MATCH_MM:
             return accel
     return None
+
+
+def join_speed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, stop_accel_mm_s2: float) -> float:
+    """The approach speed: the lowest vlim over the longest approach braking at the stop's
+    acceleration could need, from the grid point before it on (so vlim interpolated anywhere
+    in the approach, the split point too, is at least this)."""
+    end = float(s_mm[-1])
+    reach = 15.0 * float(vlim_mm_s.max()) ** 2 / (16.0 * stop_accel_mm_s2)
+    first = max(int(np.searchsorted(s_mm, end - reach, side="right")) - 1, 0)
+    return float(vlim_mm_s[first:].min())
+
+
+def model_stop_accel(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
+                     accel_for: Callable[[float], float]) -> float:
+    """The braking acceleration a model (accel_for: approach speed -> acceleration) gives this
+    section's stop; lowered until the approach speed it leads to agrees (three passes)."""
+    accel = accel_mm_s2
+    for _ in range(3):
+        accel = min(accel, accel_for(join_speed(s_mm, vlim_mm_s, accel)))
+    return accel
 
 
 Part = tuple[np.ndarray, np.ndarray, float, float, float]  # s, vlim, accel, v start, v end
@@ -32,11 +54,7 @@ def approach_split(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     too short for that is planned whole at the stop's acceleration."""
     whole = [(s_mm, vlim_mm_s, stop_accel_mm_s2, v_start_mm_s, 0.0)]
     end = float(s_mm[-1])
-    reach = 15.0 * float(vlim_mm_s.max()) ** 2 / (16.0 * stop_accel_mm_s2)
-    # From the grid point before the longest approach on: vlim interpolated anywhere in the
-    # approach is then at least v_join, at the split point too.
-    first = max(int(np.searchsorted(s_mm, end - reach, side="right")) - 1, 0)
-    v_join = float(vlim_mm_s[first:].min())
+    v_join = join_speed(s_mm, vlim_mm_s, stop_accel_mm_s2)
     split = end - 15.0 * v_join ** 2 / (16.0 * stop_accel_mm_s2)
     head = s_mm < split - SPLIT_GAP_MM
     if head.sum() < 2 or v_join <= 0.0:
