@@ -32,3 +32,14 @@ def is_in_sorted(values: ArrayLike, sorted_set: ArrayLike) -> np.ndarray:
         return np.zeros(v.shape, bool)
     i = np.clip(np.searchsorted(s, v), 0, s.size - 1)
     return s[i] == v
+
+
+def segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance of each point from the segment [a, b] beside it (arrays broadcast: points
+    (..., 2) against segments (..., 2)), the segment's ends included."""
+    ab, ap = b - a, points - a
+    len2 = np.sum(ab * ab, axis=-1)
+    t = np.sum(ap * ab, axis=-1) / np.where(len2 > 0.0, len2, 1.0)
+    t = np.minimum(np.maximum(t, 0.0), 1.0)
+    gap = ap - t[..., None] * ab
+    return np.sqrt(np.sum(gap * gap, axis=-1))

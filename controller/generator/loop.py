@@ -19,6 +19,7 @@ from controller.generator.dynamics.prediction import (
     acceleration_gain_s2,
     axis_servos,
     find_violations,
+    planning_limit_mm,
     predict,
 )
 from controller.generator.dynamics.stops import (
@@ -97,10 +98,10 @@ _MODELS: dict[tuple, BrakingModel] = {}  # per machine: the model memoises speed
 
 def _braking_model(config: MachineConfig) -> BrakingModel:
     ip = config.interpolator
-    key = (config.sample_period_s, ip.max_accel_mm_s2, ip.contour_error_limit_mm,
+    key = (config.sample_period_s, ip.max_accel_mm_s2, planning_limit_mm(config),
            tuple(a.servo for a in config.axes))
     if key not in _MODELS:
-        _MODELS[key] = BrakingModel(config, TARGET_FRACTION * ip.contour_error_limit_mm)
+        _MODELS[key] = BrakingModel(config, TARGET_FRACTION * planning_limit_mm(config))
     return _MODELS[key]
 
 
@@ -113,7 +114,7 @@ def _feed_input(config: MachineConfig, settings: RunSettings, reductions: tuple[
                 stop_accels: dict[int, float], geo: Geometry,
                 model: BrakingModel | None) -> FeedInput:
     ip = config.interpolator
-    budget = INITIAL_BUDGET_SHARE * ip.contour_error_limit_mm / acceleration_gain_s2(config)
+    budget = INITIAL_BUDGET_SHARE * planning_limit_mm(config) / acceleration_gain_s2(config)
     # Stops are known by their order: a widened corner zone moves them along the path.
     stops = _stops_mm(geo)
     return FeedInput(ip.max_feed_mm_s, ip.max_accel_mm_s2, config.sample_period_s,
@@ -197,7 +198,7 @@ def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: Mac
     samples = interpolate(geo.path, feed.profile, T, settings.interpolation)
     pred = predict(samples.xy_mm, samples.phi_rad, start_xy_mm, axis_servos(config), T,
                    None if cont is None else cont.servo)
-    limit = config.interpolator.contour_error_limit_mm
+    limit = planning_limit_mm(config)
     true_mm = true_error_mm(samples.xy_mm, pred, exact_above_mm=EXACT_ABOVE_SHARE * limit)
     n = len(samples.xy_mm)
     stops = stop_errors(true_mm, samples.s_mm, _stops_mm(geo), n, T)
@@ -237,16 +238,17 @@ def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: 
             status = RunStatus.FEED_PLAN_FAILED
             break
         good = (geo, att)
-        overshoots = [e for e in att.stop_errors if e.error_mm > ip.contour_error_limit_mm]
+        limit_mm = planning_limit_mm(config)
+        overshoots = [e for e in att.stop_errors if e.error_mm > limit_mm]
         if not att.violations and not overshoots:
             status = RunStatus.OK
             break
         if rounds == ip.max_dynamics_rounds:
             break
-        _soften_stops(stop_accels, att.stop_errors, ip.contour_error_limit_mm,
+        _soften_stops(stop_accels, att.stop_errors, limit_mm,
                       att.feed.stop_accels)
         samples = att.samples
-        reductions += tuple(_reduction(v, samples, ip.contour_error_limit_mm, lookback)
+        reductions += tuple(_reduction(v, samples, limit_mm, lookback)
                             for v in att.violations)
         if settings.widen_zones:
             last = len(samples.s_mm) - 1

@@ -8,6 +8,7 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.motion.stopping import REST_SPEED_MM_S
+from controller.numeric import segment_distance
 from drivers.base import Feedback
 
 
@@ -78,8 +79,13 @@ class FerrorCheck:
                           float(self.limits_mm(v)[row, axis]), int(fb.seq[row]))
 
 
+NEAR_FRAMES = 40  # reference frames searched each side of a frame for the nearest path point
+
+
 class ContourStats:
-    """Eq. 28 contour error of encoder positions against the reference, running max/RMS/mean."""
+    """The tool's measured distance from the path: encoder positions against the polyline of
+    reference frames near their own frame (the sent path, stops and their overshoot included,
+    not only eq. 28's normal component); running max/RMS/mean."""
 
     def __init__(self, pulse_mm: np.ndarray) -> None:
         self.pulse_mm = pulse_mm
@@ -89,13 +95,19 @@ class ContourStats:
         self.n = 0
 
     def update(self, fb: Feedback, hist: RefHistory) -> None:
-        if not len(fb):
+        if len(fb):
+            self.update_at(fb.seq, fb.encoder_counts, hist)
+
+    def update_at(self, seq: np.ndarray, encoder_counts: np.ndarray, hist: RefHistory) -> None:
+        """Encoder rows measured at (or, settling, after) frames seq."""
+        if not hist.count:
             return
-        idx = fb.seq % hist.capacity
-        e = hist.pos_mm[idx] - fb.encoder_counts * self.pulse_mm
-        phi = hist.phi_rad[idx]
-        keep = ~np.isnan(phi)
-        eps = np.abs(-e[keep, 0] * np.sin(phi[keep]) + e[keep, 1] * np.cos(phi[keep]))
+        lo = max(0, hist.count - hist.capacity)
+        win = np.clip(np.asarray(seq)[:, None] + np.arange(-NEAR_FRAMES, NEAR_FRAMES + 1),
+                      lo, hist.count - 1) % hist.capacity
+        poly = hist.pos_mm[win][:, :, :2]
+        act = (np.atleast_2d(encoder_counts) * self.pulse_mm)[:, None, :2]
+        eps = segment_distance(act, poly[:, :-1], poly[:, 1:]).min(axis=1)
         if eps.size:
             self.max_abs_mm = max(self.max_abs_mm, float(eps.max()))
             self.sum_abs_mm += float(eps.sum())

@@ -220,6 +220,8 @@ class MotionController:
             return
         cmd, enc = self.drive.position_counts()
         now_s = self.pacer.elapsed_s()
+        if self.executed:  # the settling: where the tool overshoots a stop
+            self.contour.update_at(np.array([self.executed - 1]), enc, self.hist)
         # Equal once is not settled: the 36 % overshoot crosses the target on its way.
         if not np.array_equal(cmd, enc):
             self.settled_since_s = None

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 from refgen import circle_chunks, line_chunks
 from runtime_helpers import Recorder, assert_smooth, virtual_card, xy_config
 
-from controller.generator.dynamics.servo import contour_error_mm, discretise, tracking_error_mm
+from controller.generator.dynamics.servo import discretise, tracking_error_mm
+from controller.generator.dynamics.stops import distance_from_reference_mm
 from controller.motion.checks import FerrorCheck
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer
@@ -58,14 +59,16 @@ def on_circle(result: MotionResult, radius_mm: float = 10.0, tol_mm: float = 0.0
 
 
 def predicted_contour_um(chunks: list) -> tuple[float, float]:
-    """Offline prediction (servo model over the whole reference), as `cncctl simulate` does."""
+    """Offline prediction (servo model over the whole reference and 60 ms of settling), as
+    `cncctl simulate` does: the tool's distance from the path, what the run measures too. The
+    circle's quintic braking at Amax overshoots its end by about 50 um (nothing shaped it)."""
     pos = np.vstack([c.pos_mm for c in chunks])
-    v = np.diff(pos, axis=0, prepend=pos[:1]) / T
+    held = np.vstack([pos, np.repeat(pos[-1:], 60, axis=0)])
+    v = np.diff(held, axis=0, prepend=held[:1]) / T
     e = np.column_stack([tracking_error_mm(discretise(a.servo, T), v[:, i])
                          for i, a in enumerate(CFG.axes)])
-    moving = np.hypot(v[:, 0], v[:, 1]) >= 0.05
-    eps = np.abs(contour_error_mm(e[:, 0], e[:, 1], np.arctan2(v[:, 1], v[:, 0])))[moving]
-    return float(eps.max() * 1e3), float(np.sqrt(np.mean(eps ** 2)) * 1e3)
+    eps = distance_from_reference_mm(held, held - e)
+    return float(eps.max() * 1e3), float(np.sqrt(np.mean(eps[: len(pos)] ** 2)) * 1e3)
 
 
 def test_circle_runs_to_the_pulse_and_matches_the_servo_prediction() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +37,14 @@ class Violation:
     k_hi: int
     k_peak: int
     peak_mm: float
+
+
+def planning_limit_mm(config: MachineConfig) -> float:
+    """eps_max less what quantisation adds on the machine, so that the measured error keeps
+    eps_max too: the commanded steps are the reference rounded to pulses, and the encoder reads
+    the tool to a pulse; up to half a pulse each per axis, sqrt(2) pulses in the plane."""
+    pulse_mm = max(a.pulse_mm for a in config.axes)
+    return config.interpolator.contour_error_limit_mm - math.sqrt(2.0) * pulse_mm
 
 
 def axis_servos(config: MachineConfig) -> tuple[DiscreteServo, DiscreteServo]:

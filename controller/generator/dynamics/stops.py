@@ -104,7 +104,9 @@ class BrakingModel:
     """A first guess of each stop's braking acceleration, before any plan: the overshoot of a
     straight cruise at v braked to rest by a quintic of peak acceleration A, through each axis
     model; the largest A (a bisection) whose overshoot is within the target. The loop then
-    checks it on the real path. Memoised by speed (to 0.1 mm/s, rounded up)."""
+    checks it on the real path. Memoised by speed on a 0.1 mm/s grid (the overshoot is not
+    monotonic in the speed: between grid speeds it may be a little over the target, which is
+    5 % under the limit, and the loop measures the real path anyway)."""
 
     CRUISE_S = 0.03  # the cruise before the braking: the servo is in its steady lag by then
 
