@@ -13,7 +13,9 @@ within 0.02 um; `controller.generator.dynamics.path_distance`). Each peer is fed
 NURBS flattened into G1 chords (chord error within 1 um and 10 um: every chord is checked at its
 quarter, half and three-quarter points, as a CAM post would), and the program's G1 as is. Each
 peer's acceleration is bisected (geometrically, to 0.5 %) for the largest value whose TRUE
-contour error max is within eps_max (config contour_error_limit_mm); Vmax = the config's Vmax.
+contour error max is within what ours plans for: eps_max less sqrt(2) pulses of quantisation
+margin (controller.generator.dynamics.prediction.planning_limit_mm), since on a machine both
+would need that margin; Vmax = the config's Vmax.
 The time bound is bench/time_bound.py's (Amax, Vmax, chord tolerance, T of the config).
 
 What was ported, from which upstream files and commits:
@@ -101,7 +103,10 @@ from controller.generator.dynamics.path_distance import (  # noqa: E402
     path_polyline,
     sample_curve,
 )
-from controller.generator.dynamics.prediction import axis_servos  # noqa: E402
+from controller.generator.dynamics.prediction import (  # noqa: E402
+    axis_servos,
+    planning_limit_mm,
+)
 from controller.generator.dynamics.servo import contour_error_mm, tracking_error_mm  # noqa: E402
 from controller.generator.feed.time_bound import time_optimal_bound_s  # noqa: E402
 from controller.geometry.nurbs import Nurbs  # noqa: E402
@@ -481,7 +486,9 @@ def bench_program(program: str, config: MachineConfig, tolerances_um: list[float
                   grbl_buffer: int = GRBL_BLOCK_BUFFER_SIZE - 1) -> tuple[list[Row], float]:
     """Ours, then Klipper and grbl at their default and tuned accelerations per tolerance."""
     ip = config.interpolator
-    limit_um = ip.contour_error_limit_mm * 1e3
+    # Equal accuracy: each peer is tuned to the error ours plans for, eps_max less the margin
+    # that pulse and encoder quantisation take on a machine (ours and theirs alike).
+    limit_um = planning_limit_mm(config) * 1e3
     vmax, amax = ip.max_feed_mm_s, ip.max_accel_mm_s2
     blocks = list(read_program(program, config))
     path = PathDistance(path_polyline(blocks))
@@ -605,8 +612,9 @@ def main(argv: list[str] | None = None) -> int:
         if not args.quiet:
             print(msg, file=sys.stderr, flush=True)
 
-    limit_um = config.interpolator.contour_error_limit_mm * 1e3
-    print(f"True contour error limit eps_max = {limit_um:g} um; settling {SETTLE_S} s included.\n")
+    limit_um = planning_limit_mm(config) * 1e3
+    print(f"True contour error target {limit_um:.2f} um (eps_max less the quantisation "
+          f"margin); settling {SETTLE_S} s included.\n")
     for program in args.programs:
         rows, bound = bench_program(program, config, args.tolerances_um, log,
                                     not args.grbl_ideal, args.grbl_buffer)
