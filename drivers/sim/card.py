@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.generator.dynamics.servo import mismatched_config
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, LostCommunicationError
 from drivers.sim.axes import SimAxes
@@ -19,12 +20,14 @@ class SimCard(Drive):
     """Frames are clocked one per sample period T, in wall-clock time or virtual time.
 
     Options: realtime (bool, default True), fifo_frames (256), max_pulses_per_frame (127,
-    an int8 frame as in the prototype protocol), start_mm (list, machine position at power-up).
+    an int8 frame as in the prototype protocol), start_mm (list, machine position at power-up),
+    plant_pole_pct and plant_gain_pct (0: a plant off the planner's model, see mismatched).
     Card rule (hostmot2 watchdog): an empty FIFO mid-program stops the card and latches
     UNDERRUN until reset(); an empty FIFO after an end-of-stream frame is simply idle.
     """
 
-    OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm"})
+    OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm",
+                         "plant_pole_pct", "plant_gain_pct"})
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
@@ -33,7 +36,10 @@ class SimCard(Drive):
         self.max_pulses = int(options.get("max_pulses_per_frame", 127))
         start_mm = np.asarray(options.get("start_mm", np.zeros(self.n_axes)), dtype=float)
         self._fifo = FrameFifo(int(options.get("fifo_frames", 256)), self.n_axes)
-        self._axes = SimAxes(config, np.rint(start_mm / self.pulse_mm).astype(np.int64))
+        # The plant may differ from the planner's model (issue 17: a real table never is it).
+        plant = mismatched_config(config, float(options.get("plant_pole_pct", 0.0)),
+                                  float(options.get("plant_gain_pct", 0.0)))
+        self._axes = SimAxes(plant, np.rint(start_mm / self.pulse_mm).astype(np.int64))
         self._lock = threading.RLock()
         self._status = CardStatus.OK
         self._messages: list[str] = []

@@ -151,3 +151,17 @@ def test_an_unknown_drive_option_is_an_error_naming_it() -> None:
     config = xy_config().with_drive_options({"fifo_frame": 64})
     with pytest.raises(DriveError, match="unknown drive option 'fifo_frame'"):
         make_drive(config, realtime=False)
+
+
+@pytest.mark.parametrize("pole_pct,gain_pct", [(0.0, 0.0), (-20.0, 0.0), (0.0, 20.0)])
+def test_the_card_can_run_a_plant_off_the_model(pole_pct: float, gain_pct: float) -> None:
+    """Steady lag at 58 pulses/ms: V (a1 - b1) / a0 of the mismatched plant, not the model."""
+    from controller.generator.dynamics.servo import mismatched
+
+    card = virtual_card(xy_config(), plant_pole_pct=pole_pct, plant_gain_pct=gain_pct)
+    card.write_frames(ramp_frames(250), end_of_stream=True)
+    card.advance(240)
+    fb = card.feedback()
+    lag_mm = (fb.commanded_counts[-1, 0] - fb.encoder_counts[-1, 0]) * 0.001
+    p = mismatched(xy_config().axis("x").servo, pole_pct, gain_pct)
+    assert lag_mm == pytest.approx(58.0 * (p.a1 - p.b1) / p.a0, abs=0.0011)

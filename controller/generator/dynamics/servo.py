@@ -12,12 +12,12 @@ the first motion. tests/generator/test_servo.py checks both functions against sc
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
 
-from controller.config import ServoParams
+from controller.config import MachineConfig, ServoParams
 
 BLOCK = 256  # samples per block of the block-recursive filter
 
@@ -167,3 +167,26 @@ class AxisServoStepper:
 def contour_error_mm(ex_mm: np.ndarray, ey_mm: np.ndarray, phi_rad: np.ndarray) -> np.ndarray:
     """Eq. 28: eps = -Ex sin(phi) + Ey cos(phi), phi the path tangent angle."""
     return -ex_mm * np.sin(phi_rad) + ey_mm * np.cos(phi_rad)
+
+
+def mismatched(p: ServoParams, pole_pct: float = 0.0, gain_pct: float = 0.0) -> ServoParams:
+    """The same loop with every pole (and zero) moved by pole_pct (s -> s / k, k = 1 + pct:
+    the bandwidth off, the DC gain kept), and its feed-forward falling short of the ideal by
+    gain_pct more (a1 - b1 and a2 - b2, so the velocity and acceleration lags c1 and c2, scaled
+    by 1 + pct). A real table is never its model: the sim card can run this plant while the
+    planner keeps the nominal one."""
+    k = 1.0 + pole_pct / 100.0
+    g = 1.0 + gain_pct / 100.0
+    if k <= 0.0 or g < 0.0:
+        raise ValueError("mismatch must leave poles and gains positive")
+    a1, a2, a3, a4 = p.a1 / k, p.a2 / k**2, p.a3 / k**3, p.a4 / k**4
+    b1, b2 = p.b1 / k, p.b2 / k**2
+    return ServoParams(a0=p.a0, a1=a1, a2=a2, a3=a3, a4=a4, b0=p.b0,
+                       b1=a1 - (a1 - b1) * g, b2=a2 - (a2 - b2) * g)
+
+
+def mismatched_config(config: MachineConfig, pole_pct: float = 0.0,
+                      gain_pct: float = 0.0) -> MachineConfig:
+    """The machine with every axis's servo mismatched alike (see mismatched)."""
+    axes = tuple(replace(a, servo=mismatched(a.servo, pole_pct, gain_pct)) for a in config.axes)
+    return replace(config, axes=axes)
