@@ -12,37 +12,10 @@ import time
 from pathlib import Path
 
 import pytest
+from daemon_helpers import children_of, running
 
 REPO = Path(__file__).resolve().parents[2]
 CNCCTL = [sys.executable, "-m", "controller.operator.cli"]
-
-
-def _children_of(pid: int) -> list[int]:
-    """Live processes whose parent is pid (from /proc)."""
-    kids = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text()
-            except OSError:
-                continue
-            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-                kids.append(int(entry.name))
-    return kids
-
-
-def _running(pid: int, wait_s: float = 2.0) -> bool:
-    """Still running after wait_s (an exited child waiting to be reaped does not count)."""
-    deadline = time.monotonic() + wait_s
-    while time.monotonic() < deadline:
-        try:
-            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-        except OSError:
-            return False
-        if state in ("Z", "X"):
-            return False
-        time.sleep(0.02)
-    return True
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
@@ -55,7 +28,7 @@ def test_a_stop_signal_decelerates_and_exits_4(sig: signal.Signals) -> None:
             event = json.loads(proc.stdout.readline())
             if event["event"] == "progress" and event.get("executed_s", 0) > 0.1:
                 break
-        children = _children_of(proc.pid)
+        children = children_of(proc.pid)
         proc.send_signal(sig)
         out, err = proc.communicate(timeout=20)
         final = json.loads(out.splitlines()[-1])
@@ -63,7 +36,7 @@ def test_a_stop_signal_decelerates_and_exits_4(sig: signal.Signals) -> None:
         assert final["event"] == "aborted" and sig.name in final["message"]
         assert final["underruns"] == 0
         assert all(p["commanded"] == p["executed"] for p in final["pulses"].values())
-        assert [c for c in children if _running(c)] == []
+        assert [c for c in children if running(c)] == []
     finally:
         if proc.poll() is None:
             proc.kill()

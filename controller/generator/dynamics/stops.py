@@ -11,6 +11,7 @@ import numpy as np
 from controller.config import MachineConfig
 from controller.generator.dynamics.prediction import ServoPrediction, axis_servos
 from controller.generator.dynamics.servo import tracking_error_mm
+from controller.numeric import segment_distance
 
 # Reference segments searched each side of a sample's own: the modelled tool is never further
 # along the path than this from its reference (at 1 ms, 40 samples hold 50 um even at 1.25 mm/s).
@@ -51,30 +52,17 @@ def distance_from_reference_mm(ref: np.ndarray, act: np.ndarray, exact_above_mm:
     if n < 2:
         return np.hypot(*(act - ref).T)
     own = np.arange(n)
-    bound = np.minimum(_segment_distance(act, ref, np.clip(own - 1, 0, n - 2)),
-                       _segment_distance(act, ref, np.clip(own, 0, n - 2)))
+    before, at = np.clip(own - 1, 0, n - 2), np.clip(own, 0, n - 2)
+    bound = np.minimum(segment_distance(act, ref[before], ref[before + 1]),
+                       segment_distance(act, ref[at], ref[at + 1]))
     k = np.flatnonzero(bound > exact_above_mm)
     if k.size == 0:
         return bound
     j = np.clip(k[:, None] + np.arange(-near, near)[None, :], 0, n - 2)
-    a, ab = ref[j], ref[j + 1] - ref[j]
-    ap = act[k, None, :] - a
-    len2 = np.einsum("nij,nij->ni", ab, ab)
-    t = np.clip(np.einsum("nij,nij->ni", ap, ab) / np.where(len2 > 0.0, len2, 1.0), 0.0, 1.0)
-    gap = ap - t[..., None] * ab
+    nearest = segment_distance(act[k, None, :], ref[j], ref[j + 1]).min(axis=1)
     out = bound.copy()
-    out[k] = np.sqrt(np.min(np.einsum("nij,nij->ni", gap, gap), axis=1))
+    out[k] = nearest
     return out
-
-
-def _segment_distance(act: np.ndarray, ref: np.ndarray, j: np.ndarray) -> np.ndarray:
-    """Distance of act[i] from the reference segment j[i]."""
-    a, ab = ref[j], ref[j + 1] - ref[j]
-    ap = act - a
-    len2 = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", ap, ab) / np.where(len2 > 0.0, len2, 1.0), 0.0, 1.0)
-    gap = ap - t[:, None] * ab
-    return np.sqrt(np.einsum("ij,ij->i", gap, gap))
 
 
 def stop_errors(true_mm: np.ndarray, s_mm: np.ndarray, stops_mm: list[float], n_run: int,
