@@ -208,6 +208,7 @@ def test_sigkill_of_cncd_leaves_no_orphan_nor_shared_memory(tmp_path: Path) -> N
         d.cncctl("reset")
         run = start_run(d, LONG)
         wait_moving(run, after_s=0.3)
+        time.sleep(0.2)  # the journal names the line within 0.05 s of the first progress
         kids = children_of(d.proc.pid)
         assert kids  # the generator at least (the interpreter may have finished)
         d.proc.send_signal(signal.SIGKILL)

@@ -287,16 +287,21 @@ class Machine:
                 self._set_state(State.IDLE)
 
     def _journal_loop(self) -> None:
-        """Off the motion thread (a journal write syncs to disk): the line reached, twice a
-        second while a job runs."""
-        written = None
+        """Off the motion thread (a journal write syncs to disk): the line reached, as soon as
+        a job has one and then at most every JOURNAL_EVERY_S while it changes."""
+        written: tuple[int, int] | None = None  # (job, line) last written
+        last_s = 0.0
         while True:
-            time.sleep(JOURNAL_EVERY_S)
+            time.sleep(0.05)
             job = self.job
             p = job.progress if job is not None else None
-            if p is not None and self.state is State.RUNNING and p.line != written:
+            if p is None or self.state is not State.RUNNING or p.line <= 0:
+                continue
+            now_s = time.monotonic()
+            first = written is None or written[0] != job.number
+            if (job.number, p.line) != written and (first or now_s - last_s >= JOURNAL_EVERY_S):
                 self.journal.update(last_line=p.line)
-                written = p.line
+                written, last_s = (job.number, p.line), now_s
 
     def _beat(self, *_: object) -> None:
         self.beat_s = time.monotonic()
