@@ -14,6 +14,8 @@ class RefChunk:
     pos_mm has one column per configured axis, in the config's axis order (x, y[, z]).
     Sample i of the chunk is at time t0_s + i * T. line is the NC source line per sample.
     final marks the last chunk of the program: its last row is the programmed end point.
+    pause_after marks a program pause (M0): the machine waits at rest after the last row until
+    the operator resumes.
     """
 
     t0_s: float
@@ -21,6 +23,7 @@ class RefChunk:
     feed_mm_s: np.ndarray  # (N,)
     line: np.ndarray  # (N,) int32
     final: bool = False
+    pause_after: bool = False
 
     def __len__(self) -> int:
         return int(self.pos_mm.shape[0])

@@ -15,6 +15,8 @@ from controller.blocks import (
     NcBlock,
     NurbsBlock,
     PathMode,
+    StopBlock,
+    StopKind,
 )
 from controller.config import MachineConfig
 from controller.errors import PlanningError
@@ -98,6 +100,14 @@ def _dwell(block: DwellBlock, config: MachineConfig, t0_s: float) -> RefChunk | 
     pos = np.array(block.position)[: len(config.axis_names)]
     rows = np.repeat(pos[None, :], k, axis=0)
     return RefChunk(t0_s + T, rows, np.zeros(k), np.full(k, block.source.first_line, np.int32))
+
+
+def _pause(block: StopBlock, config: MachineConfig, t0_s: float) -> RefChunk:
+    """IN_POSITION_S of samples holding the pause point, the program pausing after them."""
+    k = int(round(IN_POSITION_S / config.sample_period_s))
+    pos = np.repeat(np.array(block.position)[None, : len(config.axis_names)], k, axis=0)
+    return RefChunk(t0_s + config.sample_period_s, pos, np.zeros(k),
+                    np.full(k, block.source.first_line, np.int32), pause_after=True)
 
 
 def plan_run(curves: list[BlockCurve], start_xy: np.ndarray, config: MachineConfig,
@@ -235,6 +245,9 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
         elif isinstance(block, DwellBlock):
             chunk = _dwell(block, config, t_s)
             yield from emit(PlannedStep(chunk) if chunk is not None else None, dwell=True)
+        elif isinstance(block, StopBlock) and block.kind is StopKind.PAUSE:
+            # M0: settle in position, then the motion controller waits for the operator.
+            yield from emit(PlannedStep(_pause(block, config, t_s)), dwell=True)
     yield from flush()
 
 
@@ -265,4 +278,4 @@ def generate_reference(blocks: Iterable[NcBlock], config: MachineConfig,
             yield previous
         previous = step.chunk
     if previous is not None:
-        yield RefChunk(previous.t0_s, previous.pos_mm, previous.feed_mm_s, previous.line, True)
+        yield replace(previous, final=True)

@@ -11,7 +11,7 @@ from controller.config import MachineConfig
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter
-from controller.motion.source import RefSource, SourceState
+from controller.motion.source import RefSource, SourceState, pause_index, row_lines
 from controller.motion.stopping import stop_along_path
 from controller.motion.types import (
     MotionProgress,
@@ -46,6 +46,11 @@ class MotionController:
         self.period_s = config.sample_period_s
         self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
         self._abort_message: str | None = None
+        self._resume_requested = False
+
+    def request_resume(self) -> None:
+        """Operator: continue after a program pause (a flag read by the loop)."""
+        self._resume_requested = True
 
     def request_abort(self, message: str = "aborted by operator") -> None:
         """Operator stop (SIGINT handler safe: only sets a flag read by the loop)."""
@@ -91,6 +96,8 @@ class MotionController:
         self.settle_deadline_s = 0.0
         self.settled_since_s: float | None = None
         self.position_known = True
+        self.pausing = False  # the frames up to a program pause are sent: wait there
+        self.restarting = False  # resumed from a pause: the FIFO is empty by design
 
     def _cycle(self) -> None:
         try:
@@ -105,7 +112,9 @@ class MotionController:
             self._finish(Outcome.FAULT, self.drive.fault_message())
             return
         self._supervise(fb)
-        if self.state in (MotionState.WAITING, MotionState.RUNNING) and not self.sent_eos:
+        if self.pausing and self.outcome is None:
+            self._pause_step(level)
+        elif self.state in (MotionState.WAITING, MotionState.RUNNING) and not self.sent_eos:
             self._refill(level)
         elif self.state is MotionState.STOPPING:
             self._send_stop(level)
@@ -142,9 +151,10 @@ class MotionController:
         s = self.settings
         want = self._frames(s.high_water_ms) - level
         hold, low = self._frames(s.holdback_ms), self._frames(s.low_water_ms)
-        if self.state is MotionState.RUNNING:
+        if self.state is MotionState.RUNNING and not self.restarting:
             self.min_fifo_frames = (level if self.min_fifo_frames is None
                                     else min(level, self.min_fifo_frames))
+        self.restarting = self.restarting and level == 0  # after a pause: empty until refilled
         finished_before, _ = self.source.state()
         ask = max(0, want + hold - len(self.held))
         rows = self.source.read(ask) if ask else np.zeros((0, self.n + 2))
@@ -157,6 +167,14 @@ class MotionController:
         if len(rows) and not self._start_ok(rows):
             return
         self.held = np.vstack([self.held, rows]) if len(rows) else self.held
+        pause = pause_index(self.held) if len(self.held) else None
+        if pause is not None:
+            # Everything up to the pause goes out whatever the holdback: the path is at rest
+            # there (a stop along it is not needed), and the card idles after it, no underrun.
+            n = min(max(want, 0), pause + 1)
+            self._send(self.held[:n], end=False, pause=n == pause + 1)
+            self.held = self.held[n:]
+            return
         sendable = len(self.held) if final else max(0, len(self.held) - hold)
         if self.state is MotionState.WAITING and not final and len(self.held) < hold + low:
             sendable = 0  # prime: first motion only with enough reference behind it
@@ -178,26 +196,40 @@ class MotionController:
                      f"the machine is at {(self.start_cmd * self.pulse_mm).tolist()} mm")
         return False
 
-    def _send(self, rows: np.ndarray, end: bool) -> None:
+    def _send(self, rows: np.ndarray, end: bool, pause: bool = False) -> None:
         pos = rows[:, : self.n]
         if len(pos):
             feed = rows[:, self.n] if rows.shape[1] > self.n else np.zeros(len(pos))
-            line = rows[:, self.n + 1] if rows.shape[1] > self.n + 1 else np.full(len(pos),
-                                                                                   self.line)
+            line = row_lines(rows) if rows.shape[1] > self.n + 1 else np.full(len(pos),
+                                                                              self.line)
             self.hist.append(pos, feed, line.astype(np.int64), self.last_mm)
             self.prev_mm = pos[-2] if len(pos) > 1 else self.last_mm
             self.last_mm = pos[-1].copy()
             self.state = MotionState.RUNNING if self.state is MotionState.WAITING else self.state
-        if len(pos) or end:
-            self.drive.write_frames(self.pulses.frames(pos), end_of_stream=end)
+        if len(pos) or end or pause:
+            self.drive.write_frames(self.pulses.frames(pos), end_of_stream=end or pause)
         self.sent += len(pos)
         self.sent_eos = self.sent_eos or end
+        self.pausing = self.pausing or pause
+
+    def _pause_step(self, level: int) -> None:
+        """At a program pause: PAUSED once the card has run out, RUNNING again on resume."""
+        if self.state is not MotionState.PAUSED:
+            self._resume_requested = False  # a resume must come after the pause is reached
+            if level == 0:
+                self.state = MotionState.PAUSED
+            return
+        if self._resume_requested:
+            self._resume_requested = False
+            self.pausing = False
+            self.restarting = True
+            self.state = MotionState.RUNNING
 
     def _begin_stop(self, outcome: Outcome, message: str) -> None:
         if self.outcome is not None:
             return  # the first reason is the one reported
         self.outcome, self.message = outcome, message
-        if self.sent_eos or not self.sent:
+        if self.sent_eos or self.pausing or not self.sent:
             self.state = MotionState.SETTLING if self.sent else MotionState.FINISHED
             return
         self.pending_stop = stop_along_path(self.prev_mm, self.last_mm, self.held[:, : self.n],

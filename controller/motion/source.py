@@ -28,8 +28,24 @@ class RefSource(Protocol):
 
 
 def chunk_rows(chunk: RefChunk) -> np.ndarray:
-    """A RefChunk as ring rows."""
-    return np.column_stack([chunk.pos_mm, chunk.feed_mm_s, chunk.line.astype(float)])
+    """A RefChunk as ring rows. A pause (M0) after the chunk is its last row's line, negated:
+    the rows keep their width, and a line number is never negative otherwise."""
+    rows = np.column_stack([chunk.pos_mm, chunk.feed_mm_s, chunk.line.astype(float)])
+    if chunk.pause_after and len(rows):
+        rows[-1, -1] = -abs(rows[-1, -1]) - 0.5  # -0.5: line 0 can pause too
+    return rows
+
+
+def pause_index(rows: np.ndarray) -> int | None:
+    """The first row after which the program pauses, if any."""
+    marked = np.flatnonzero(rows[:, -1] < 0.0)
+    return int(marked[0]) if marked.size else None
+
+
+def row_lines(rows: np.ndarray) -> np.ndarray:
+    """The NC line of each row, pause marks removed."""
+    line = rows[:, -1]
+    return np.where(line < 0.0, -line - 0.5, line)
 
 
 class ChunkSource:

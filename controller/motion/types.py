@@ -20,6 +20,7 @@ class MotionState(enum.Enum):
     RUNNING = "running"
     STOPPING = "stopping"  # controlled stop queued (fault, abort, starved reference)
     SETTLING = "settling"  # all frames executed, waiting for the servo to settle
+    PAUSED = "paused"  # at rest at a program pause (M0), waiting for the operator to resume
     FINISHED = "finished"
 
 

@@ -20,6 +20,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("abort", _OPS + "control_cmd", "stop the daemon's running job along the path"),
     ("estop", _OPS + "control_cmd", "e-stop: stop now and latch until reset"),
     ("reset", _OPS + "control_cmd", "clear a latched e-stop or fault"),
+    ("resume", _OPS + "control_cmd", "continue the daemon's job after a program pause (M0)"),
     ("log", _OPS + "control_cmd", "the daemon's last events"),
     ("simdrive", _OPS + "simdrive_cmd", "serve a simulated CANopen drive set or serial card"),
 )

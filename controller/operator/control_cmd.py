@@ -105,4 +105,4 @@ def _print_event(event: dict[str, Any]) -> None:
 
 
 _COMMANDS = {"status": _status, "abort": _simple, "estop": _simple, "reset": _simple,
-             "log": _log}
+             "resume": _simple, "log": _log}

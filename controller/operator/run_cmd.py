@@ -6,12 +6,13 @@ import argparse
 import os
 import signal
 import sys
+import threading
 from pathlib import Path
 from typing import Any
 
 from controller.config import load_config
 from controller.errors import CncError, ConfigError, NcError
-from controller.motion.types import Outcome
+from controller.motion.types import MotionProgress, MotionState, Outcome
 from controller.operator.client import DaemonUnavailable, daemon_answers, default_socket_path
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 from controller.operator.run_remote import run_on_daemon
@@ -57,6 +58,37 @@ def _program_lines(path: str) -> list[str]:
         return []
 
 
+class _PauseAnnouncer:
+    """Says once per pause (M0) how to continue; passes progress on to the view."""
+
+    def __init__(self, inner: Any) -> None:
+        self.inner, self.announced = inner, False
+
+    def progress(self, p: MotionProgress) -> None:
+        paused = p.state is MotionState.PAUSED
+        if paused and not self.announced:
+            print(f"cncctl: paused at line {p.line} (M0): press Enter to resume, Ctrl-C to "
+                  "stop", file=sys.stderr, flush=True)
+        self.announced = paused
+        self.inner(p)
+
+
+def _resume_on_enter(runtime: Runtime) -> None:
+    """Embedded runs: a line on standard input continues after a program pause (a resume asked
+    before the pause is reached is ignored by the motion controller)."""
+    # os.read on the descriptor, not sys.stdin: a thread blocked in sys.stdin holds its buffer's
+    # lock, which a forked child (the producers) inherits locked and then waits on for ever
+    # when multiprocessing closes its stdin.
+    def read() -> None:
+        try:
+            fd = sys.stdin.fileno()
+            while os.read(fd, 4096):
+                runtime.request_resume()
+        except (OSError, ValueError, AttributeError):
+            pass
+    threading.Thread(target=read, name="resume-on-enter", daemon=True).start()
+
+
 def _daemon_socket(args: argparse.Namespace) -> str | None:
     """The daemon to run through: --socket, or the default one if a daemon answers there.
     Without one, the run is embedded (the drive is opened by this process)."""
@@ -83,8 +115,10 @@ def run(args: argparse.Namespace) -> int:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
     view = _view(args, _program_lines(args.program))
+    pause = _PauseAnnouncer(view.progress)
     runtime = Runtime(args.program, config, RuntimeOptions(virtual_time=args.virtual_time,
-                                                           on_progress=view.progress))
+                                                           on_progress=pause.progress))
+    _resume_on_enter(runtime)
 
     def on_stop_signal(signum: int, frame: Any) -> None:
         # Never a silent kill: decelerate along the path, then exit 4. SIGTERM is what systemd

@@ -107,6 +107,11 @@ class Runtime:
         self.controller: MotionController | None = None
         self.procs: dict[str, Any] = {}
 
+    def request_resume(self) -> None:
+        """Continue after a program pause (M0)."""
+        if self.controller is not None:
+            self.controller.request_resume()
+
     def request_abort(self, message: str = "aborted by operator") -> None:
         if self.controller is not None:
             self.controller.request_abort(message)

@@ -160,8 +160,8 @@ def test_bringup_writes_the_objects_and_close_leaves_drives_disabled() -> None:
             assert (a.consumer_id, a.consumer_ms) == (127, 300)
             assert a.mode == c.MODE_CSP and a.node.nmt._heartbeat_time_ms == 50
             assert a.node.sdo[c.INTERPOLATION_PERIOD][1].raw == 1
-        drive.close()
-        assert [a.state for a in sims.axes] == ["READY TO SWITCH ON"] * 2
+        drive.close()  # controlwords reach the simulated drives through the notifier thread
+        wait_for(lambda: [a.state for a in sims.axes] == ["READY TO SWITCH ON"] * 2, 0.5)
         assert [a.consumer_ms for a in sims.axes] == [0, 0]  # closing is not losing us
 
 
@@ -251,7 +251,8 @@ def test_silent_drive_is_lost_communication_naming_it() -> None:
             drive.status()
         wait_for(lambda: sims.axis("y").state == "QUICK STOP ACTIVE", 0.5)
         drive.close()
-        assert sims.axis("y").state == "SWITCH ON DISABLED"
+        # The disable reaches the simulated drive through the bus's notifier thread.
+        wait_for(lambda: sims.axis("y").state == "SWITCH ON DISABLED", 0.5)
 
 
 def test_master_heartbeat_loss_faults_the_drives() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +18,13 @@ from controller.motion.checks import FerrorCheck
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer
 from controller.motion.source import ChunkSource, chunk_rows
-from controller.motion.types import MotionProgress, MotionResult, MotionSettings, Outcome
+from controller.motion.types import (
+    MotionProgress,
+    MotionResult,
+    MotionSettings,
+    MotionState,
+    Outcome,
+)
 
 CFG = xy_config()
 T = CFG.sample_period_s
@@ -182,3 +189,50 @@ def test_chunk_rows_layout() -> None:
     chunk = next(iter(line_chunks((1.0, 2.0))))
     rows = chunk_rows(chunk)
     assert rows.shape == (len(chunk), 4) and np.all(rows[:, 3] == 2)
+
+
+def _m0_chunks() -> list:
+    import tempfile
+
+    from controller.generator.plan import generate_reference
+    from controller.interpreter.program import read_program
+    with tempfile.TemporaryDirectory() as tmp:
+        program = Path(tmp) / "m0.nc"
+        program.write_text("G21 G90 G64 F2400\nG1 X10\nG1 Y10\nM0\nG1 X0\nG1 Y0\nM2\n")
+        return list(generate_reference(read_program(str(program), CFG), CFG))
+
+
+def _run_with_pause(on_paused: str) -> tuple:
+    card = virtual_card(CFG)
+    settings = MotionSettings.from_config(CFG)
+    pacer = VirtualPacer(settings.cycle_frames, T, card.advance)
+    seen: list = []
+
+    def progress(p) -> None:
+        seen.append(p)
+        if p.state is MotionState.PAUSED and sum(s.state is MotionState.PAUSED for s in seen) == 5:
+            getattr(ctrl, on_paused)()
+    ctrl = MotionController(CFG, card, ChunkSource(_m0_chunks()), pacer, settings,
+                            on_progress=progress)
+    return ctrl.run(), seen, card
+
+
+def test_m0_pauses_at_rest_and_resumes_on_the_path() -> None:
+    result, seen, _ = _run_with_pause("request_resume")
+    states = [s.state for s in seen]
+    assert MotionState.PAUSED in states
+    first = states.index(MotionState.PAUSED)
+    assert MotionState.RUNNING in states[first:]  # it went on after the resume
+    paused = [s for s in seen if s.state is MotionState.PAUSED]
+    assert all(p.line == 4 and p.feed_mm_s == 0.0 and p.fifo_ms == 0.0 for p in paused)
+    assert result.outcome is Outcome.DONE and result.underruns == 0
+    assert result.final_position_mm == {"x": 0.0, "y": 0.0}
+    assert result.commanded_counts == result.executed_counts
+    assert result.min_fifo_ms > 0.0  # the empty FIFO of the pause is not counted
+
+
+def test_abort_while_paused_ends_at_once_at_rest() -> None:
+    result, seen, _ = _run_with_pause("request_abort")
+    assert result.outcome is Outcome.ABORTED
+    assert result.final_position_mm == {"x": 10.0, "y": 10.0}
+    assert result.commanded_counts == result.executed_counts

@@ -331,3 +331,28 @@ def test_a_run_is_not_evicted_by_a_flood_of_idle_connections(tmp_path: Path) -> 
             for s in flood:
                 s.close()
         assert run.returncode == 0 and json.loads(out.splitlines()[-1])["event"] == "done"
+
+
+def test_m0_pauses_the_job_until_resume(tmp_path: Path) -> None:
+    program = tmp_path / "m0.nc"
+    program.write_text("G21 G90 G64 F2400\nG1 X10\nG1 Y10\nM0\nG1 X0\nG1 Y0\nM2\n")
+    with running_cncd(tmp_path) as d:
+        d.cncctl("reset")
+        assert d.cncctl("resume").returncode == 2  # nothing paused
+        run = start_run(d, program)
+        try:
+            deadline = time.monotonic() + 20
+            while d.status()["state"] != "PAUSED":
+                assert time.monotonic() < deadline and run.poll() is None
+                time.sleep(0.05)
+            status = d.status()
+            assert status["line"] == 4 and status["position_mm"] == {"x": 10.0, "y": 10.0}
+            time.sleep(0.3)
+            assert d.status()["state"] == "PAUSED"  # it waits, it does not go on by itself
+            assert d.cncctl("resume").returncode == 0
+            out, _ = run.communicate(timeout=20)
+        finally:
+            run.kill()
+        final = json.loads(out.splitlines()[-1])
+        assert run.returncode == 0 and final["event"] == "done"
+        assert final["final_position_mm"] == {"x": 0.0, "y": 0.0} and final["underruns"] == 0

@@ -62,3 +62,30 @@ def test_an_oversized_config_is_refused_before_parsing(tmp_path: Path) -> None:
     assert done.returncode == 2 and "larger than 1048576 bytes" in done.stderr
     assert time.monotonic() - t0 < 10
     assert os.path.getsize(big) > 1 << 20
+
+
+def test_an_embedded_run_pauses_at_m0_until_enter(tmp_path: Path) -> None:
+    program = tmp_path / "m0.nc"
+    program.write_text("G21 G90 G64 F2400\nG1 X10\nG1 Y10\nM0\nG1 X0\nG1 Y0\nM2\n")
+    proc = subprocess.Popen([*CNCCTL, "run", str(program), "--json"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdin is not None
+        while True:
+            event = json.loads(proc.stdout.readline())
+            if event["event"] == "progress" and event["state"] == "paused":
+                break
+            assert event["event"] in ("start", "progress"), event
+        time.sleep(0.3)
+        assert proc.poll() is None  # still waiting at the pause
+        proc.stdin.write("\n")
+        proc.stdin.flush()
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    final = json.loads(out.splitlines()[-1])
+    assert proc.returncode == 0 and final["event"] == "done", err
+    assert "paused at line 4 (M0)" in err
+    assert final["final_position_mm"] == {"x": 0.0, "y": 0.0}

@@ -16,7 +16,7 @@ from typing import Any
 
 from controller.config import MachineConfig
 from controller.errors import CncError, NcError
-from controller.motion.types import MotionProgress, MotionResult, Outcome
+from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
 from controller.operator.check_cmd import check_program
 from controller.operator.daemon.journal import Journal
 from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
@@ -103,6 +103,17 @@ class Machine:
                 raise ProtocolError("not-running", "no job is running")
             self._stop_job(job, reason)
 
+    def resume(self) -> None:
+        """Continue a job paused at a program pause (M0)."""
+        with self._lock:
+            job = self.job
+            paused = job is not None and job.progress is not None \
+                and job.progress.state is MotionState.PAUSED
+            if not paused or job.runtime is None:
+                raise ProtocolError("not-paused", "no job is paused")
+            job.runtime.request_resume()
+        self.log.log(NOTICE, f"job {job.number}: resumed at line {job.progress.line}")
+
     def estop(self, reason: str) -> None:
         with self._lock:
             self.fault = reason
@@ -142,7 +153,10 @@ class Machine:
     def status(self) -> dict[str, Any]:
         with self._lock:
             job, p = self.job, (self.job.progress if self.job else None)
-            out: dict[str, Any] = {"state": self.state.value, "fault": self.fault,
+            state = self.state.value
+            if p is not None and p.state is MotionState.PAUSED and self.state is State.RUNNING:
+                state = "PAUSED"  # at a program pause (M0): `cncctl resume` continues
+            out: dict[str, Any] = {"state": state, "fault": self.fault,
                                    "program": job.name if job else None,
                                    "job": job.number if job else None}
         out["line"] = p.line if p else self.last_job.get("last_line")

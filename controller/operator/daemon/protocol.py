@@ -8,7 +8,8 @@ from typing import Any
 
 MAX_LINE_BYTES = 64 * 1024  # any request line
 MAX_PROGRAM_BYTES = 64 * 1024 * 1024  # the program text that follows a run request
-COMMANDS = frozenset({"status", "run", "abort", "estop", "reset", "log", "subscribe"})
+COMMANDS = frozenset({"status", "run", "abort", "estop", "reset", "log", "subscribe",
+                      "resume"})
 TOPICS = frozenset({"state", "progress", "log"})
 
 

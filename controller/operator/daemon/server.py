@@ -290,6 +290,9 @@ class Server:
             getattr(self.machine, cmd)(f"{'aborted' if cmd == 'abort' else 'e-stop'} by "
                                        f"operator ({who})")
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
+        elif cmd == "resume":
+            self.machine.resume()
+            self._send(conn, reply_ok(rid, state=self.machine.state.value))
         elif cmd == "reset":
             self.machine.reset()
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
