@@ -22,9 +22,8 @@ class RefRing:
     half-written row. A full ring blocks the producer: that is the back-pressure.
     """
 
-    def __init__(self, shm: shared_memory.SharedMemory, owner: bool) -> None:
+    def __init__(self, shm: shared_memory.SharedMemory) -> None:
         self.shm = shm
-        self.owner = owner
         self.header = np.ndarray((HEADER_WORDS,), dtype=np.int64, buffer=shm.buf)
         self.capacity = int(self.header[CAPACITY])
         self.n_cols = int(self.header[N_COLS])
@@ -35,11 +34,15 @@ class RefRing:
     def create(cls, capacity_rows: int, n_cols: int) -> RefRing:
         size = HEADER_WORDS * 8 + capacity_rows * n_cols * 8
         shm = shared_memory.SharedMemory(create=True, size=size)
+        # Its name is removed at once: the producers are forked and inherit the mapping, and
+        # nobody attaches by name, so nothing is left in /dev/shm even when every process of
+        # the run is killed together (the resource tracker too), as by SIGKILL to a group.
+        shm.unlink()
         header = np.ndarray((HEADER_WORDS,), dtype=np.int64, buffer=shm.buf)
         header[:] = 0
         header[N_COLS], header[CAPACITY] = n_cols, capacity_rows
         del header
-        return cls(shm, owner=True)
+        return cls(shm)
 
     # -- producer -------------------------------------------------------------------------
     def write(self, rows: np.ndarray, poll_s: float = 0.001) -> bool:
@@ -88,6 +91,4 @@ class RefRing:
 
     def close(self) -> None:
         del self.header, self.rows
-        self.shm.close()
-        if self.owner:
-            self.shm.unlink()
+        self.shm.close()  # the name went at creation (see create): unmapping frees it
