@@ -17,6 +17,7 @@ from controller.numeric import segment_distance
 # along the path than this from its reference (at 1 ms, 40 samples hold 50 um even at 1.25 mm/s).
 NEAR_SAMPLES = 40
 BEFORE_S = 0.05  # a stop's window starts this long before it ...
+BLOCK_SAMPLES = 4096  # samples measured at once: about 10 MB of temporaries whatever the length
 
 
 @dataclass(frozen=True)
@@ -58,10 +59,12 @@ def distance_from_reference_mm(ref: np.ndarray, act: np.ndarray, exact_above_mm:
     k = np.flatnonzero(bound > exact_above_mm)
     if k.size == 0:
         return bound
-    j = np.clip(k[:, None] + np.arange(-near, near)[None, :], 0, n - 2)
-    nearest = segment_distance(act[k, None, :], ref[j], ref[j + 1]).min(axis=1)
     out = bound.copy()
-    out[k] = nearest
+    window = np.arange(-near, near)[None, :]
+    for lo in range(0, k.size, BLOCK_SAMPLES):  # bounded memory on programs of any length
+        kb = k[lo:lo + BLOCK_SAMPLES]
+        j = np.clip(kb[:, None] + window, 0, n - 2)
+        out[kb] = segment_distance(act[kb, None, :], ref[j], ref[j + 1]).min(axis=1)
     return out
 
 
