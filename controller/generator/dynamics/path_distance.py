@@ -55,6 +55,9 @@ def _point_segment(q: np.ndarray, a: np.ndarray, d: np.ndarray, len2: np.ndarray
     return np.hypot(ex, ey), t
 
 
+MAX_SEEDS = 200_000
+
+
 class PathDistance:
     """A finite polyline path, indexed once, measured against many points."""
 
@@ -73,7 +76,10 @@ class PathDistance:
         positive = seg_len[seg_len > 0]
         if spacing_mm is None:
             spacing_mm = float(np.median(positive)) if positive.size else 1.0
-        self.spacing_mm = max(float(spacing_mm), 1e-9)
+        # Never more than MAX_SEEDS seeds: a median of near-zero segments beside one long one
+        # would otherwise ask for billions (found by the property test; the search below only
+        # needs seeds and its widening to use the same spacing).
+        self.spacing_mm = max(float(spacing_mm), float(self.s_mm[-1]) / MAX_SEEDS, 1e-9)
         # Seeds: each segment's start plus evenly spaced interior points (at most spacing apart).
         pieces = np.maximum(np.ceil(seg_len / self.spacing_mm).astype(np.int64), 1)
         seg_of_seed = np.repeat(np.arange(len(seg_len)), pieces)
