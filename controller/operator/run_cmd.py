@@ -12,17 +12,14 @@ from typing import Any
 
 from controller.config import load_config
 from controller.errors import CncError, ConfigError, NcError
-from controller.motion.types import MotionProgress, MotionState, Outcome
+from controller.motion.types import MotionProgress, MotionState
 from controller.operator.client import DaemonUnavailable, daemon_answers, default_socket_path
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
+from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
 from controller.operator.run_remote import run_on_daemon
 from controller.operator.run_view import JsonView, PlainView, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.errors import DriveUnavailableError
-
-EXIT_CODES = {Outcome.DONE: 0, Outcome.FAULT: 3, Outcome.ABORTED: 4}
-EXIT_REJECTED = 2
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

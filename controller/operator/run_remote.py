@@ -12,11 +12,10 @@ from typing import Any
 
 from controller.operator.client import DaemonClient, DaemonError, DaemonUnavailable
 from controller.operator.daemon.protocol import MAX_PROGRAM_BYTES
+from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
 from controller.operator.run_view import progress_from_event
 
-FINAL_EVENTS = {"done": 0, "fault": 3, "aborted": 4}
-EXIT_REJECTED = 2
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+FINAL_EVENTS = {outcome.value: code for outcome, code in EXIT_CODES.items()}
 
 
 def run_on_daemon(args: argparse.Namespace, socket_path: str, view: Any) -> int:

@@ -86,7 +86,7 @@ class Machine:
     # -- commands ---------------------------------------------------------------------------
     def start_job(self, name: str, text: bytes, emit: Emit) -> int:
         with self._lock:
-            self._require_idle()
+            self.require_idle()
             self._jobs += 1
             job = Job(self._jobs, name, hashlib.sha256(text).hexdigest(), text,
                       text.count(b"\n"), emit)
@@ -193,7 +193,8 @@ class Machine:
                 for a, c in zip(self.config.axes, enc, strict=True)}
 
     # -- internals ----------------------------------------------------------------------------
-    def _require_idle(self) -> None:
+    def require_idle(self) -> None:
+        """Raise the reason a job cannot start now (busy, e-stop, fault), if there is one."""
         if self.job is not None:
             raise ProtocolError("busy", f"busy: a job is {self.state.value.lower()} "
                                         "(one job at a time; nothing was queued)")

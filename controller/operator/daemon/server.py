@@ -281,10 +281,12 @@ class Server:
         if cmd == "status":
             self._send(conn, reply_ok(rid, **self.machine.status()))
         elif cmd == "run":
-            size = request.fields["program_bytes"]
-            if self.machine.job is not None or self.machine.state.value != "IDLE":
-                conn.discard = size  # refused at once: the program text is skipped unread
-                self.machine._require_idle()
+            try:
+                self.machine.require_idle()
+            except ProtocolError:
+                # Refused at once: the program text that follows is skipped unread.
+                conn.discard = request.fields["program_bytes"]
+                raise
             conn.run = (request, bytearray())
         elif cmd in ("abort", "estop"):
             getattr(self.machine, cmd)(f"{'aborted' if cmd == 'abort' else 'e-stop'} by "
