@@ -33,6 +33,24 @@ class ServoParams:
 
 
 @dataclass(frozen=True, slots=True)
+class HomingConfig:
+    """One axis's homing sequence (LinuxCNC HOME_* style), run by the drive (CiA 402 mode 6).
+
+    Search toward the switch at search speed, back off, approach again at latch speed; the
+    point found (switch edge, or the encoder index after it) becomes home_mm in machine
+    coordinates, then the axis moves to final_mm."""
+
+    direction: int  # -1: search toward negative travel, +1 toward positive
+    search_mm_s: float
+    latch_mm_s: float
+    home_mm: float  # machine coordinate of the point found
+    final_mm: float  # where the axis stands once homed
+    use_index: bool  # latch on the encoder index after the switch (not the switch edge)
+    sequence: int  # axes home in increasing sequence; equal sequences home together
+    accel_mm_s2: float  # search and latch moves (0x609A)
+
+
+@dataclass(frozen=True, slots=True)
 class AxisConfig:
     name: str
     servo: ServoParams
@@ -41,6 +59,7 @@ class AxisConfig:
     max_velocity_mm_s: float
     ferror_mm: float  # following-error limit at full speed (LinuxCNC FERROR)
     min_ferror_mm: float  # following-error floor (LinuxCNC MIN_FERROR)
+    homing: HomingConfig | None = None  # None: no homing sequence (the position is absolute)
 
     def ferror_limit_mm(self, v_mm_s: float) -> float:
         """LinuxCNC rule: max(MIN_FERROR, FERROR * |v| / Vmax)."""
@@ -100,6 +119,7 @@ class MachineConfig:
     drive: DriveConfig
     runtime: RuntimeConfig = field(default_factory=lambda: RuntimeConfig(64, 20.0, 100.0))
     service: ServiceConfig = field(default_factory=ServiceConfig)
+    allow_unhomed: bool = False  # run programs before the axes with a homing sequence are homed
 
     @property
     def axis_names(self) -> tuple[str, ...]:
@@ -180,6 +200,12 @@ class _Section:
             raise ConfigError(self.path, self._key(key), f"must be one of {', '.join(choices)}")
         return value
 
+    def bool(self, key: str, default: Any = _REQUIRED) -> bool:
+        value = self._raw(key, default)
+        if not isinstance(value, bool):
+            raise ConfigError(self.path, self._key(key), f"must be true or false, got {value!r}")
+        return value
+
     def names(self, key: str) -> tuple[str, ...]:
         value = self._raw(key, [])
         if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
@@ -226,9 +252,34 @@ def _read_axis(sec: _Section, name: str) -> AxisConfig:
         max_velocity_mm_s=sec.float("max_velocity_mm_s", above=0.0, maxval=10000.0),
         ferror_mm=sec.float("ferror_mm", above=0.0, maxval=100.0),
         min_ferror_mm=sec.float("min_ferror_mm", above=0.0, maxval=100.0),
+        homing=None,
     )
+    if "homing" in sec.data:
+        axis = replace(axis, homing=_read_homing(sec.section("homing"), axis))
     sec.finish()
     return axis
+
+
+def _read_homing(sec: _Section, axis: AxisConfig) -> HomingConfig:
+    lo, hi = axis.travel_mm
+    direction = sec.int("direction", minval=-1, maxval=1)
+    if direction == 0:
+        raise ConfigError(sec.path, sec._key("direction"), "must be -1 or 1")
+    home_mm = sec.float("home_mm", minval=lo, maxval=hi)
+    cfg = HomingConfig(
+        direction=direction,
+        search_mm_s=sec.float("search_mm_s", above=0.0, maxval=axis.max_velocity_mm_s),
+        latch_mm_s=sec.float("latch_mm_s", above=0.0, maxval=axis.max_velocity_mm_s),
+        home_mm=home_mm,
+        final_mm=sec.float("final_mm", home_mm, minval=lo, maxval=hi),
+        use_index=sec.bool("use_index", False),
+        sequence=sec.int("sequence", 0, minval=0, maxval=9),
+        accel_mm_s2=sec.float("accel_mm_s2", 500.0, above=0.0, maxval=1e6),
+    )
+    if cfg.latch_mm_s > cfg.search_mm_s:
+        raise ConfigError(sec.path, sec._key("latch_mm_s"), "must not exceed search_mm_s")
+    sec.finish()
+    return cfg
 
 
 def _read_interpolator(sec: _Section) -> InterpolatorConfig:
@@ -303,6 +354,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         drive=_read_drive(top.section("drive")),
         runtime=_read_runtime(top.section("runtime", {})),
         service=_read_service(top.section("service", {})),
+        allow_unhomed=top.bool("allow_unhomed", False),
     )
     top.finish()
     return cfg

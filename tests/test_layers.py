@@ -26,7 +26,7 @@ ALLOWED: dict[str, set[str]] = {
     "drivers": {"base", "dynamics"},  # the sim card clocks its axes through the servo model
     "interpreter": {"base", "geometry"},
     "generator": {"base", "geometry"} | GENERATOR_MODULES,
-    "motion": {"base", "drivers"},
+    "motion": {"base", "drivers", "dynamics"},  # hold and override: the servo model's check
     "runtime": {"base", "geometry", "drivers", "interpreter", "generator", "motion"}
     | GENERATOR_MODULES,
     "operator": {"base", "geometry", "drivers", "interpreter", "generator", "motion", "runtime"}

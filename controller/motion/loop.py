@@ -11,6 +11,7 @@ from controller.config import MachineConfig
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter
+from controller.motion.retime import Retimer
 from controller.motion.source import RefSource, SourceState, pause_index, row_lines
 from controller.motion.stopping import stop_along_path
 from controller.motion.types import (
@@ -47,10 +48,22 @@ class MotionController:
         self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
         self._abort_message: str | None = None
         self._resume_requested = False
+        self._hold_requested = False
+        self.override_pct = 100.0
+        self.retimer = Retimer(config)
 
     def request_resume(self) -> None:
-        """Operator: continue after a program pause (a flag read by the loop)."""
+        """Operator: continue after a program pause or a feed hold (a flag read by the loop)."""
         self._resume_requested = True
+
+    def request_hold(self) -> None:
+        """Operator: feed hold, a planned deceleration along the path to a standstill."""
+        self._hold_requested = True
+
+    def set_feed_override(self, percent: float) -> None:
+        """Operator: feed override in % of the planned feed (0 holds; above 100 is capped at
+        the plan, which already runs at the programmed feed or the machine's limits)."""
+        self.override_pct = min(max(float(percent), 0.0), 150.0)
 
     def request_abort(self, message: str = "aborted by operator") -> None:
         """Operator stop (SIGINT handler safe: only sets a flag read by the loop)."""
@@ -97,6 +110,8 @@ class MotionController:
         self.settled_since_s: float | None = None
         self.position_known = True
         self.pausing = False  # the frames up to a program pause are sent: wait there
+        self.holding = False  # feed hold asked: decelerate along the path, then wait
+        self.program_pause = False  # the standstill being reached is a program pause (M0)
         self.restarting = False  # resumed from a pause: the FIFO is empty by design
 
     def _cycle(self) -> None:
@@ -112,6 +127,7 @@ class MotionController:
             self._finish(Outcome.FAULT, self.drive.fault_message())
             return
         self._supervise(fb)
+        self._operator_requests()
         if self.pausing and self.outcome is None:
             self._pause_step(level)
         elif self.state in (MotionState.WAITING, MotionState.RUNNING) and not self.sent_eos:
@@ -146,6 +162,17 @@ class MotionController:
         if self._abort_message is not None:
             self._begin_stop(Outcome.ABORTED, self._abort_message)
 
+    def _operator_requests(self) -> None:
+        """Hold and override become the re-timer's target rate (resume: see _pause_step)."""
+        if self._hold_requested and not self.holding:
+            self.holding = True
+        self._hold_requested = False
+        if self._resume_requested and self.holding and not self.pausing:
+            self.holding = False  # resumed before the standstill: ramp back up from here
+            self._resume_requested = False
+        rate = 0.0 if self.holding else min(self.override_pct, 100.0) / 100.0
+        self.retimer.set_target(rate)
+
     # -- streaming ------------------------------------------------------------------------
     def _refill(self, level: int) -> None:
         s = self.settings
@@ -167,23 +194,35 @@ class MotionController:
         if len(rows) and not self._start_ok(rows):
             return
         self.held = np.vstack([self.held, rows]) if len(rows) else self.held
+        if not self.retimer.identity and not final and ask:
+            self._read_ahead()  # a ramp is planned on the rows it will cross
         pause = pause_index(self.held) if len(self.held) else None
-        if pause is not None:
-            # Everything up to the pause goes out whatever the holdback: the path is at rest
-            # there (a stop along it is not needed), and the card idles after it, no underrun.
-            n = min(max(want, 0), pause + 1)
-            self._send(self.held[:n], end=False, pause=n == pause + 1)
-            self.held = self.held[n:]
-            return
         sendable = len(self.held) if final else max(0, len(self.held) - hold)
         if self.state is MotionState.WAITING and not final and len(self.held) < hold + low:
             sendable = 0  # prime: first motion only with enough reference behind it
-        n = max(0, min(want, sendable))
-        self._send(self.held[:n], end=final and n == len(self.held))
-        self.held = self.held[n:]
-        if self.sent and not final and level + n < low:
+        # Everything up to a pause goes out whatever the holdback: the path is at rest there
+        # (a stop along it is not needed), and the card idles after it, no underrun.
+        limit = pause + 1 if pause is not None else sendable
+        out, used = self.retimer.take(self.held, limit, max(want, 0),
+                                      land=pause is not None or final)
+        self.held = self.held[used:]
+        whole = self.retimer.frac == 0.0
+        at_pause = pause is not None and used == pause + 1 and whole
+        at_hold = self.retimer.at_rest and not at_pause
+        self.program_pause = self.program_pause or at_pause
+        self._send(out, end=final and not len(self.held) and whole,
+                   pause=at_pause or at_hold)
+        if self.sent and not final and pause is None and not self.pausing \
+                and level + len(out) < low:
             self._begin_stop(Outcome.FAULT, f"feed hold at line {self.line}: reference points "
                              "ran late (generator starved), stopped along the path")
+
+    def _read_ahead(self, max_rows: int = 4096) -> None:
+        """More held rows while re-timing: a ramp looks at the rows it will cross."""
+        if len(self.held) < max_rows:
+            rows = self.source.read(max_rows - len(self.held))
+            if len(rows):
+                self.held = np.vstack([self.held, rows])
 
     def _start_ok(self, rows: np.ndarray) -> bool:
         """The first reference point must be where the machine is (no jump at start)."""
@@ -213,16 +252,22 @@ class MotionController:
         self.pausing = self.pausing or pause
 
     def _pause_step(self, level: int) -> None:
-        """At a program pause: PAUSED once the card has run out, RUNNING again on resume."""
-        if self.state is not MotionState.PAUSED:
-            self._resume_requested = False  # a resume must come after the pause is reached
+        """At a program pause or a hold: PAUSED/HELD once the card has run out, RUNNING again
+        on resume (from a hold: a planned ramp back to the override's feed). A standstill
+        of 0 % override goes on by itself once the override is turned up."""
+        if self.state not in (MotionState.PAUSED, MotionState.HELD):
             if level == 0:
-                self.state = MotionState.PAUSED
+                self.state = MotionState.PAUSED if self.program_pause else MotionState.HELD
+                self._resume_requested = False  # a resume must come after the standstill
             return
-        if self._resume_requested:
+        zero_override_lifted = (self.state is MotionState.HELD and not self.holding
+                                and self.override_pct > 0.0)
+        if self._resume_requested or zero_override_lifted:
             self._resume_requested = False
             self.pausing = False
+            self.program_pause = False
             self.restarting = True
+            self.holding = False
             self.state = MotionState.RUNNING
 
     def _begin_stop(self, outcome: Outcome, message: str) -> None:
@@ -285,7 +330,9 @@ class MotionController:
             ferror_um=float(np.abs(self.ferr.last_mm).max()) * 1e3,
             fifo_ms=level * self.period_s * 1e3, elapsed_s=now_s,
             executed_s=self.executed * self.period_s,
-            planned_s=None if total is None else total * self.period_s))
+            planned_s=None if total is None else total * self.period_s,
+            override_pct=self.override_pct,
+            position_mm=tuple(float(v) for v in self.last_enc * self.pulse_mm)))
 
     def _result(self) -> MotionResult:
         return build_result(self)

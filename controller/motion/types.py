@@ -21,6 +21,7 @@ class MotionState(enum.Enum):
     STOPPING = "stopping"  # controlled stop queued (fault, abort, starved reference)
     SETTLING = "settling"  # all frames executed, waiting for the servo to settle
     PAUSED = "paused"  # at rest at a program pause (M0), waiting for the operator to resume
+    HELD = "held"  # at rest on the path after a feed hold, waiting for the operator to resume
     FINISHED = "finished"
 
 
@@ -54,6 +55,8 @@ class MotionProgress:
     elapsed_s: float
     executed_s: float
     planned_s: float | None  # known once the generator has finished
+    override_pct: float = 100.0
+    position_mm: tuple[float, ...] = ()  # encoder position, machine coordinates
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,257 @@
+"""Feed hold and feed override: the planned reference re-timed along its own path, within Amax."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.config import MachineConfig
+from controller.generator.dynamics.prediction import (
+    SETTLE_S,
+    axis_servos,
+    planning_limit_mm,
+    rest_state,
+)
+from controller.generator.dynamics.servo import filter_block
+from controller.generator.dynamics.stops import distance_from_reference_mm
+
+ACCEL_MARGIN = 0.98  # first guess of a ramp: this share of Amax for the rate change alone
+MIN_RAMP_S = 0.01
+MAX_RAMP_S = 5.0
+RAMP_GROWTH = 1.25  # a ramp that breaks Amax is tried again this much longer
+AT_REST_RATE = 1e-9  # a time scale below this is a standstill
+SERVO_MEMORY = 256  # output samples kept to start the servo model of a check (settles in 32)
+
+
+def smoothstep5(u: np.ndarray) -> np.ndarray:
+    """The quintic 0 -> 1 with zero slope and curvature at both ends (ALGORITHMS 2's shape)."""
+    u = np.clip(u, 0.0, 1.0)
+    return u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
+
+
+def interpolate_rows(rows: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """Catmull-Rom through the rows at fractional indices tau (exact at whole ones); past the
+    last row, the last row (the reference at rest)."""
+    n = len(rows)
+    tau = np.clip(tau, 0.0, n - 1)
+    i = np.minimum(np.floor(tau).astype(np.int64), n - 1)
+    t = (tau - i)[:, None]
+    p0, p1 = rows[np.maximum(i - 1, 0)], rows[i]
+    p2, p3 = rows[np.minimum(i + 1, n - 1)], rows[np.minimum(i + 2, n - 1)]
+    c1 = 0.5 * (p2 - p0)
+    c2 = p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3
+    c3 = 0.5 * (p3 - p0) + 1.5 * (p1 - p2)
+    return p1 + t * (c1 + t * (c2 + t * c3))
+
+
+@dataclass
+class Ramp:
+    """The time scale (reference samples per output sample) going rate0 -> rate1 over `span`
+    samples (not always a whole number: see Retimer._land)."""
+
+    rate0: float
+    rate1: float
+    span: float
+    k: int = 0  # samples of it done
+
+    @property
+    def n(self) -> int:
+        return max(1, math.ceil(self.span - 1e-9))
+
+    def rates(self, count: int) -> np.ndarray:
+        """The next `count` rates (rate1 once the ramp is over); does not advance."""
+        k = self.k + 1 + np.arange(count)
+        return self.rate0 + (self.rate1 - self.rate0) * smoothstep5(k / max(self.span, 1.0))
+
+    @property
+    def done(self) -> bool:
+        return self.k >= self.n
+
+
+class Retimer:
+    """Plays the planned reference at a time scale `rate` (1: as planned, 0: held).
+
+    Positions are taken along the reference rows themselves (the planned path: no new
+    geometry), so the feed is rate x the planned feed and the normal acceleration rate^2 x
+    the planned one: below 1 neither can exceed what the plan was checked for. A change of
+    rate is a quintic ramp, lengthened until the tangential acceleration of the re-timed
+    points, rate^2 a + rate' v, stays within Amax on the rows it will cross, and until the
+    servo model's distance of the tool from the points sent stays within the contour limit
+    (the hold's own standstill and its settling included), or no worse than the plan's own
+    there. At rate 1 with no ramp the rows pass through unchanged: a run without hold or
+    override is the plan.
+    """
+
+    def __init__(self, config: MachineConfig) -> None:
+        self.n_axes = len(config.axes)
+        self.period_s = config.sample_period_s
+        self.accel_mm_s2 = config.interpolator.max_accel_mm_s2
+        self.servos = axis_servos(config)
+        self.limit_mm = planning_limit_mm(config)
+        self.settle = int(round(SETTLE_S / self.period_s))
+        self.recent = np.zeros((0, 2))  # the last outputs (XY), the servo model's history
+        self.rate = 1.0
+        self.target = 1.0
+        self.ramp: Ramp | None = None
+        self.frac = 0.0  # position between the last row passed and the first held row
+        self.back = np.zeros((0, self.n_axes + 2))  # the two last rows passed (interpolation)
+
+    @property
+    def identity(self) -> bool:
+        return self.rate == 1.0 and self.ramp is None and self.frac == 0.0 and self.target == 1.0
+
+    @property
+    def at_rest(self) -> bool:
+        return self.rate <= AT_REST_RATE and self.ramp is None
+
+    def set_target(self, rate: float) -> None:
+        """Ask for a new time scale; the ramp is planned at the next take()."""
+        self.target = min(max(rate, 0.0), 1.0)
+
+    def passed(self, rows: np.ndarray) -> None:
+        """Rows sent as they are (identity): remember the last two for a later ramp."""
+        if len(rows):
+            self.back = np.vstack([self.back, rows])[-2:]
+            self._remember(rows)
+
+    def _remember(self, rows: np.ndarray) -> None:
+        self.recent = np.vstack([self.recent, rows[-SERVO_MEMORY:, :2]])[-SERVO_MEMORY:]
+
+    # -- output ---------------------------------------------------------------------------
+    def take(self, held: np.ndarray, limit: int, count: int,
+             land: bool = False) -> tuple[np.ndarray, int]:
+        """Up to `count` output rows crossing at most `limit` held rows: (rows, rows passed).
+
+        A new target starts a ramp planned on the held rows; rows past `limit` are only
+        looked at, never reached. land: the limit row is a standstill of the plan (a pause,
+        the program end), so the last output lands on it exactly when less than a row away."""
+        if self.identity:
+            n = max(0, min(count, limit))
+            self.passed(held[:n])
+            return held[:n], n
+        if self.target != (self.ramp.rate1 if self.ramp else self.rate):
+            self.ramp = self._plan_ramp(held)
+        if self.at_rest or count <= 0:
+            return np.zeros((0, held.shape[1])), 0
+        rates = self._rates(count)
+        base = np.vstack([self.back, held]) if len(self.back) else held
+        start = len(self.back) - 1 + self.frac  # fractional index of the last output point
+        tau = start + np.cumsum(rates)
+        top = len(self.back) - 1 + limit
+        keep = int(np.searchsorted(tau, top + 1e-12, side="right"))
+        tau, rates = tau[:keep], rates[:keep]
+        if land and keep < count and limit > 0 and top - (tau[-1] if keep else start) < 1.0:
+            tau = np.append(tau, float(top))  # the rest of a row at a standstill: land on it
+            rates = np.append(rates, rates[-1] if keep else self.rate)
+        self._advance(rates)
+        if self.ramp is None and self.rate == 1.0 and len(tau) \
+                and abs(tau[-1] - round(tau[-1])) < 1e-6:
+            tau[-1] = round(tau[-1])  # back on whole rows (see _land): the rows as planned
+        out = self._rows(base, tau, rates)
+        if len(out):
+            self._remember(out)
+        end = start if not len(tau) else float(tau[-1])
+        whole = int(math.floor(end + 1e-12))
+        passed = max(0, whole - (len(self.back) - 1))
+        self.frac = max(0.0, end - whole) if end - whole > 1e-12 else 0.0
+        self.back = base[max(0, whole - 1): whole + 1]
+        return out, passed
+
+    def _rows(self, base: np.ndarray, tau: np.ndarray, rates: np.ndarray) -> np.ndarray:
+        """Positions at tau; the feed column scaled by the rate; lines (and marks) of the row
+        reached, so a pause mark is only carried by the row that lands on it."""
+        if not len(tau):
+            return np.zeros((0, base.shape[1]))
+        pos = interpolate_rows(base[:, : self.n_axes + 1], tau)
+        pos[:, self.n_axes] *= rates
+        idx = np.minimum(np.floor(tau + 1e-12).astype(np.int64), len(base) - 1)
+        exact = np.abs(tau - idx) <= 1e-12
+        line = np.where(exact, base[idx, -1], np.floor(np.abs(base[idx, -1])))
+        return np.column_stack([pos, line])
+
+    def _rates(self, count: int) -> np.ndarray:
+        if self.ramp is None:
+            return np.full(count, self.rate)
+        return self.ramp.rates(count)
+
+    def _advance(self, rates: np.ndarray) -> None:
+        if not len(rates):
+            return
+        self.rate = float(rates[-1])
+        if self.ramp is not None:
+            self.ramp.k += len(rates)
+            if self.ramp.done:
+                self.rate, self.ramp = self.ramp.rate1, None
+                if self.rate <= AT_REST_RATE:
+                    self.rate = 0.0
+
+    # -- planning -------------------------------------------------------------------------
+    def _plan_ramp(self, held: np.ndarray) -> Ramp | None:
+        """The shortest quintic ramp to the target that keeps Amax and the contour limit."""
+        rate0, rate1 = self.rate, self.target
+        if rate0 == rate1:
+            return None
+        base = np.vstack([self.back, held]) if len(self.back) else held
+        v_max = float(np.max(np.abs(base[:, self.n_axes]))) if len(base) else 0.0
+        guess_s = 15.0 * abs(rate1 - rate0) * v_max / (8.0 * ACCEL_MARGIN * self.accel_mm_s2)
+        ramp_s = max(MIN_RAMP_S, guess_s)
+        plan_mm = self._worst_distance_mm(base, Ramp(rate0, rate0, 1))
+        while True:
+            ramp = Ramp(rate0, rate1, float(math.ceil(ramp_s / self.period_s)))
+            if rate1 == 1.0:
+                ramp = self._land(ramp)
+            if ramp_s >= MAX_RAMP_S or self._acceptable(base, ramp, plan_mm):
+                return ramp
+            ramp_s *= RAMP_GROWTH
+
+    def _land(self, ramp: Ramp) -> Ramp:
+        """The same ramp back to rate 1 stretched (by less than 2 / (1 - rate0) samples) so
+        that it ends on a whole row: from there the planned rows pass through unchanged,
+        where points between rows would differ from them by interpolation (0.1 % in speed)."""
+        lo, hi = ramp.span, ramp.span + 2.0 / max(1.0 - ramp.rate0, 1e-3) + 2.0
+        horizon = math.ceil(hi) + 1
+
+        def advance(span: float) -> float:
+            return self.frac + float(np.sum(Ramp(ramp.rate0, 1.0, span).rates(horizon)))
+
+        target = math.floor(advance(lo))  # a longer ramp advances less: down to this row
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if advance(mid) > target else (lo, mid)
+        return Ramp(ramp.rate0, 1.0, hi)
+
+    def _path_points(self, base: np.ndarray, ramp: Ramp, extra: int) -> np.ndarray:
+        """The points the ramp would send (all axes), then `extra` more at its final rate, a
+        standstill staying where it is; the point sent before them first when known."""
+        rates = ramp.rates(ramp.n + extra)
+        start = len(self.back) - 1 + self.frac
+        tau = start + np.concatenate([[0.0], np.cumsum(rates)])
+        return interpolate_rows(base[:, : self.n_axes], tau)
+
+    def _acceptable(self, base: np.ndarray, ramp: Ramp, plan_mm: float) -> bool:
+        if len(base) < 2:
+            return True
+        pts = self._path_points(base, ramp, 2)
+        if len(self.recent) >= 2:
+            pts = np.vstack([self.recent[-2:-1, :] if self.n_axes == 2 else
+                             np.column_stack([self.recent[-2:-1], pts[:1, 2:]]), pts])
+        speed = np.linalg.norm(np.diff(pts, axis=0), axis=1) / self.period_s
+        if np.any(np.abs(np.diff(speed)) / self.period_s > self.accel_mm_s2):
+            return False
+        return self._worst_distance_mm(base, ramp) <= max(self.limit_mm, plan_mm)
+
+    def _worst_distance_mm(self, base: np.ndarray, ramp: Ramp) -> float:
+        """The servo model's largest distance of the tool from the points sent, over the ramp
+        and a settling time after it, starting from the recent outputs (their state)."""
+        if len(base) < 2:
+            return 0.0
+        new = self._path_points(base, ramp, self.settle)[1:, :2]
+        xy = np.vstack([self.recent, new]) if len(self.recent) else new
+        v = np.diff(xy, axis=0, prepend=xy[:1]) / self.period_s
+        sx, sy = rest_state(self.servos)
+        err = np.column_stack([filter_block(self.servos[0], v[:, 0], sx)[0],
+                               filter_block(self.servos[1], v[:, 1], sy)[0]])
+        dist = distance_from_reference_mm(xy, xy - err)
+        return float(dist[len(self.recent):].max(initial=0.0))
