@@ -173,7 +173,7 @@ def shm_names() -> set[str]:
 def start_run(daemon: Cncd, program: Path, *extra: str) -> subprocess.Popen:
     return subprocess.Popen([*CNCCTL, "run", str(program), "--json", "--socket",
                              daemon.socket_path, *extra], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True)
 
 
 def wait_moving(run: subprocess.Popen, after_s: float = 0.1) -> None:

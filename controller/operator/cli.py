@@ -20,7 +20,9 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("abort", _OPS + "control_cmd", "stop the daemon's running job along the path"),
     ("estop", _OPS + "control_cmd", "e-stop: stop now and latch until reset"),
     ("reset", _OPS + "control_cmd", "clear a latched e-stop or fault"),
-    ("resume", _OPS + "control_cmd", "continue the daemon's job after a program pause (M0)"),
+    ("resume", _OPS + "control_cmd", "continue the daemon's job after a pause (M0) or a hold"),
+    ("hold", _OPS + "control_cmd", "feed hold: decelerate along the path and wait for resume"),
+    ("feed", _OPS + "control_cmd", "feed override in % (0-150) of the daemon's jobs"),
     ("log", _OPS + "control_cmd", "the daemon's last events"),
     ("simdrive", _OPS + "simdrive_cmd", "serve a simulated CANopen drive set or serial card"),
 )

@@ -1,4 +1,5 @@
-"""`cncctl status | abort | estop | reset | log`: the daemon's state, and commands to it."""
+"""`cncctl status | abort | estop | reset | resume | hold | feed | log`: the daemon's state and
+commands to it."""
 
 from __future__ import annotations
 
@@ -30,6 +31,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     if command == "status":
         parser.add_argument("--json", action="store_true", help="one JSON object")
         parser.add_argument("--watch", action="store_true", help="print every change")
+    elif command == "feed":
+        parser.add_argument("percent", type=float,
+                            help="feed override in %% of the programmed feed, 0-150 "
+                                 "(0 holds until raised)")
     elif command == "log":
         parser.add_argument("-n", "--lines", type=int, default=50, help="last events")
         parser.add_argument("-f", "--follow", action="store_true", help="then follow")
@@ -74,6 +79,7 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
     if s.get("program"):
         print(f"  job {s['job']} {s['program']!r} line {s['line']}  feed "
               f"{s['feed_mm_s']:.1f} mm/s  following error {s['ferror_um']:.0f} um")
+    print(f"  feed override {s.get('feed_override_pct', 100.0):g} %")
     print(f"  position {where}")
     last = s.get("last_job") or {}
     if last.get("program"):
@@ -85,6 +91,12 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
 def _simple(client: DaemonClient, args: argparse.Namespace) -> int:
     reply = client.request(args.command)
     print(f"cncctl {args.command}: {reply['state']}")
+    return 0
+
+
+def _feed(client: DaemonClient, args: argparse.Namespace) -> int:
+    reply = client.request("feed", percent=args.percent)
+    print(f"cncctl feed: {reply['feed_override_pct']:g} %")
     return 0
 
 
@@ -105,4 +117,4 @@ def _print_event(event: dict[str, Any]) -> None:
 
 
 _COMMANDS = {"status": _status, "abort": _simple, "estop": _simple, "reset": _simple,
-             "resume": _simple, "log": _log}
+             "resume": _simple, "hold": _simple, "feed": _feed, "log": _log}

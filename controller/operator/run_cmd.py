@@ -6,7 +6,7 @@ import argparse
 import os
 import signal
 import sys
-import threading
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +16,7 @@ from controller.motion.types import MotionProgress, MotionState
 from controller.operator.client import DaemonUnavailable, daemon_answers, default_socket_path
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
+from controller.operator.run_keys import KeyControl, read_keys, stdin_fd
 from controller.operator.run_remote import run_on_daemon
 from controller.operator.run_view import JsonView, PlainView, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
@@ -55,35 +56,23 @@ def _program_lines(path: str) -> list[str]:
         return []
 
 
-class _PauseAnnouncer:
-    """Says once per pause (M0) how to continue; passes progress on to the view."""
+class _Announcer:
+    """Says once per standstill (M0 pause, feed hold) how to continue; passes progress on."""
 
-    def __init__(self, inner: Any) -> None:
-        self.inner, self.announced = inner, False
+    def __init__(self, inner: Any, keys: KeyControl) -> None:
+        self.inner, self.keys, self.last = inner, keys, MotionState.WAITING
 
     def progress(self, p: MotionProgress) -> None:
-        paused = p.state is MotionState.PAUSED
-        if paused and not self.announced:
+        self.keys.progress(p)
+        if p.state is not self.last and p.state is MotionState.PAUSED:
             print(f"cncctl: paused at line {p.line} (M0): press Enter to resume, Ctrl-C to "
                   "stop", file=sys.stderr, flush=True)
-        self.announced = paused
+        elif p.state is not self.last and p.state is MotionState.HELD:
+            where = " ".join(f"{n}{v:.3f}" for n, v in zip("XYZ", p.position_mm, strict=False))
+            print(f"cncctl: held at line {p.line}, {where}: press space or Enter to resume",
+                  file=sys.stderr, flush=True)
+        self.last = p.state
         self.inner(p)
-
-
-def _resume_on_enter(runtime: Runtime) -> None:
-    """Embedded runs: a line on standard input continues after a program pause (a resume asked
-    before the pause is reached is ignored by the motion controller)."""
-    # os.read on the descriptor, not sys.stdin: a thread blocked in sys.stdin holds its buffer's
-    # lock, which a forked child (the producers) inherits locked and then waits on for ever
-    # when multiprocessing closes its stdin.
-    def read() -> None:
-        try:
-            fd = sys.stdin.fileno()
-            while os.read(fd, 4096):
-                runtime.request_resume()
-        except (OSError, ValueError, AttributeError):
-            pass
-    threading.Thread(target=read, name="resume-on-enter", daemon=True).start()
 
 
 def _daemon_socket(args: argparse.Namespace) -> str | None:
@@ -112,10 +101,13 @@ def run(args: argparse.Namespace) -> int:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
     view = _view(args, _program_lines(args.program))
-    pause = _PauseAnnouncer(view.progress)
-    runtime = Runtime(args.program, config, RuntimeOptions(virtual_time=args.virtual_time,
-                                                           on_progress=pause.progress))
-    _resume_on_enter(runtime)
+    runtime = Runtime(args.program, config, RuntimeOptions(virtual_time=args.virtual_time))
+    keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
+                                                  flush=True))
+    runtime.options = replace(runtime.options, on_progress=_Announcer(view.progress,
+                                                                      keys).progress)
+    fd = stdin_fd()
+    restore_terminal = read_keys(fd, keys.key) if fd is not None else (lambda: None)
 
     def on_stop_signal(signum: int, frame: Any) -> None:
         # Never a silent kill: decelerate along the path, then exit 4. SIGTERM is what systemd
@@ -135,6 +127,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"cncctl: {exc}", file=sys.stderr)
         return 3
     finally:
+        restore_terminal()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     view.close()

@@ -13,6 +13,7 @@ from typing import Any
 from controller.operator.client import DaemonClient, DaemonError, DaemonUnavailable
 from controller.operator.daemon.protocol import MAX_PROGRAM_BYTES
 from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
+from controller.operator.run_keys import KeyControl, read_keys, stdin_fd
 from controller.operator.run_view import progress_from_event
 
 FINAL_EVENTS = {outcome.value: code for outcome, code in EXIT_CODES.items()}
@@ -32,9 +33,14 @@ def run_on_daemon(args: argparse.Namespace, socket_path: str, view: Any) -> int:
             print(f"cncctl: the daemon refused the job: {exc.code}: {exc}", file=sys.stderr)
             return EXIT_REJECTED
         previous = {sig: signal.signal(sig, _abort_on(socket_path)) for sig in STOP_SIGNALS}
+        keys = KeyControl(RemoteOperator(socket_path),
+                          lambda text: print(f"cncctl: {text}", file=sys.stderr, flush=True))
+        fd = stdin_fd()
+        restore_terminal = read_keys(fd, keys.key) if fd is not None else (lambda: None)
         try:
-            return _follow(client, view)
+            return _follow(client, view, keys)
         finally:
+            restore_terminal()
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
             view.close()
@@ -45,6 +51,30 @@ def _program_text(path: str) -> bytes:
     if size > MAX_PROGRAM_BYTES:
         raise ValueError(f"larger than the daemon accepts ({MAX_PROGRAM_BYTES} bytes)")
     return Path(path).read_bytes()
+
+
+class RemoteOperator:
+    """Hold, resume and override of the daemon's job, each on a connection of its own (the
+    run's connection is busy reading events); a refusal (nothing to resume) is not an error."""
+
+    def __init__(self, socket_path: str) -> None:
+        self.socket_path = socket_path
+
+    def _ask(self, cmd: str, **fields: Any) -> None:
+        try:
+            with DaemonClient(self.socket_path) as other:
+                other.request(cmd, **fields)
+        except (DaemonError, DaemonUnavailable):
+            pass
+
+    def request_hold(self) -> None:
+        self._ask("hold")
+
+    def request_resume(self) -> None:
+        self._ask("resume")
+
+    def set_feed_override(self, percent: float) -> None:
+        self._ask("feed", percent=percent)
 
 
 def _abort_on(socket_path: str) -> Any:
@@ -58,7 +88,7 @@ def _abort_on(socket_path: str) -> Any:
     return handler
 
 
-def _follow(client: DaemonClient, view: Any) -> int:
+def _follow(client: DaemonClient, view: Any, keys: KeyControl) -> int:
     for event in client.messages():
         kind = event.get("event")
         if kind == "rejected":
@@ -68,7 +98,9 @@ def _follow(client: DaemonClient, view: Any) -> int:
         if kind == "start":
             view.event("start", **{k: v for k, v in event.items() if k != "event"})
         elif kind == "progress":
-            view.progress(progress_from_event(event))
+            p = progress_from_event(event)
+            keys.progress(p)
+            view.progress(p)
         elif kind in FINAL_EVENTS:
             if "motion_time_s" in event:
                 view.final_summary(event)

@@ -52,7 +52,8 @@ class JsonView:
         self._emit({"event": "progress", "state": p.state.value, "line": p.line,
                     "feed_mm_s": round(p.feed_mm_s, 3), "ferror_um": round(p.ferror_um, 1),
                     "fifo_ms": round(p.fifo_ms, 1), "executed_s": round(p.executed_s, 3),
-                    "planned_s": p.planned_s})
+                    "planned_s": p.planned_s, "override_pct": p.override_pct,
+                    "position_mm": [round(v, 4) for v in p.position_mm]})
 
     def final(self, result: MotionResult) -> None:
         self.final_summary(result_summary(result))
@@ -101,7 +102,12 @@ def status_text(p: MotionProgress, lines: list[str]) -> str:
     text = lines_text(lines, p.line)
     planned = f"/{p.planned_s:.2f}" if p.planned_s is not None else ""
     return (f"[{p.state.value}] {p.executed_s:.2f}{planned} s  line {p.line} {text!r}  "
-            f"feed {p.feed_mm_s:.1f} mm/s  ferror {p.ferror_um:.0f} um  fifo {p.fifo_ms:.0f} ms")
+            f"feed {p.feed_mm_s:.1f} mm/s ({p.override_pct:g} %)  {position_text(p)}  "
+            f"ferror {p.ferror_um:.0f} um  fifo {p.fifo_ms:.0f} ms")
+
+
+def position_text(p: MotionProgress) -> str:
+    return " ".join(f"{n}{v:.3f}" for n, v in zip("XYZ", p.position_mm, strict=False))
 
 
 class RichView(PlainView):
@@ -134,8 +140,10 @@ class RichView(PlainView):
         self.bar.update(self.task, completed=p.executed_s, total=p.planned_s,
                         state=p.state.value, planned=f"{p.planned_s:.2f}" if p.planned_s else "?")
         self.status.text = (f"line {p.line}: {lines_text(self.lines, p.line)}\n"
-                            f"feed {p.feed_mm_s * 60:.0f} mm/min   following error "
-                            f"{p.ferror_um:.0f} um   card FIFO {p.fifo_ms:.0f} ms")
+                            f"feed {p.feed_mm_s * 60:.0f} mm/min   override "
+                            f"{p.override_pct:g} %   machine {position_text(p)}\n"
+                            f"following error {p.ferror_um:.0f} um   card FIFO "
+                            f"{p.fifo_ms:.0f} ms   (space: hold/resume, + -: override)")
 
     def close(self) -> None:
         self.live.stop()
@@ -160,4 +168,6 @@ def progress_from_event(event: dict[str, Any]) -> MotionProgress:
                           feed_mm_s=float(event["feed_mm_s"]), ferror_um=float(event["ferror_um"]),
                           fifo_ms=float(event.get("fifo_ms", 0.0)),
                           elapsed_s=float(event.get("elapsed_s", 0.0)),
-                          executed_s=float(event["executed_s"]), planned_s=event.get("planned_s"))
+                          executed_s=float(event["executed_s"]), planned_s=event.get("planned_s"),
+                          override_pct=float(event.get("override_pct", 100.0)),
+                          position_mm=tuple(float(v) for v in event.get("position_mm", ())))

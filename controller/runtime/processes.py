@@ -108,9 +108,22 @@ class Runtime:
         self.procs: dict[str, Any] = {}
 
     def request_resume(self) -> None:
-        """Continue after a program pause (M0)."""
+        """Continue after a program pause (M0) or a feed hold."""
         if self.controller is not None:
             self.controller.request_resume()
+
+    def request_hold(self) -> None:
+        """Feed hold: decelerate along the path to a standstill (see motion.retime)."""
+        if self.controller is not None:
+            self.controller.request_hold()
+
+    def set_feed_override(self, percent: float) -> None:
+        """Feed override, 0-150 % (kept for a controller not yet started)."""
+        self.feed_override_pct = percent
+        if self.controller is not None:
+            self.controller.set_feed_override(percent)
+
+    feed_override_pct = 100.0
 
     def request_abort(self, message: str = "aborted by operator") -> None:
         if self.controller is not None:
@@ -207,6 +220,7 @@ class Runtime:
         self.controller = MotionController(self.config, drive, source, pacer, self.settings,
                                            on_progress=self.options.on_progress,
                                            watch=watch)
+        self.controller.set_feed_override(self.feed_override_pct)
         if self._abort_early is not None:
             self.controller.request_abort(self._abort_early)
         return self.controller.run()

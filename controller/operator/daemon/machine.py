@@ -51,6 +51,7 @@ class Job:
     cancel: str | None = None  # abort or e-stop asked while checking
     start_mm: tuple[float, float, float] | None = None  # where the machine stood
     progress: MotionProgress | None = None
+    holding: bool = False  # a feed hold was asked and not resumed
     done: threading.Event = field(default_factory=threading.Event)
 
 
@@ -58,7 +59,8 @@ def progress_event(p: MotionProgress) -> dict[str, Any]:
     return {"event": "progress", "state": p.state.value, "line": p.line,
             "feed_mm_s": round(p.feed_mm_s, 3), "ferror_um": round(p.ferror_um, 1),
             "fifo_ms": round(p.fifo_ms, 1), "elapsed_s": round(p.elapsed_s, 3),
-            "executed_s": round(p.executed_s, 3), "planned_s": p.planned_s}
+            "executed_s": round(p.executed_s, 3), "planned_s": p.planned_s,
+            "override_pct": p.override_pct, "position_mm": list(p.position_mm)}
 
 
 class Machine:
@@ -104,15 +106,38 @@ class Machine:
             self._stop_job(job, reason)
 
     def resume(self) -> None:
-        """Continue a job paused at a program pause (M0)."""
+        """Continue a job paused at a program pause (M0), held, or on its way to a hold."""
         with self._lock:
             job = self.job
-            paused = job is not None and job.progress is not None \
-                and job.progress.state is MotionState.PAUSED
-            if not paused or job.runtime is None:
-                raise ProtocolError("not-paused", "no job is paused")
+            waiting = job is not None and job.progress is not None and (
+                job.progress.state in (MotionState.PAUSED, MotionState.HELD) or job.holding)
+            if not waiting or job.runtime is None:
+                raise ProtocolError("not-paused", "no job is paused or held")
+            job.holding = False
             job.runtime.request_resume()
         self.log.log(NOTICE, f"job {job.number}: resumed at line {job.progress.line}")
+
+    def hold(self) -> None:
+        """Feed hold: the running job decelerates along the path and waits for resume."""
+        with self._lock:
+            job = self.job
+            if job is None or job.runtime is None or self.state is not State.RUNNING:
+                raise ProtocolError("not-running", "no job is running")
+            job.holding = True
+            job.runtime.request_hold()
+        self.log.log(NOTICE, f"job {job.number}: feed hold at line "
+                             f"{job.progress.line if job.progress else 0}")
+
+    def feed(self, percent: float) -> None:
+        """Feed override for this and the next jobs (0-150 %; 0 holds until raised)."""
+        with self._lock:
+            self.feed_override_pct = percent
+            job = self.job
+            if job is not None and job.runtime is not None:
+                job.runtime.set_feed_override(percent)
+        self.log.log(NOTICE, f"feed override {percent:g} %")
+
+    feed_override_pct = 100.0
 
     def estop(self, reason: str) -> None:
         with self._lock:
@@ -156,12 +181,15 @@ class Machine:
             state = self.state.value
             if p is not None and p.state is MotionState.PAUSED and self.state is State.RUNNING:
                 state = "PAUSED"  # at a program pause (M0): `cncctl resume` continues
+            if p is not None and p.state is MotionState.HELD and self.state is State.RUNNING:
+                state = "HELD"  # feed hold (or 0 % override): `cncctl resume` continues
             out: dict[str, Any] = {"state": state, "fault": self.fault,
                                    "program": job.name if job else None,
                                    "job": job.number if job else None}
         out["line"] = p.line if p else self.last_job.get("last_line")
         out["feed_mm_s"] = round(p.feed_mm_s, 3) if p else 0.0
         out["ferror_um"] = round(p.ferror_um, 1) if p else 0.0
+        out["feed_override_pct"] = self.feed_override_pct
         out["position_mm"] = self._position_mm()
         out["last_job"] = self.last_job
         return out
@@ -249,6 +277,7 @@ class Machine:
                 return
             job.start_mm = start_mm
             job.runtime = Runtime(path, self.config, self._options(job))
+            job.runtime.set_feed_override(self.feed_override_pct)
             self.journal.start(job.name, job.sha256, job.lines)
             self._beat()
             self._set_state(State.RUNNING)

@@ -9,7 +9,8 @@ from typing import Any
 MAX_LINE_BYTES = 64 * 1024  # any request line
 MAX_PROGRAM_BYTES = 64 * 1024 * 1024  # the program text that follows a run request
 COMMANDS = frozenset({"status", "run", "abort", "estop", "reset", "log", "subscribe",
-                      "resume"})
+                      "resume", "hold", "feed"})
+MAX_FEED_OVERRIDE_PCT = 150.0
 TOPICS = frozenset({"state", "progress", "log"})
 
 
@@ -110,7 +111,17 @@ def _known(request: Request, allowed: set[str]) -> None:
                                          f"{sorted(extra)[0][:32]!r}")
 
 
-_CHECKS = {"run": _check_run, "log": _check_log, "subscribe": _check_subscribe}
+def _check_feed(request: Request) -> None:
+    _known(request, {"percent"})
+    pct = request.fields.get("percent")
+    if not isinstance(pct, int | float) or isinstance(pct, bool) \
+            or not 0.0 <= pct <= MAX_FEED_OVERRIDE_PCT:
+        raise ProtocolError("bad-field",
+                            f"feed needs percent, a number 0..{MAX_FEED_OVERRIDE_PCT:g}")
+
+
+_CHECKS = {"run": _check_run, "log": _check_log, "subscribe": _check_subscribe,
+           "feed": _check_feed}
 
 
 class LineReader:

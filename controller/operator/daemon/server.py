@@ -292,9 +292,12 @@ class Server:
             getattr(self.machine, cmd)(f"{'aborted' if cmd == 'abort' else 'e-stop'} by "
                                        f"operator ({who})")
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
-        elif cmd == "resume":
-            self.machine.resume()
+        elif cmd in ("resume", "hold"):
+            getattr(self.machine, cmd)()
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
+        elif cmd == "feed":
+            self.machine.feed(float(request.fields["percent"]))
+            self._send(conn, reply_ok(rid, feed_override_pct=self.machine.feed_override_pct))
         elif cmd == "reset":
             self.machine.reset()
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
