@@ -1,5 +1,6 @@
 """Drive backends behind one interface (python-can style): base (the Drive class and its
-hooks), errors, registry (backends by name) and one module or package per backend (sim).
+hooks), errors, registry (backends by name), homing (the host's side of Drive.home()) and one
+package per backend (sim, canopen, serial).
 
 May import the controller's base layer and the servo model of
 controller.generator.dynamics.servo (what the simulated card clocks each axis through)."""

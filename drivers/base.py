@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import enum
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,6 +12,8 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.errors import DriveError
+from drivers.errors import HomingError
+from drivers.homing import plan_for
 
 
 class CardStatus(enum.Flag):
@@ -62,9 +65,12 @@ class Drive(ABC):
         self.n_axes = len(config.axes)
         self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
         self._is_open = False
+        self._homed_axes: set[int] = set()  # axes homed on this open drive (host side)
+        self._homing = False  # a home() is running: write_frames is refused
 
     # -- public API -----------------------------------------------------------------------
     def open(self) -> None:
+        self._homed_axes = set()  # a drive just opened is unhomed until home() succeeds
         self._open()
         self._is_open = True
 
@@ -76,6 +82,8 @@ class Drive(ABC):
         if not np.issubdtype(frames.dtype, np.integer):
             raise DriveError("frames must be integer pulse counts")
         self._require_open()
+        if self._homing:
+            raise DriveError("frames refused: a homing sequence is running")
         self._send_frames(frames.astype(np.int64), end_of_stream)
 
     def fifo_level(self) -> int:
@@ -107,6 +115,54 @@ class Drive(ABC):
         """Clear latched flags and discard queued frames (a rising-edge reset)."""
         self._require_open()
         self._reset()
+
+    def home(self, axes: Sequence[int], timeout_s: float = 60.0) -> None:
+        """Run the homing sequence of these axes (indices in config.axes order) on the device,
+        all of them together; block until done. Afterwards position_counts() reads the machine
+        position: each axis stands at its final_mm, and the point found (switch edge, or the
+        index mark after it) read home_mm. Only with the FIFO idle (no stream under way).
+        Raises HomingError naming the axis and why (no homing configured, switch not found,
+        time-out, drive fault during homing); the axes homed are unhomed until it succeeds."""
+        self._require_open()
+        wanted = self._homing_axes(axes)
+        for i in wanted:
+            plan_for(self.config, i)  # HomingError when that axis has no homing sequence
+        if not wanted:
+            return
+        if not timeout_s > 0:
+            raise HomingError(f"homing time-out must be positive, got {timeout_s!r}")
+        names = ", ".join(self.config.axes[i].name.upper() for i in wanted)
+        if self._read_status().halted:
+            raise HomingError(f"cannot home {names}: the drive is halted "
+                              f"({self._fault_message()}); reset() first")
+        if self._stream_active():
+            raise HomingError(f"cannot home {names}: frames are streaming (homing needs the "
+                              "FIFO idle: end the stream and let it run out first)")
+        self._homed_axes.difference_update(wanted)
+        self._homing = True
+        try:
+            self._home(wanted, timeout_s)
+        finally:
+            self._homing = False
+        self._homed_axes.update(wanted)
+
+    def homed(self) -> tuple[bool, ...]:
+        """Per axis: True for an axis without a homing sequence (its position is absolute),
+        and for one homed by home() on this open drive."""
+        self._require_open()
+        return tuple(a.homing is None or h for a, h in zip(self.config.axes, self._homed(),
+                                                           strict=True))
+
+    def _homing_axes(self, axes: Sequence[int]) -> tuple[int, ...]:
+        out: list[int] = []
+        for i in axes:
+            if isinstance(i, bool) or not isinstance(i, int | np.integer) \
+                    or not 0 <= int(i) < self.n_axes:
+                raise HomingError(f"no axis {i!r}: axes are indices 0..{self.n_axes - 1} "
+                                  f"({', '.join(self.config.axis_names)})")
+            if int(i) not in out:
+                out.append(int(i))
+        return tuple(sorted(out))
 
     def probe(self) -> None:
         """Check, before any motion, that the backend can be opened and configured as the
@@ -161,6 +217,18 @@ class Drive(ABC):
 
     def _fault_message(self) -> str:
         return ""
+
+    def _stream_active(self) -> bool:
+        """Backend hook: frames queued, or a stream not yet ended (home() is refused)."""
+        return self._fifo_level() > 0
+
+    def _home(self, axes: tuple[int, ...], timeout_s: float) -> None:
+        """Backend hook: home these axes together (checked: configured, FIFO idle)."""
+        raise HomingError(f"the {self.config.drive.backend} backend cannot home")
+
+    def _homed(self) -> tuple[bool, ...]:
+        """Backend hook; the default: the axes home() succeeded on since open()."""
+        return tuple(i in self._homed_axes for i in range(self.n_axes))
 
     def _probe(self) -> None:
         """Backend hook; the default opens and closes the drive."""

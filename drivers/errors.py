@@ -1,4 +1,4 @@
-"""Drive-side exceptions: one DriveError subclass per latched card condition."""
+"""Drive-side exceptions: one DriveError subclass per latched card condition, and homing."""
 
 from __future__ import annotations
 
@@ -24,3 +24,13 @@ class DriveUnavailableError(DriveError):
 
 class BadFrameError(DriveError):
     """The host sent a frame the card cannot execute (too many pulses, FIFO overflow, shape)."""
+
+
+class HomingError(DriveError):
+    """A homing sequence was refused or failed: names the axis (`axis`, None when the refusal
+    concerns the whole drive) and why (no homing configured, switch not found, time-out, drive
+    fault during homing, frames streaming)."""
+
+    def __init__(self, message: str, axis: str | None = None) -> None:
+        self.axis = axis
+        super().__init__(message)

@@ -10,7 +10,7 @@ import numpy as np
 
 from controller.config import MachineConfig
 from drivers.base import CardStatus, Drive, Feedback
-from drivers.canopen import bringup
+from drivers.canopen import bringup, homing
 from drivers.canopen import cia402 as c
 from drivers.canopen.link import Link
 from drivers.canopen.options import CanopenOptions, parse_options
@@ -183,6 +183,22 @@ class CanopenDrive(Drive):
                  (CardStatus.BAD_FRAME, BadFrameError))
         cls = next((k for flag, k in kinds if flag in link.status), DriveError)
         return cls("; ".join(link.messages))
+
+    # -- homing ---------------------------------------------------------------------------
+    def _stream_active(self) -> bool:
+        link = self._check_comm()
+        with link.lock:
+            return link.streaming or len(link.fifo) > 0
+
+    def _home(self, axes: tuple[int, ...], timeout_s: float) -> None:
+        homing.home(self, axes, timeout_s)
+
+    def _homed(self) -> tuple[bool, ...]:
+        """Host-side flags (a drive back in CSP no longer shows bit 12), lost when a drive
+        reboots (its boot-up message: its position counter starts again)."""
+        link = self._link
+        rebooted = link.rebooted if link is not None else [True] * self.n_axes
+        return tuple(h and not r for h, r in zip(super()._homed(), rebooted, strict=True))
 
     # -- reset ----------------------------------------------------------------------------
     def _reset(self) -> None:

@@ -18,14 +18,25 @@ ABORT_CONNECTION = 0x6007  # 0 nothing, 1 fault, 2 disable voltage, 3 quick stop
 ERROR_CODE = 0x603F
 CONTROLWORD, STATUSWORD = 0x6040, 0x6041
 MODE, MODE_DISPLAY = 0x6060, 0x6061
+POSITION_DEMAND = 0x6062  # the drive's own reference, counts (bumpless hand-over)
 POSITION_ACTUAL = 0x6064
 FERROR_WINDOW, FERROR_TIMEOUT = 0x6065, 0x6066  # counts, ms
 TARGET_POSITION = 0x607A
 INTERPOLATION_PERIOD = 0x60C2  # sub 1 mantissa, sub 2 exponent (10^n s)
 SUPPORTED_MODES = 0x6502
+HOME_OFFSET = 0x607C  # counts: the position the home point reads once homing is attained
+HOMING_METHOD = 0x6098
+HOMING_SPEEDS = 0x6099  # sub 1: search for the switch, sub 2: search for zero (latch); counts/s
+HOMING_ACCEL = 0x609A  # counts/s^2
 
 MODE_CSP = 8
+MODE_HOMING = 6
 SUPPORTS_CSP = 0x80  # 0x6502 bit 7
+SUPPORTS_HOMING = 0x20  # 0x6502 bit 5
+
+# Homing methods (CiA 402-2): (direction, use_index) -> method. 17/18: the negative/positive
+# limit switch, the home point where it releases; 1/2: the first index pulse after that.
+HOMING_METHODS = {(-1, False): 17, (1, False): 18, (-1, True): 1, (1, True): 2}
 DEVICE_PROFILE_402 = 402  # low 16 bits of 0x1000
 
 # The PDO layout the backend relies on (read back at bring-up): (index, subindex, bits).
@@ -39,7 +50,9 @@ CW_QUICK_STOP = 0x02
 CW_SHUTDOWN = 0x06
 CW_SWITCH_ON = 0x07
 CW_ENABLE_OPERATION = 0x0F
+CW_HOMING_START = 0x10  # homing mode: a rising edge starts the sequence
 CW_FAULT_RESET = 0x80
+CW_HALT = 0x100
 
 # -- statusword ---------------------------------------------------------------------------
 SW_STATES = (  # (mask, value, name), as canopen.profiles.p402.State402.SW_MASK
@@ -56,8 +69,11 @@ STATE_BITS = {name: value for _, value, name in SW_STATES}
 SW_VOLTAGE_ENABLED = 0x0010
 SW_QUICK_STOP = 0x0020  # set = quick stop NOT active
 SW_REMOTE = 0x0200
+SW_TARGET_REACHED = 0x0400  # homing: standing still (done, error or not started)
 SW_FOLLOWS_COMMAND = 0x1000  # CSP: drive follows the command value
 SW_FOLLOWING_ERROR = 0x2000  # CSP: following error
+SW_HOMING_ATTAINED = 0x1000  # homing mode: bit 12
+SW_HOMING_ERROR = 0x2000  # homing mode: bit 13
 
 
 def state_of(statusword: int) -> str:

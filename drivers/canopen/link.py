@@ -58,6 +58,7 @@ class Link:
         self.last_tpdo_cycle = [0] * self.n
         self.emcy_seen = [False] * self.n
         self.lost = [False] * self.n
+        self.rebooted = [False] * self.n  # a boot-up message since open: homing is lost
         self.supervising = False  # heartbeat/TPDO/state checks, from enable to close
         self.quick_stopped = False
         self.max_pending = max(MIN_PENDING, o.tpdo_timeout_cycles + 2)
@@ -84,6 +85,14 @@ class Link:
             self.base_pulses = np.rint(self.base_counts / self.scale).astype(np.int64)
             self.cmd = self.base_pulses.copy()
             self.enc = self.base_pulses.copy()
+
+    def rebase_axes(self, position_counts: dict[int, int]) -> None:
+        """rebase() for some axes only (after homing: their drives' new position frame)."""
+        with self.lock:
+            for i, counts in position_counts.items():
+                self.base_counts[i] = counts
+                self.base_pulses[i] = int(np.rint(counts / self.scale[i]))
+                self.cmd[i] = self.enc[i] = self.base_pulses[i]
 
     def _targets(self) -> np.ndarray:
         return self.base_counts + np.rint((self.cmd - self.base_pulses) * self.scale).astype(
@@ -249,6 +258,8 @@ class Link:
     def _heartbeat_callback(self, i: int) -> Any:
         def on_heartbeat(state: int) -> None:
             self.last_hb_s[i] = time.monotonic()
+            if state == 0:
+                self.rebooted[i] = True
             if state == 0 and self.supervising:
                 self.latch(CardStatus.FAULT, f"{label(self.nodes[i], self.axes[i])} rebooted "
                            "(boot-up message)")

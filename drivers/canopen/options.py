@@ -27,6 +27,7 @@ class CanopenOptions:
     tpdo_timeout_cycles: int  # SYNCs without a TPDO from a drive before it counts as lost
     fifo_frames: int
     sdo_timeout_s: float
+    home_offset_sign: int = 1  # -1: a drive whose home point reads -0x607C (docs/canopen.md)
 
 
 DEFAULTS: dict[str, Any] = {
@@ -34,7 +35,7 @@ DEFAULTS: dict[str, Any] = {
     "node_ids": None, "counts_per_mm": None, "master_node_id": 127,
     "master_heartbeat_ms": 50, "drive_heartbeat_ms": 50, "heartbeat_timeout_ms": 300,
     "ferror_window_mm": 1.0, "ferror_timeout_ms": 10, "tpdo_timeout_cycles": 100,
-    "fifo_frames": 256, "sdo_timeout_s": 0.3,
+    "fifo_frames": 256, "sdo_timeout_s": 0.3, "home_offset_sign": 1,
 }
 # realtime: make_drive passes it; the bus has its own clock, so virtual time is refused.
 OPTIONS = frozenset(DEFAULTS) | {"realtime"}
@@ -88,6 +89,9 @@ def parse_options(config: MachineConfig, options: dict[str, Any]) -> CanopenOpti
         "counts_per_mm", o["counts_per_mm"] if o["counts_per_mm"] is not None else cpm_default,
         n))
     master = _int("master_node_id", o["master_node_id"], 1, 127)
+    sign = _int("home_offset_sign", o["home_offset_sign"], -1, 1)
+    if sign == 0:
+        raise DriveError("canopen option home_offset_sign: must be 1 or -1")
     if master in node_ids:
         raise DriveError(f"canopen option master_node_id: {master} is also a drive's node id")
     return CanopenOptions(
@@ -101,7 +105,7 @@ def parse_options(config: MachineConfig, options: dict[str, Any]) -> CanopenOpti
         ferror_timeout_ms=_int("ferror_timeout_ms", o["ferror_timeout_ms"], 0, 65_535),
         tpdo_timeout_cycles=_int("tpdo_timeout_cycles", o["tpdo_timeout_cycles"], 2, 100_000),
         fifo_frames=_int("fifo_frames", o["fifo_frames"], 16, 1_000_000),
-        sdo_timeout_s=_float("sdo_timeout_s", o["sdo_timeout_s"]))
+        sdo_timeout_s=_float("sdo_timeout_s", o["sdo_timeout_s"]), home_offset_sign=sign)
 
 
 def drive_layout(config: MachineConfig) -> CanopenOptions:

@@ -16,6 +16,8 @@ from controller.errors import DriveError
 from controller.generator.dynamics.servo import AxisServoStepper, discretise
 from drivers.canopen import cia402 as c
 from drivers.canopen.options import drive_layout
+from drivers.canopen.sim_homing import SimHoming402
+from drivers.sim.switches import SWITCH_OPTIONS, SimSwitches
 
 SDO_ABORT_VALUE_RANGE = 0x06090030  # "value range of parameter exceeded"
 LAG_RAMP_SYNCS = 20  # injected lag ramps in over this many cycles (as drivers/sim/axes.py)
@@ -40,11 +42,13 @@ class SimAxis402:
     following-error supervision (0x6065/0x6066) and the master-heartbeat consumer (0x1016)."""
 
     def __init__(self, network: canopen.Network, node_id: int, axis: AxisConfig,
-                 counts_per_mm: float, period_s: float, inject: Injections) -> None:
+                 counts_per_mm: float, period_s: float, inject: Injections,
+                 homing: SimHoming402) -> None:
         self.node = canopen.LocalNode(node_id, canopen.import_od(str(c.EDS_PATH), node_id))
         network.add_node(self.node)
         self.network, self.id, self.name = network, node_id, axis.name
         self.counts_per_mm, self.period_s, self.inject = counts_per_mm, period_s, inject
+        self.homing = homing
         self.stepper = AxisServoStepper(discretise(axis.servo, period_s))
         self.lock = threading.RLock()
         od = self.node.object_dictionary
@@ -89,7 +93,9 @@ class SimAxis402:
             if index == c.CONTROLWORD:
                 self.command(int(value))
             elif index == c.MODE:
-                self.mode = int(value) if int(value) == c.MODE_CSP else self.mode
+                if int(value) in (c.MODE_CSP, c.MODE_HOMING) and int(value) != self.mode:
+                    self.homing.interrupt()
+                    self.mode = int(value)
             elif index == c.TARGET_POSITION:
                 self.target = int(value)
             elif index == c.FERROR_WINDOW:
@@ -100,6 +106,8 @@ class SimAxis402:
                 self.abort_option = int(value)
             elif index == c.CONSUMER_HEARTBEAT and subindex == 1:
                 self.consumer_id, self.consumer_ms = (int(value) >> 16) & 0x7F, int(value) & 0xFFFF
+            else:
+                self.homing.write(index, subindex, int(value))
 
     def _on_rpdo(self, can_id: int, data: bytes, timestamp: float) -> None:
         if len(data) != c.PDO1.size or self.node.nmt.state != "OPERATIONAL":
@@ -111,7 +119,17 @@ class SimAxis402:
     def command(self, cw: int) -> None:
         """Apply a controlword (an SDO write does it at once, RPDO1 at the next SYNC)."""
         rising_reset = cw & c.CW_FAULT_RESET and not self.controlword & c.CW_FAULT_RESET
+        rising_start = cw & c.CW_HOMING_START and not self.controlword & c.CW_HOMING_START
         self.controlword = cw
+        self._command_state(cw, rising_reset)
+        if self.state != "OPERATION ENABLED" or self.mode != c.MODE_HOMING:
+            self.homing.interrupt()
+        elif cw & c.CW_HALT:
+            self.homing.halt()
+        elif rising_start:
+            self.homing.start(self.ref)
+
+    def _command_state(self, cw: int, rising_reset: int) -> None:
         s = self.state
         if s == "FAULT":
             if rising_reset:
@@ -139,6 +157,8 @@ class SimAxis402:
         if self.state in ("READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED",
                           "QUICK STOP ACTIVE"):
             sw |= c.SW_VOLTAGE_ENABLED
+        if self.mode == c.MODE_HOMING:
+            return sw | self.homing.status_bits()
         if self.state == "OPERATION ENABLED" and self.mode == c.MODE_CSP:
             sw |= c.SW_FOLLOWS_COMMAND
         if abs(self.ref - self.position) > self.window:
@@ -151,6 +171,7 @@ class SimAxis402:
             if self.state == "FAULT" or self.silent:
                 return
             self.state, self.error_code = "FAULT", code
+            self.homing.interrupt()
         self.emcy_sent.append(code)
         self.node.emcy.send(code, 0x01 if code != c.EMCY_HEARTBEAT else 0x11)
 
@@ -176,8 +197,11 @@ class SimAxis402:
             self._injections()
             if self.silent:
                 return
+            homing = enabled and self.mode == c.MODE_HOMING and self.homing.running
             if enabled and self.mode == c.MODE_CSP:
                 new_ref = self.target
+            elif homing:
+                new_ref = self.homing.command()
             else:  # disabled, quick stop, fault: the reference stays (the motor holds)
                 new_ref = self.ref
             v_mm_s = (new_ref - self.ref) / self.counts_per_mm / self.period_s
@@ -187,6 +211,8 @@ class SimAxis402:
                               self.lag_mm + self.inject.lag_mm / LAG_RAMP_SYNCS)
             self.actual_mm = self.ref / self.counts_per_mm - err_mm - self.lag_mm
             self.position = int(round(self.actual_mm * self.counts_per_mm))
+            if homing and (shift := self.homing.observe(self.actual_mm)):
+                self._rebase(shift)
             over = abs(self.ref - self.position) > self.window and enabled
             self.ferror_syncs = self.ferror_syncs + 1 if over else 0
             trip = self.ferror_syncs * self.period_s * 1e3 > self.timeout_ms
@@ -196,6 +222,13 @@ class SimAxis402:
             data = c.PDO1.pack(self.statusword, self.position)
         self.network.send_message(self.tpdo_cob, data)
         self.tpdos_sent += 1
+
+    def _rebase(self, shift: int) -> None:
+        """Homing attained: the position reads the home offset (the table does not move)."""
+        self.ref += shift
+        self.target = self.ref
+        self.position += shift
+        self.actual_mm += shift / self.counts_per_mm
 
     def _injections(self) -> None:
         t_s = self.syncs_enabled * self.period_s
@@ -225,10 +258,14 @@ class SimAxis402:
 class SimDriveSet:
     """The simulated drives of a machine on one CAN bus (in-process python-can `virtual` by
     default). Options (strict): drive_fault_after_s, drive_fault_code, lag_mm, lag_after_s,
-    silent_after_s, sdo_abort_index, fault_axis (x); times count from the first enable."""
+    silent_after_s, sdo_abort_index, fault_axis (x); times count from the first enable.
+    Homing (mode 6): true_start_mm, home_switch_mm (default: at the home offset the master
+    writes; null: no switch), index_pitch_mm (drivers/sim/switches.py) and search_limit_mm
+    (default: the travel + 10 %: then statusword bit 13)."""
 
     OPTIONS = frozenset({"drive_fault_after_s", "drive_fault_code", "lag_mm", "lag_after_s",
-                         "silent_after_s", "sdo_abort_index", "fault_axis"})
+                         "silent_after_s", "sdo_abort_index", "fault_axis", "true_start_mm",
+                         "home_switch_mm", "index_pitch_mm", "search_limit_mm"})
 
     def __init__(self, config: MachineConfig, options: dict[str, Any] | None = None,
                  channel: str = "cncsim", interface: str = "virtual",
@@ -248,12 +285,18 @@ class SimDriveSet:
         self.network.connect(interface=interface, channel=channel, receive_own_messages=False)
         self.master_id = layout.master_node_id
         self.axes: list[SimAxis402] = []
-        for axis, node_id, cpm in zip(config.axes, layout.node_ids, layout.counts_per_mm,
-                                      strict=True):
+        self.switches = SimSwitches(len(names), {k: v for k, v in options.items()
+                                                 if k in SWITCH_OPTIONS}, np.zeros(len(names)),
+                                    "simulated drive")
+        search_limit_mm = _opt_float(options, "search_limit_mm")
+        for i, (axis, node_id, cpm) in enumerate(zip(config.axes, layout.node_ids,
+                                                     layout.counts_per_mm, strict=True)):
             inject = _injections(options) if axis.name == fault_axis else Injections(
                 sdo_abort_index=_opt_int(options, "sdo_abort_index"))
+            homing = SimHoming402(axis, i, cpm, config.sample_period_s, self.switches,
+                                  search_limit_mm)
             self.axes.append(SimAxis402(self.network, node_id, axis, cpm,
-                                        config.sample_period_s, inject))
+                                        config.sample_period_s, inject, homing))
         self.master_seen_s: float | None = None
         self.syncs = 0
         self.network.subscribe(0x80, self._on_sync)

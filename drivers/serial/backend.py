@@ -12,6 +12,7 @@ import numpy as np
 from controller.config import MachineConfig
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, LostCommunicationError
+from drivers.serial import homing
 from drivers.serial import protocol as p
 
 _BITS = ((p.ST_UNDERRUN, CardStatus.UNDERRUN), (p.ST_BAD_FRAME, CardStatus.BAD_FRAME),
@@ -86,6 +87,7 @@ class SerialCard(Drive):
         self._next_poll_s = 0.0
         self._status_frames = 0
         self._max_gap_s = 0.0
+        self._stream_open = False  # samples sent since the last end of stream (or reset)
 
     # -- link -------------------------------------------------------------------------------
     def _connect(self) -> None:
@@ -239,6 +241,7 @@ class SerialCard(Drive):
             self._rx_idx = self._written - 1
             self._row_idx = max(self._row_idx, self._written - 1)
             self._cleared_idx = self._written - 1
+            self._stream_open = False
             self._synced = True
 
     def _check_capacity(self, reply: p.Status) -> None:
@@ -283,6 +286,7 @@ class SerialCard(Drive):
             data = p.encode_end()
         with self._cond:
             self._written += n
+            self._stream_open = not end_of_stream and (bool(n) or self._stream_open)
         self._write(data)
 
     def _estimate_level(self) -> int:
@@ -350,6 +354,12 @@ class SerialCard(Drive):
                  p.ST_FOLLOWING_ERROR: f"{axis} axis following error (card limit)"}
         text = "; ".join(msg for bit, msg in parts.items() if s.latched & bit)
         return "; ".join(t for t in (text, self._lost) if t)
+
+    def _stream_active(self) -> bool:
+        return self._stream_open or self._fifo_level() > 0
+
+    def _home(self, axes: tuple[int, ...], timeout_s: float) -> None:
+        homing.home(self, axes, timeout_s)
 
     def _reset(self) -> None:
         self._check_link()

@@ -19,6 +19,7 @@ T_SAMPLE16 = 0x02  # one sample, int16 pulse counts per axis
 T_RESET = 0x10  # clear latched flags, discard the FIFO, answer with a status frame
 T_STATUS_REQUEST = 0x11  # answer with a status frame now
 T_END = 0x12  # end of stream after the samples already sent (no new sample)
+T_HOME = 0x13  # run the homing sequence of the axes in a mask (answered with a status frame)
 T_STATUS = 0x80  # card -> host status report
 
 FLAG_END_OF_STREAM = 0x01  # sample flag: the last frame of a program
@@ -30,7 +31,21 @@ ST_SEQ_GAP = 0x04  # a sample's sequence number was not the previous one + 1
 ST_DRIVE_FAULT = 0x08  # an axis amplifier faulted (fault_axis, fault_code say which)
 ST_FOLLOWING_ERROR = 0x10  # the card's own following-error limit tripped (fault_axis)
 ST_LATCHED = 0x1F
+ST_HOME_FAILED = 0x20  # the last HOME failed (fault_axis, fault_code = HOME_*); no halt;
+#                        cleared by the next HOME or a RESET
+ST_HOMING = 0x40  # not latched: a homing sequence is running
 ST_EXECUTED = 0x80  # not latched: the last clock tick executed sample exec_seq
+
+# fault_code of ST_HOME_FAILED (a drive fault during homing is ST_DRIVE_FAULT instead)
+HOME_NOT_FOUND = 1  # no switch within the search limit
+HOME_BUSY = 2  # refused: samples queued, a stream not ended, a halted card or a homing running
+HOME_BAD_REQUEST = 3  # refused: a direction or speed the card cannot run
+HOME_NO_RELEASE = 4  # the switch did not release when backing off
+HOME_REASONS = {HOME_NOT_FOUND: "home switch not found within the search limit",
+                HOME_BUSY: "refused by the card: not idle (samples queued, a stream not "
+                           "ended, halted, or homing already)",
+                HOME_BAD_REQUEST: "refused by the card: bad homing parameters",
+                HOME_NO_RELEASE: "the home switch does not release"}
 
 AXES_ALLOWED = (2, 3)
 SEQ_MOD = 1 << 16
@@ -40,6 +55,9 @@ _SAMPLE_FIXED = 3  # seq u16, flags u8
 _CONTROL_LEN = 2  # token u16
 _STATUS_FIXED = struct.calcsize("<HHHBBHHH")  # 14 bytes
 _STATUS_AXIS = struct.calcsize("<iihh")  # 12 bytes per axis
+_HOME_FIXED = struct.calcsize("<HB")  # token, axis mask
+_HOME_AXIS_FMT = "<bBIIIiiI"
+_HOME_AXIS = struct.calcsize(_HOME_AXIS_FMT)  # 26 bytes per axis
 
 
 class ProtocolError(ValueError):
@@ -89,7 +107,28 @@ class Status:
     encoder_delta: tuple[int, ...]  # int16
 
 
-Frame = Sample | Reset | StatusRequest | End | Status
+@dataclass(frozen=True)
+class HomeAxis:
+    """One axis's homing parameters in pulses (ignored unless its bit is in the mask)."""
+
+    direction: int = 0  # -1 or +1: the search direction
+    use_index: bool = False  # latch on the index mark after the switch edge
+    search_pps: int = 0  # search speed, pulses/s (also the back-off and final moves)
+    latch_pps: int = 0  # latch speed, pulses/s
+    accel_pps2: int = 0  # acceleration, pulses/s^2
+    home_pulses: int = 0  # the point found reads this
+    final_pulses: int = 0  # then the axis moves here
+    search_limit_pulses: int = 0  # no switch within this distance: HOME_NOT_FOUND
+
+
+@dataclass(frozen=True)
+class Home:
+    token: int
+    mask: int  # bit i: axis i homes
+    axes: tuple[HomeAxis, ...]  # one per axis
+
+
+Frame = Sample | Reset | StatusRequest | End | Status | Home
 _CONTROL = {T_RESET: Reset, T_STATUS_REQUEST: StatusRequest, T_END: End}
 
 
@@ -136,6 +175,19 @@ def encode_end(token: int = 0) -> bytes:
     return _wrap(HOST_SYNC, T_END, struct.pack("<H", token % SEQ_MOD))
 
 
+def encode_home(token: int, mask: int, axes: tuple[HomeAxis, ...] | list[HomeAxis]) -> bytes:
+    _check_axes(len(axes))
+    payload = struct.pack("<HB", token % SEQ_MOD, mask & ((1 << len(axes)) - 1))
+    for a in axes:
+        try:
+            payload += struct.pack(_HOME_AXIS_FMT, a.direction, 1 if a.use_index else 0,
+                                   a.search_pps, a.latch_pps, a.accel_pps2, a.home_pulses,
+                                   a.final_pulses, a.search_limit_pulses)
+        except struct.error as exc:
+            raise ProtocolError(f"home parameters out of range: {a}: {exc}") from exc
+    return _wrap(HOST_SYNC, T_HOME, payload)
+
+
 def encode_status(s: Status) -> bytes:
     n = len(s.commanded)
     _check_axes(n)
@@ -159,6 +211,8 @@ def encode(frame: Frame) -> bytes:
         return encode_status_request(frame.token)
     if isinstance(frame, End):
         return encode_end(frame.token)
+    if isinstance(frame, Home):
+        return encode_home(frame.token, frame.mask, frame.axes)
     return encode_status(frame)
 
 
@@ -172,6 +226,8 @@ def _plausible(sync: int, ftype: int, length: int) -> bool:
         if ftype in (T_SAMPLE8, T_SAMPLE16):
             width = 1 if ftype == T_SAMPLE8 else 2
             return any(length == _SAMPLE_FIXED + n * width for n in AXES_ALLOWED)
+        if ftype == T_HOME:
+            return any(length == _HOME_FIXED + n * _HOME_AXIS for n in AXES_ALLOWED)
         return ftype in _CONTROL and length == _CONTROL_LEN
     return ftype == T_STATUS and any(length == _STATUS_FIXED + n * _STATUS_AXIS
                                      for n in AXES_ALLOWED)
@@ -187,6 +243,12 @@ def decode_payload(ftype: int, payload: bytes) -> Frame:
     if ftype in _CONTROL:
         (token,) = struct.unpack("<H", payload)
         return _CONTROL[ftype](token)
+    if ftype == T_HOME:
+        token, mask = struct.unpack_from("<HB", payload)
+        n = (len(payload) - _HOME_FIXED) // _HOME_AXIS
+        blocks = [struct.unpack_from(_HOME_AXIS_FMT, payload, _HOME_FIXED + i * _HOME_AXIS)
+                  for i in range(n)]
+        return Home(token, mask, tuple(HomeAxis(b[0], bool(b[1] & 1), *b[2:]) for b in blocks))
     fixed = struct.unpack("<HHHBBHHH", payload[:_STATUS_FIXED])
     n = (len(payload) - _STATUS_FIXED) // _STATUS_AXIS
     axes = [struct.unpack_from("<iihh", payload, _STATUS_FIXED + i * _STATUS_AXIS)

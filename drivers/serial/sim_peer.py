@@ -14,9 +14,12 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.errors import DriveError
+from drivers.homing import HomingPlan
 from drivers.serial import protocol as p
 from drivers.sim.axes import SimAxes
 from drivers.sim.fifo import FrameFifo
+from drivers.sim.homing import SimAxesHoming
+from drivers.sim.switches import SWITCH_OPTIONS, SimSwitches
 
 # Option -> default. Times marked "after" count from the first sample frame received.
 PEER_OPTIONS: dict[str, Any] = {
@@ -34,7 +37,13 @@ PEER_OPTIONS: dict[str, Any] = {
     "corrupt_status_after_s": None,  # every status frame sent with a bad CRC
     "corrupt_rx_after_frames": None,  # line noise: the next received bytes fail their CRC
     "drop_frame_after_frames": None,  # lose one received sample (a sequence gap follows)
+    # homing (drivers/sim/switches.py): lists per axis, true frame of the simulated table
+    "true_start_mm": None,  # where the table really is at power-up (default: start_mm)
+    "home_switch_mm": None,  # each axis's switch (default: where HOME says home is; null: none)
+    "index_pitch_mm": 1.0,  # encoder index marks at multiples of this
+    "homing_fault_after_s": None,  # drive_fault_axis faults this long into a HOME
 }
+LIST_OPTIONS = ("start_mm", "true_start_mm", "home_switch_mm")
 
 
 def check_options(options: dict[str, Any]) -> dict[str, Any]:
@@ -45,7 +54,7 @@ def check_options(options: dict[str, Any]) -> dict[str, Any]:
                          f"(known: {', '.join(sorted(PEER_OPTIONS))})")
     merged = PEER_OPTIONS | options
     for key, value in merged.items():
-        if key == "start_mm" or value is None:
+        if key in LIST_OPTIONS or value is None:
             continue
         if isinstance(value, bool) or not isinstance(value, int | float) or value < 0:
             raise DriveError(f"serial simdrive: option {key!r} must be a number >= 0, "
@@ -70,6 +79,13 @@ class PeerCard:
         self.fifo = FrameFifo(int(self.opt["fifo_frames"]), self.n)
         self.axes = SimAxes(config, np.rint(np.asarray(start, float) / pulse_mm).astype(np.int64))
         self.axis_names = config.axis_names
+        self.switches = SimSwitches(self.n, {k: v for k, v in self.opt.items()
+                                             if k in SWITCH_OPTIONS and v is not None},
+                                    self.axes.actual_mm.copy(), "serial simdrive")
+        self.homing: SimAxesHoming | None = None
+        self.home_token = 0
+        self.home_started_s = 0.0
+        self.home_aborted = False
         self.decoder = p.Decoder(p.HOST_SYNC)
         self.latched = 0
         self.fault_axis = self.fault_code = 0
@@ -102,7 +118,12 @@ class PeerCard:
     def handle(self, frame: p.Frame) -> None:
         if isinstance(frame, p.Sample):
             self._sample(frame)
+        elif isinstance(frame, p.Home):
+            self._home(frame)
         elif isinstance(frame, p.Reset):
+            if self.homing is not None:  # abort: the axes decelerate, no HOME_FAILED
+                self.homing.halt("aborted by a RESET")
+                self.home_aborted = True
             self.fifo.clear()
             self.latched = 0
             self.fault_axis = self.fault_code = 0
@@ -136,8 +157,73 @@ class PeerCard:
         self.expect_seq = (s.seq + 1) % p.SEQ_MOD
         self.streaming = True
 
+    # -- homing -----------------------------------------------------------------------------
+    def _home(self, h: p.Home) -> None:
+        """Start a homing sequence (docs/serial-protocol.md, HOME) and answer at once."""
+        self.latched &= ~p.ST_HOME_FAILED
+        axes = [i for i in range(self.n) if h.mask >> i & 1]
+        busy = self.homing is not None or self.latched & p.ST_LATCHED or len(self.fifo) \
+            or self.streaming
+        bad = len(h.axes) != self.n or not axes or any(
+            h.axes[i].direction not in (-1, 1) or h.axes[i].search_pps <= 0
+            or not 0 < h.axes[i].latch_pps <= h.axes[i].search_pps or h.axes[i].accel_pps2 <= 0
+            for i in axes)
+        if busy or bad:
+            self._home_failed(axes[0] if axes else 0, p.HOME_BUSY if busy else p.HOME_BAD_REQUEST)
+        else:
+            pulse = self.axes.pulse_mm
+            plans = {i: HomingPlan(
+                axis=self.axis_names[i], direction=a.direction, search_mm_s=a.search_pps * pulse[i],
+                latch_mm_s=a.latch_pps * pulse[i], accel_mm_s2=a.accel_pps2 * pulse[i],
+                home_mm=a.home_pulses * pulse[i], final_mm=a.final_pulses * pulse[i],
+                use_index=a.use_index, search_limit_mm=a.search_limit_pulses * pulse[i])
+                for i, a in enumerate(h.axes) if i in axes}
+            self.homing = self.switches.homing(self.axes, plans, self.period_s,
+                                               self.axis_names)
+            self.home_token, self.home_aborted = h.token, False
+            self.home_started_s = time.monotonic()
+        self.send_status(h.token)
+
+    def _home_failed(self, axis: int, code: int) -> None:
+        self.latched |= p.ST_HOME_FAILED
+        if not self.latched & p.ST_DRIVE_FAULT:
+            self.fault_axis, self.fault_code = axis, code
+
+    def _clock_homing(self, n: int) -> int:
+        """Homing samples instead of FIFO samples; the counters are reported as they go."""
+        run = self.homing
+        assert run is not None
+        after = self.opt["homing_fault_after_s"]
+        if after is not None and "home_fault" not in self.injected \
+                and time.monotonic() - self.home_started_s >= float(after):
+            self.injected.add("home_fault")
+            self.fault_axis = int(self.opt["drive_fault_axis"])
+            self.fault_code = int(self.opt["drive_fault_code"])
+            self.axes.freeze(self.fault_axis)
+            self.latched |= p.ST_DRIVE_FAULT
+        if self.latched & p.ST_DRIVE_FAULT:
+            run.halt("drive fault", at_once=True, axis=self.fault_axis)
+        used = run.step(n)
+        self.prev_cmd, self.prev_enc = self.cur_cmd, self.cur_enc
+        self.cur_cmd = self.axes.commanded.copy()
+        self.cur_enc = self.axes.encoder(self.axes.actual_mm)
+        self.executed_last_tick = False
+        if run.finished:
+            self.homing = None
+            if run.error and not self.home_aborted and not self.latched & p.ST_DRIVE_FAULT:
+                code = p.HOME_NO_RELEASE if "release" in run.error else p.HOME_NOT_FOUND
+                self._home_failed(run.failed_axis or 0, code)
+            self.send_status(self.home_token)
+        return used
+
     # -- clocking ---------------------------------------------------------------------------
     def clock(self, n: int) -> None:
+        if self.homing is not None:
+            used = self._clock_homing(n)
+            self.ticks += used
+            n -= used
+            if not n:
+                return
         frames = np.zeros((0, self.n), dtype=np.int64)
         seq = np.zeros(0, dtype=np.int64)
         if not self.latched & p.ST_LATCHED:
@@ -186,7 +272,8 @@ class PeerCard:
         cur_cmd, cur_enc = self.cur_cmd, self.cur_enc
         status = p.Status(
             reply_to=reply_to, fifo_level=len(self.fifo), fifo_capacity=self.fifo.capacity,
-            latched=self.latched | (p.ST_EXECUTED if self.executed_last_tick else 0),
+            latched=self.latched | (p.ST_EXECUTED if self.executed_last_tick else 0)
+            | (p.ST_HOMING if self.homing is not None else 0),
             fault_axis=self.fault_axis, fault_code=self.fault_code, rx_seq=self.rx_seq,
             exec_seq=self.exec_seq, commanded=tuple(int(c) for c in cur_cmd),
             encoder=tuple(int(e) for e in cur_enc),

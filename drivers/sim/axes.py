@@ -60,3 +60,10 @@ class SimAxes:
     def add_lag(self, axis: int, lag_mm: float, ramp_frames: int) -> None:
         self.lag_target_mm[axis] = self.extra_lag_mm[axis] + lag_mm
         self.lag_step_mm[axis] = lag_mm / max(1, ramp_frames)
+
+    def rebase(self, axis: int, shift_counts: int) -> None:
+        """Homing: the counters of one axis jump by shift_counts (the table does not move)."""
+        shift_mm = shift_counts * self.pulse_mm[axis]
+        self.commanded[axis] += shift_counts
+        self.actual_mm[axis] += shift_mm
+        self.frozen_mm[axis] += shift_mm

@@ -11,23 +11,31 @@ import numpy as np
 from controller.config import MachineConfig
 from controller.generator.dynamics.servo import mismatched_config
 from drivers.base import CardStatus, Drive, Feedback
-from drivers.errors import BadFrameError, DriveError, LostCommunicationError
+from drivers.errors import BadFrameError, DriveError, HomingError, LostCommunicationError
+from drivers.homing import plan_for
 from drivers.sim.axes import SimAxes
 from drivers.sim.fifo import FrameFifo
+from drivers.sim.homing import SimAxesHoming
+from drivers.sim.switches import SimSwitches, timeout_message
 
 
 class SimCard(Drive):
     """Frames are clocked one per sample period T, in wall-clock time or virtual time.
 
     Options: realtime (bool, default True), fifo_frames (256), max_pulses_per_frame (127,
-    an int8 frame as in the prototype protocol), start_mm (list, machine position at power-up),
-    plant_pole_pct and plant_gain_pct (0: a plant off the planner's model, see mismatched).
+    an int8 frame as in the prototype protocol), start_mm (list, what the counters read at
+    power-up), plant_pole_pct and plant_gain_pct (0: a plant off the planner's model, see
+    mismatched). Homing (drivers/sim/homing.py): true_start_mm (list, where the table really
+    is at power-up; default start_mm), home_switch_mm (list, where each axis's home switch is,
+    in that true frame; default each axis's homing home_mm, null: no switch), index_pitch_mm
+    (1.0, encoder index marks at its multiples) and homed_at_start (false).
     Card rule (hostmot2 watchdog): an empty FIFO mid-program stops the card and latches
     UNDERRUN until reset(); an empty FIFO after an end-of-stream frame is simply idle.
     """
 
     OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm",
-                         "plant_pole_pct", "plant_gain_pct"})
+                         "plant_pole_pct", "plant_gain_pct", "true_start_mm", "home_switch_mm",
+                         "index_pitch_mm", "homed_at_start"})
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
@@ -40,6 +48,10 @@ class SimCard(Drive):
         plant = mismatched_config(config, float(options.get("plant_pole_pct", 0.0)),
                                   float(options.get("plant_gain_pct", 0.0)))
         self._axes = SimAxes(plant, np.rint(start_mm / self.pulse_mm).astype(np.int64))
+        self._switches = SimSwitches(self.n_axes, options, self._axes.actual_mm.copy(), "sim")
+        self._homing_run: SimAxesHoming | None = None
+        self._homing_done = threading.Event()
+        self._fault_axis: int | None = None  # the axis of the last injected drive fault
         self._lock = threading.RLock()
         self._status = CardStatus.OK
         self._messages: list[str] = []
@@ -123,6 +135,56 @@ class SimCard(Drive):
             self._messages = []
             self._streaming = False
 
+    # -- homing ---------------------------------------------------------------------------
+    def _stream_active(self) -> bool:
+        with self._lock:
+            return self._streaming or len(self._fifo) > 0
+
+    def _homed(self) -> tuple[bool, ...]:
+        return tuple(h or self._switches.homed_at_start for h in super()._homed())
+
+    def _home(self, axes: tuple[int, ...], timeout_s: float) -> None:
+        plans = {i: plan_for(self.config, i) for i in axes}
+        run = self._switches.homing(self._axes, plans, self.period_s, self.config.axis_names)
+        self._homing_done.clear()
+        with self._lock:
+            self._homing_run = run
+        if self.realtime:
+            if not self._homing_done.wait(timeout_s):
+                with self._lock:
+                    run.halt(timeout_message(timeout_s))
+                self._homing_done.wait(5.0)
+        else:
+            limit = int(np.ceil(timeout_s / self.period_s))
+            while not run.finished and run.samples < limit + 100_000:
+                if run.samples >= limit:
+                    run.halt(timeout_message(timeout_s))
+                self.advance(256)
+        with self._lock:
+            self._homing_run = None
+        if not run.finished or run.error:
+            name = run.failed_name or self.config.axes[axes[0]].name
+            raise HomingError(f"{name.upper()} axis homing failed: {run.error or 'no end'}",
+                              name)
+
+    def _clock_homing(self, n: int) -> int:
+        """Homing samples instead of FIFO frames (called with the lock held)."""
+        run = self._homing_run
+        assert run is not None
+        if self._status.halted:
+            run.halt(f"drive fault during homing: {self._fault_message()}", at_once=True,
+                     axis=self._fault_axis)
+        used = run.step(n)
+        if run.finished:
+            self._homing_run = None
+            self._homing_done.set()
+        return used
+
+    def true_position_mm(self) -> np.ndarray:
+        """Where the simulated table really is (test hook): once homed, counts x pulse_mm."""
+        with self._lock:
+            return self._axes.actual_mm + self._switches.offset_mm
+
     # -- clocking -------------------------------------------------------------------------
     def advance(self, n_frames: int) -> None:
         """Virtual time: clock n periods now (real-time mode clocks from its own thread)."""
@@ -140,6 +202,10 @@ class SimCard(Drive):
             time.sleep(max(0.0, next_s - time.monotonic()))
 
     def _clock(self, n: int) -> None:
+        if self._homing_run is not None:
+            used = self._clock_homing(n)
+            self.frames_clocked += used
+            n -= used
         frames = np.zeros((0, self.n_axes), dtype=np.int64)
         seq = np.zeros(0, dtype=np.int64)
         if not self._status.halted:
@@ -184,6 +250,7 @@ class SimCard(Drive):
         """Amplifier fault on one axis: that axis coasts (frozen), the card stops."""
         with self._lock:
             self._axes.freeze(axis)
+            self._fault_axis = axis
             name = self.config.axes[axis].name.upper()
             self._latch(CardStatus.FAULT, f"{name} axis drive fault 0x{code:04X}")
 
