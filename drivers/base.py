@@ -139,12 +139,24 @@ class Drive(ABC):
             raise HomingError(f"cannot home {names}: frames are streaming (homing needs the "
                               "FIFO idle: end the stream and let it run out first)")
         self._homed_axes.difference_update(wanted)
+        self.homing_abort_reason = None
         self._homing = True
         try:
             self._home(wanted, timeout_s)
         finally:
             self._homing = False
         self._homed_axes.update(wanted)
+
+    def abort_homing(self, reason: str = "homing aborted") -> None:
+        """Stop a homing sequence under way (e-stop, daemon shutdown): it ends in HomingError
+        with the axes halted where they are; safe from any thread, a no-op when not homing."""
+        self.homing_abort_reason = reason
+
+    homing_abort_reason: str | None = None
+
+    def homing_aborted(self) -> str | None:
+        """The reason given to abort_homing() during this homing, if any (backends poll it)."""
+        return self.homing_abort_reason if self._homing else None
 
     def homed(self) -> tuple[bool, ...]:
         """Per axis: True for an axis without a homing sequence (its position is absolute),

@@ -289,6 +289,9 @@ class MotionController:
         self._send(rows, end=not len(self.pending_stop))
 
     def _settle(self, level: int, fb: Feedback) -> None:
+        if self.state is MotionState.WAITING and self.sent_eos and not self.sent:
+            self._finish(self.outcome or Outcome.DONE, self.message)  # a program that never
+            return  # moves (G-code without motion, a jog of zero length): done at once
         if self.state in (MotionState.RUNNING, MotionState.STOPPING) and self.sent_eos \
                 and level == 0:
             self.state = MotionState.SETTLING

@@ -23,6 +23,8 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("resume", _OPS + "control_cmd", "continue the daemon's job after a pause (M0) or a hold"),
     ("hold", _OPS + "control_cmd", "feed hold: decelerate along the path and wait for resume"),
     ("feed", _OPS + "control_cmd", "feed override in % (0-150) of the daemon's jobs"),
+    ("home", _OPS + "control_cmd", "home the axes (switches or index, run by the drive)"),
+    ("jog", _OPS + "control_cmd", "jog an axis within the soft limits: X+10, or X+ continuous"),
     ("log", _OPS + "control_cmd", "the daemon's last events"),
     ("simdrive", _OPS + "simdrive_cmd", "serve a simulated CANopen drive set or serial card"),
 )

@@ -1,11 +1,14 @@
-"""`cncctl status | abort | estop | reset | resume | hold | feed | log`: the daemon's state and
-commands to it."""
+"""`cncctl status | abort | estop | reset | resume | hold | feed | home | jog | log`: the
+daemon's state and commands to it."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import re
 import sys
+import threading
 import time
 from typing import Any
 
@@ -31,6 +34,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     if command == "status":
         parser.add_argument("--json", action="store_true", help="one JSON object")
         parser.add_argument("--watch", action="store_true", help="print every change")
+    elif command == "home":
+        parser.add_argument("axes", nargs="*", help="axis letters (default: every axis with a "
+                                                    "homing sequence, in sequence order)")
+    elif command == "jog":
+        parser.add_argument("move", help="X+10 (incremental, mm), or X+ / X- (continuous, "
+                                         "until Enter, Ctrl-C or the time-out)")
+        parser.add_argument("--feed", type=float, default=600.0, help="mm/min (default 600)")
+        parser.add_argument("--timeout", type=float, default=30.0,
+                            help="continuous jog: stop after this many seconds (default 30)")
     elif command == "feed":
         parser.add_argument("percent", type=float,
                             help="feed override in %% of the programmed feed, 0-150 "
@@ -81,6 +93,9 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
               f"{s['feed_mm_s']:.1f} mm/s  following error {s['ferror_um']:.0f} um")
     print(f"  feed override {s.get('feed_override_pct', 100.0):g} %")
     print(f"  position {where}")
+    homed = s.get("homed") or {}
+    if homed and not all(homed.values()):
+        print("  not homed: " + " ".join(k.upper() for k, v in homed.items() if not v))
     last = s.get("last_job") or {}
     if last.get("program"):
         print(f"  last job {last['program']!r}: {last.get('state', '?').lower()} at line "
@@ -92,6 +107,75 @@ def _simple(client: DaemonClient, args: argparse.Namespace) -> int:
     reply = client.request(args.command)
     print(f"cncctl {args.command}: {reply['state']}")
     return 0
+
+
+def _home(client: DaemonClient, args: argparse.Namespace) -> int:
+    client.request("home", axes=[a.upper() for a in args.axes])
+    while (status := client.request("status"))["state"] == "HOMING":
+        time.sleep(0.1)
+    homed = status.get("homed", {})
+    print(f"cncctl home: {status.get('last_homing')}; homed "
+          + " ".join(f"{k.upper()}={'yes' if v else 'no'}" for k, v in homed.items()))
+    _print_status(status, False)
+    return 0 if status.get("last_homing") == "done" else 1
+
+
+JOG = re.compile(r"^([XYZxyz])([+-])(\d+\.?\d*|\.\d+)?$")
+
+
+def _jog(client: DaemonClient, args: argparse.Namespace) -> int:
+    m = JOG.match(args.move)
+    if m is None:
+        print(f"cncctl jog: {args.move!r}: expected an axis, a sign and a distance (X+10), or "
+              "an axis and a sign (X+: continuous)", file=sys.stderr)
+        return EXIT_REFUSED
+    axis, sign, number = m.group(1).lower(), 1 if m.group(2) == "+" else -1, m.group(3)
+    fields: dict[str, Any] = {"axis": axis, "feed_mm_min": args.feed, "follow": True}
+    if number is None:
+        fields |= {"direction": sign, "timeout_s": args.timeout}
+    else:
+        fields["distance_mm"] = sign * float(number)
+    reply = client.request("jog", **fields)
+    print(f"cncctl jog: {reply['message']}" + (" (Enter or Ctrl-C stops it)"
+                                               if number is None else ""), flush=True)
+    if number is None:
+        _stop_on_enter(client.path)
+    return _follow_job(client)
+
+
+def _stop_on_enter(socket_path: str) -> None:
+    """A continuous jog ends when released: Enter (or Ctrl-C, handled by _follow_job)."""
+    def wait() -> None:
+        try:
+            fd = sys.stdin.fileno()
+            if os.read(fd, 1):
+                _abort(socket_path)
+        except (OSError, ValueError):
+            pass
+    threading.Thread(target=wait, daemon=True).start()
+
+
+def _abort(socket_path: str) -> None:
+    try:
+        with DaemonClient(socket_path) as other:
+            other.request("abort")
+    except (DaemonError, DaemonUnavailable):
+        pass
+
+
+def _follow_job(client: DaemonClient) -> int:
+    try:
+        for event in client.messages():
+            kind = event.get("event")
+            if kind in ("done", "aborted", "fault", "rejected"):
+                where = event.get("final_position_mm")
+                print(f"cncctl: {kind}" + (f": {event['message']}" if event.get("message")
+                                           else "") + (f" at {where}" if where else ""))
+                return 0 if kind in ("done", "aborted") else EXIT_REFUSED
+    except KeyboardInterrupt:
+        _abort(client.path)
+        return _follow_job(client)
+    return EXIT_REFUSED
 
 
 def _feed(client: DaemonClient, args: argparse.Namespace) -> int:
@@ -117,4 +201,5 @@ def _print_event(event: dict[str, Any]) -> None:
 
 
 _COMMANDS = {"status": _status, "abort": _simple, "estop": _simple, "reset": _simple,
-             "resume": _simple, "hold": _simple, "feed": _feed, "log": _log}
+             "resume": _simple, "hold": _simple, "feed": _feed, "home": _home, "jog": _jog,
+             "log": _log}

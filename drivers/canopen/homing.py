@@ -137,6 +137,9 @@ def _wait(drive: CanopenDrive, link: Link, axes: tuple[int, ...],
         if pending and time.monotonic() > deadline_s:
             raise _error(drive, min(pending), f"time-out: not homed within {timeout_s:g} s "
                          "(halted)")
+        reason = drive.homing_aborted()
+        if pending and reason:
+            raise _error(drive, min(pending), f"{reason} (halted)")
 
 
 def _error(drive: CanopenDrive, i: int, reason: str) -> HomingError:

@@ -70,15 +70,16 @@ def home(card: SerialCard, axes: tuple[int, ...], timeout_s: float) -> None:
                     and not last.latched & p.ST_HOMING:
                 break
             left_s = deadline_s - time.monotonic()
-            if left_s <= 0:
+            if left_s <= 0 or card.homing_aborted():
                 break
             card._cond.wait(min(left_s, 0.05))
         card._check_link()  # a silent card or a closed port: LostCommunicationError
     if last is None or last.latched & p.ST_HOMING:
         _abort(card)
         axis = names[axes[0]]
-        raise HomingError(f"{axis.upper()} axis homing failed: time-out: not homed within "
-                          f"{timeout_s:g} s (the card was reset: homing aborted)", axis)
+        why = card.homing_aborted() or f"time-out: not homed within {timeout_s:g} s"
+        raise HomingError(f"{axis.upper()} axis homing failed: {why} (the card was reset: "
+                          "homing aborted)", axis)
     if last.latched & (p.ST_HOME_FAILED | p.ST_DRIVE_FAULT):
         raise _failure(card, last, plans, names)
 

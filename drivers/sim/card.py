@@ -150,15 +150,20 @@ class SimCard(Drive):
         with self._lock:
             self._homing_run = run
         if self.realtime:
-            if not self._homing_done.wait(timeout_s):
-                with self._lock:
-                    run.halt(timeout_message(timeout_s))
-                self._homing_done.wait(5.0)
+            deadline_s = time.monotonic() + timeout_s
+            while not self._homing_done.wait(0.02):
+                reason = self.homing_aborted()
+                if reason or time.monotonic() > deadline_s:
+                    with self._lock:
+                        run.halt(reason or timeout_message(timeout_s))
+                    self._homing_done.wait(5.0)
+                    break
         else:
             limit = int(np.ceil(timeout_s / self.period_s))
             while not run.finished and run.samples < limit + 100_000:
-                if run.samples >= limit:
-                    run.halt(timeout_message(timeout_s))
+                reason = self.homing_aborted()
+                if run.samples >= limit or reason:
+                    run.halt(reason or timeout_message(timeout_s))
                 self.advance(256)
         with self._lock:
             self._homing_run = None

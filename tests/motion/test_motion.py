@@ -236,3 +236,9 @@ def test_abort_while_paused_ends_at_once_at_rest() -> None:
     assert result.outcome is Outcome.ABORTED
     assert result.final_position_mm == {"x": 10.0, "y": 10.0}
     assert result.commanded_counts == result.executed_counts
+
+
+def test_program_without_motion_ends_at_once() -> None:
+    result, _, rec, _ = run([])
+    assert result.outcome is Outcome.DONE and result.motion_time_s == 0.0
+    assert len(rec.commanded()) == 0

@@ -10,7 +10,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +18,8 @@ from controller.config import MachineConfig
 from controller.errors import CncError, NcError
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
 from controller.operator.check_cmd import check_program
+from controller.operator.daemon import manual
+from controller.operator.daemon.job import Emit, Job, progress_event
 from controller.operator.daemon.journal import Journal
 from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.protocol import ProtocolError
@@ -25,7 +27,6 @@ from controller.operator.run_view import result_summary
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.base import Drive
 
-Emit = Callable[[dict[str, Any]], None]
 JOURNAL_EVERY_S = 0.5  # the journal's last line is at most this old after a crash
 MOTION_STALL_S = 1.0  # no motion-loop cycle for this long while running: unhealthy
 CHECK_STALL_S = 2.0  # no checked block for this long while checking: unhealthy
@@ -36,31 +37,8 @@ class State(enum.StrEnum):
     IDLE = "IDLE"
     CHECKING = "CHECKING"
     RUNNING = "RUNNING"
+    HOMING = "HOMING"
     FAULT = "FAULT"
-
-
-@dataclass
-class Job:
-    number: int
-    name: str
-    sha256: str
-    text: bytes
-    lines: int
-    emit: Emit  # events for the connection that started it (and the state subscribers)
-    runtime: Runtime | None = None
-    cancel: str | None = None  # abort or e-stop asked while checking
-    start_mm: tuple[float, float, float] | None = None  # where the machine stood
-    progress: MotionProgress | None = None
-    holding: bool = False  # a feed hold was asked and not resumed
-    done: threading.Event = field(default_factory=threading.Event)
-
-
-def progress_event(p: MotionProgress) -> dict[str, Any]:
-    return {"event": "progress", "state": p.state.value, "line": p.line,
-            "feed_mm_s": round(p.feed_mm_s, 3), "ferror_um": round(p.ferror_um, 1),
-            "fifo_ms": round(p.fifo_ms, 1), "elapsed_s": round(p.elapsed_s, 3),
-            "executed_s": round(p.executed_s, 3), "planned_s": p.planned_s,
-            "override_pct": p.override_pct, "position_mm": list(p.position_mm)}
 
 
 class Machine:
@@ -86,9 +64,13 @@ class Machine:
                              f"at line {self.last_job.get('last_line')}; it will not resume")
 
     # -- commands ---------------------------------------------------------------------------
-    def start_job(self, name: str, text: bytes, emit: Emit) -> int:
+    def start_job(self, name: str, text: bytes, emit: Emit, manual_move: bool = False,
+                  timeout_s: float | None = None) -> int:
+        """A program (or, manual_move, a jog: allowed before homing) as the next job."""
         with self._lock:
             self.require_idle()
+            if not manual_move:
+                self.require_homed()
             self._jobs += 1
             job = Job(self._jobs, name, hashlib.sha256(text).hexdigest(), text,
                       text.count(b"\n"), emit)
@@ -96,7 +78,67 @@ class Machine:
             self._set_state(State.CHECKING)
         threading.Thread(target=self._run_job, args=(job,), name=f"job-{job.number}",
                          daemon=True).start()
+        if timeout_s is not None:
+            timer = threading.Timer(timeout_s, self._time_out, args=(job,))
+            timer.daemon = True
+            timer.start()
         return job.number
+
+    def _time_out(self, job: Job) -> None:
+        with self._lock:
+            if self.job is job:
+                self._stop_job(job, "jog time-out: stopped along the path")
+
+    def jog(self, axis: str, distance_mm: float | None, direction: int, feed_mm_min: float,
+            emit: Emit, timeout_s: float | None) -> tuple[int, str]:
+        """Jog one axis as a one-line job within the soft limits; (job, what it does)."""
+        position = self._position_mm() or {}
+        text, note = manual.jog_program(self.config, position, axis, distance_mm, direction,
+                                        feed_mm_min)
+        job = self.start_job(f"jog {axis.upper()}", text.encode(), emit, manual_move=True,
+                             timeout_s=timeout_s)
+        self.log.log(NOTICE, note)
+        return job, note
+
+    def home(self, axes: list[str]) -> None:
+        manual.start_homing(self, axes)
+
+    @property
+    def lock(self) -> threading.RLock:
+        return self._lock
+
+    def set_state_homing(self) -> None:
+        self._set_state(State.HOMING)
+
+    def end_homing(self, failure: str | None) -> None:
+        """Homing is over: IDLE; a drive that halted during it latches FAULT."""
+        with self._lock:
+            halted = False
+            try:
+                halted = self.drive.status().halted
+            except CncError:
+                halted = True
+            if halted:
+                self.fault = failure or "drive halted during homing"
+                self._set_state(State.FAULT)
+            elif self.state is not State.ESTOP:
+                self._set_state(State.IDLE)
+            self.last_homing = failure or "done"
+
+    last_homing: str | None = None
+
+    def require_homed(self) -> None:
+        if self.config.allow_unhomed:
+            return
+        missing = manual.unhomed_axes(self.config, self.drive.homed())
+        if missing:
+            raise ProtocolError("not-homed", f"not homed: {', '.join(missing)} (`cncctl "
+                                             "home`; the config's allow_unhomed permits runs "
+                                             "without)")
+
+    def position_text(self) -> str:
+        pos = self._position_mm() or {}
+        return " ".join(f"{k.upper()}{v:.3f}" for k, v in pos.items())
 
     def abort(self, reason: str) -> None:
         with self._lock:
@@ -142,6 +184,8 @@ class Machine:
     def estop(self, reason: str) -> None:
         with self._lock:
             self.fault = reason
+            if self.state is State.HOMING:
+                self.drive.abort_homing(reason)
             self._set_state(State.ESTOP)
             if self.job is not None:
                 self._stop_job(self.job, reason)
@@ -149,6 +193,8 @@ class Machine:
 
     def reset(self) -> None:
         with self._lock:
+            if self.state is State.HOMING:
+                raise ProtocolError("busy", "homing: wait for it, or e-stop")
             if self.job is not None:
                 raise ProtocolError("busy", f"a job is {self.state.value.lower()}: abort it "
                                             "first")
@@ -164,6 +210,8 @@ class Machine:
     def terminate(self, reason: str) -> None:
         """SIGTERM: stop a running job along the path (the caller waits for wait_idle)."""
         with self._lock:
+            if self.state is State.HOMING:
+                self.drive.abort_homing(reason)
             if self.job is not None:
                 self._stop_job(self.job, reason)
 
@@ -191,6 +239,8 @@ class Machine:
         out["ferror_um"] = round(p.ferror_um, 1) if p else 0.0
         out["feed_override_pct"] = self.feed_override_pct
         out["position_mm"] = self._position_mm()
+        out["homed"] = manual.homed_status(self)
+        out["last_homing"] = self.last_homing
         out["last_job"] = self.last_job
         return out
 
@@ -226,6 +276,8 @@ class Machine:
         if self.job is not None:
             raise ProtocolError("busy", f"busy: a job is {self.state.value.lower()} "
                                         "(one job at a time; nothing was queued)")
+        if self.state is State.HOMING:
+            raise ProtocolError("busy", "busy: homing")
         if self.state is State.ESTOP:
             raise ProtocolError("estop", f"e-stop is latched ({self.fault}): reset first")
         if self.state is State.FAULT:

@@ -16,11 +16,12 @@ from pathlib import Path
 from controller.config import MachineConfig, load_config
 from controller.errors import CncError
 from controller.operator.client import default_socket_path
+from controller.operator.daemon.access import AccessPolicy, bind_socket, socket_gid
 from controller.operator.daemon.log import ERR, INFO, NOTICE, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.notify import run_watchdog, sd_notify
 from controller.operator.daemon.protocol import ProtocolError
-from controller.operator.daemon.server import AccessPolicy, Server, bind_socket, socket_gid
+from controller.operator.daemon.server import Server
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 
 STOP_TIMEOUT_S = 20.0  # SIGTERM: the running job's controlled stop must end within this

@@ -9,7 +9,7 @@ from typing import Any
 MAX_LINE_BYTES = 64 * 1024  # any request line
 MAX_PROGRAM_BYTES = 64 * 1024 * 1024  # the program text that follows a run request
 COMMANDS = frozenset({"status", "run", "abort", "estop", "reset", "log", "subscribe",
-                      "resume", "hold", "feed"})
+                      "resume", "hold", "feed", "home", "jog"})
 MAX_FEED_OVERRIDE_PCT = 150.0
 TOPICS = frozenset({"state", "progress", "log"})
 
@@ -120,8 +120,37 @@ def _check_feed(request: Request) -> None:
                             f"feed needs percent, a number 0..{MAX_FEED_OVERRIDE_PCT:g}")
 
 
+def _check_home(request: Request) -> None:
+    _known(request, {"axes"})
+    axes = request.fields.get("axes", [])
+    if not isinstance(axes, list) or not all(isinstance(a, str) and len(a) == 1 for a in axes):
+        raise ProtocolError("bad-field", "axes must be a list of axis letters")
+
+
+def _number(request: Request, key: str, lo: float, hi: float, required: bool = False) -> None:
+    value = request.fields.get(key)
+    if value is None and not required:
+        return
+    if not isinstance(value, int | float) or isinstance(value, bool) or not lo <= value <= hi:
+        raise ProtocolError("bad-field", f"{key} must be a number {lo:g}..{hi:g}")
+
+
+def _check_jog(request: Request) -> None:
+    _known(request, {"axis", "distance_mm", "direction", "feed_mm_min", "timeout_s", "follow"})
+    axis = request.fields.get("axis")
+    if not isinstance(axis, str) or len(axis) != 1:
+        raise ProtocolError("bad-field", "jog needs axis, one letter")
+    _number(request, "distance_mm", -1e4, 1e4)
+    _number(request, "direction", -1, 1)
+    _number(request, "feed_mm_min", 1e-3, 1e6)
+    _number(request, "timeout_s", 0.1, 3600.0)
+    if ("distance_mm" in request.fields) == ("direction" in request.fields):
+        raise ProtocolError("bad-field", "jog needs distance_mm (incremental) or direction "
+                                         "(continuous), not both")
+
+
 _CHECKS = {"run": _check_run, "log": _check_log, "subscribe": _check_subscribe,
-           "feed": _check_feed}
+           "feed": _check_feed, "home": _check_home, "jog": _check_jog}
 
 
 class LineReader:

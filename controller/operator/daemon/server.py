@@ -4,20 +4,15 @@
 from __future__ import annotations
 
 import errno
-import grp
-import os
-import pwd
 import queue
 import selectors
 import socket
-import stat
 import struct
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
-from controller.config import ServiceConfig
+from controller.operator.daemon.access import AccessPolicy
 from controller.operator.daemon.log import INFO, WARNING, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.protocol import (
@@ -54,74 +49,6 @@ class Conn:
         """Nothing owed either way: may be closed to make room for another client."""
         return (not self.topics and not self.following and self.run is None
                 and not self.reader.pending)
-
-
-class AccessPolicy:
-    """Root, the daemon's own user, and members of the allowed groups (socket group first)."""
-
-    def __init__(self, service: ServiceConfig, socket_gid: int) -> None:
-        self.uids = {0, os.geteuid()} | {_uid(u) for u in service.allowed_users}
-        self.gids = {socket_gid} | {_gid(g) for g in service.allowed_groups}
-
-    def allows(self, pid: int, uid: int, gid: int) -> bool:
-        return uid in self.uids or gid in self.gids or bool(self.gids & _groups_of(pid))
-
-
-def _uid(name: str) -> int:
-    try:
-        return pwd.getpwnam(name).pw_uid
-    except KeyError:
-        raise ProtocolError("config", f"service.allowed_users: no user {name!r}") from None
-
-
-def _gid(name: str) -> int:
-    try:
-        return grp.getgrnam(name).gr_gid
-    except KeyError:
-        raise ProtocolError("config", f"service group {name!r} does not exist") from None
-
-
-def _groups_of(pid: int) -> set[int]:
-    """The peer process's supplementary groups (what it runs with, not what /etc/group says)."""
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("Groups:"):
-                return {int(g) for g in line.split()[1:]}
-    except (OSError, ValueError):
-        pass
-    return set()
-
-
-def socket_gid(service: ServiceConfig) -> int:
-    return _gid(service.socket_group) if service.socket_group else os.getegid()
-
-
-def bind_socket(path: str, gid: int) -> socket.socket:
-    """Listening socket at path, mode 0660 and group gid whatever the umask; a stale socket
-    file is replaced, a live one (another daemon) is an error."""
-    if os.path.exists(path):
-        if not stat.S_ISSOCK(os.lstat(path).st_mode):
-            raise OSError(errno.EEXIST, f"{path} exists and is not a socket")
-        probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        try:
-            probe.connect(path)
-            raise OSError(errno.EADDRINUSE, f"another daemon answers on {path}")
-        except (ConnectionRefusedError, FileNotFoundError):
-            os.unlink(path)
-        finally:
-            probe.close()
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
-    old = os.umask(0o177)  # the file is born 0600: nobody else can connect before the chmod
-    try:
-        sock.bind(path)
-    finally:
-        os.umask(old)
-    if gid != os.getegid() or os.geteuid() == 0:
-        os.chown(path, -1, gid)
-    os.chmod(path, 0o660)
-    sock.listen(128)
-    sock.setblocking(False)
-    return sock
 
 
 class Server:
@@ -295,6 +222,11 @@ class Server:
         elif cmd in ("resume", "hold"):
             getattr(self.machine, cmd)()
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
+        elif cmd == "home":
+            self.machine.home(list(request.fields.get("axes", [])))
+            self._send(conn, reply_ok(rid, state=self.machine.state.value))
+        elif cmd == "jog":
+            self._start_jog(conn, request)
         elif cmd == "feed":
             self.machine.feed(float(request.fields["percent"]))
             self._send(conn, reply_ok(rid, feed_override_pct=self.machine.feed_override_pct))
@@ -308,6 +240,19 @@ class Server:
         elif cmd == "subscribe":
             conn.topics.update(request.fields.get("topics", ["state"]))
             self._send(conn, reply_ok(rid, topics=sorted(conn.topics)))
+
+    def _start_jog(self, conn: Conn, request: Request) -> None:
+        f = request.fields
+        follow = f.get("follow", False)
+        emit = self.emitter(conn) if follow else (lambda event: None)
+        direction = f.get("direction")
+        job, note = self.machine.jog(f["axis"].lower(), f.get("distance_mm"),
+                                     int(direction) if direction is not None else 0,
+                                     float(f.get("feed_mm_min", 600.0)), emit,
+                                     f.get("timeout_s", 30.0 if direction is not None else None))
+        conn.following = bool(follow)
+        self._send(conn, reply_ok(request.id, job=job, state=self.machine.state.value,
+                                  message=note))
 
     def _start_run(self, conn: Conn, request: Request, text: bytes) -> None:
         name = request.fields.get("name", "program.nc")

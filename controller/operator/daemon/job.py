@@ -1,0 +1,37 @@
+"""One job of the daemon: the program, where it started, its progress, and its events."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from controller.motion.types import MotionProgress
+from controller.runtime.processes import Runtime
+
+Emit = Callable[[dict[str, Any]], None]
+
+
+@dataclass
+class Job:
+    number: int
+    name: str
+    sha256: str
+    text: bytes
+    lines: int
+    emit: Emit  # events for the connection that started it (and the state subscribers)
+    runtime: Runtime | None = None
+    cancel: str | None = None  # abort or e-stop asked while checking
+    start_mm: tuple[float, float, float] | None = None  # where the machine stood
+    progress: MotionProgress | None = None
+    holding: bool = False  # a feed hold was asked and not resumed
+    done: threading.Event = field(default_factory=threading.Event)
+
+
+def progress_event(p: MotionProgress) -> dict[str, Any]:
+    return {"event": "progress", "state": p.state.value, "line": p.line,
+            "feed_mm_s": round(p.feed_mm_s, 3), "ferror_um": round(p.ferror_um, 1),
+            "fifo_ms": round(p.fifo_ms, 1), "elapsed_s": round(p.elapsed_s, 3),
+            "executed_s": round(p.executed_s, 3), "planned_s": p.planned_s,
+            "override_pct": p.override_pct, "position_mm": list(p.position_mm)}
