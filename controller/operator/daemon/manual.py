@@ -3,16 +3,33 @@
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from controller.config import MachineConfig
 from controller.errors import CncError
-from controller.operator.daemon.log import ERR, NOTICE
+from controller.operator.daemon.log import ERR, NOTICE, EventLog
 from controller.operator.daemon.protocol import ProtocolError
+from drivers.base import Drive
 from drivers.homing import homing_groups
 
-if TYPE_CHECKING:
-    from controller.operator.daemon.machine import Machine
+
+class Machine(Protocol):
+    """What homing needs of the daemon's Machine (machine.py imports this module)."""
+
+    config: MachineConfig
+    drive: Drive
+    log: EventLog
+
+    @property
+    def lock(self) -> threading.RLock: ...
+
+    def require_idle(self) -> None: ...
+
+    def set_state_homing(self) -> None: ...
+
+    def end_homing(self, failure: str | None) -> None: ...
+
+    def position_text(self) -> str: ...
 
 HOMING_TIMEOUT_S = 120.0
 JOG_FEED_MM_MIN = 600.0  # default jog feed
