@@ -28,6 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", help="machine configuration (file or built-in name)")
     parser.add_argument("--json", action="store_true", help="one JSON object per line")
     add_drive_option_argument(parser)
+    parser.add_argument("--optional-stop", action="store_true",
+                        help="M1 pauses like M0 (optional stop on)")
     parser.add_argument("--virtual-time", action="store_true",
                         help="clock the simulated card as fast as possible (no wall clock)")
     parser.add_argument("--socket", metavar="PATH",
@@ -101,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
     view = _view(args, _program_lines(args.program))
-    runtime = Runtime(args.program, config, RuntimeOptions(virtual_time=args.virtual_time))
+    runtime = Runtime(args.program, config, RuntimeOptions(virtual_time=args.virtual_time,
+                                                           optional_stop=args.optional_stop))
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
                                                   flush=True))
     runtime.options = replace(runtime.options, on_progress=_Announcer(view.progress,

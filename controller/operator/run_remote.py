@@ -28,7 +28,8 @@ def run_on_daemon(args: argparse.Namespace, socket_path: str, view: Any) -> int:
     with DaemonClient(socket_path) as client:
         try:
             client.request("run", payload=text, name=args.program[-255:],
-                           program_bytes=len(text), follow=True)
+                           program_bytes=len(text), follow=True,
+                           optional_stop=bool(getattr(args, "optional_stop", False)))
         except DaemonError as exc:
             print(f"cncctl: the daemon refused the job: {exc.code}: {exc}", file=sys.stderr)
             return EXIT_REJECTED

@@ -49,6 +49,7 @@ class RuntimeOptions:
     settings: dict[str, Any] = field(default_factory=dict)  # MotionSettings overrides
     on_progress: Callable[[MotionProgress], None] | None = None
     rt_priority: int | None = 80  # real-time mode: try SCHED_FIFO for the motion process
+    optional_stop: bool = False  # M1 pauses like M0
 
 
 class _Messages:
@@ -106,6 +107,11 @@ class Runtime:
         self.settings = MotionSettings.from_config(config, **self.options.settings)
         self.controller: MotionController | None = None
         self.procs: dict[str, Any] = {}
+
+    def _generate_fn(self) -> GenerateFn:
+        if self.options.optional_stop and self.options.generate_fn is reference_source:
+            return functools.partial(reference_source, optional_stop=True)
+        return self.options.generate_fn
 
     def request_resume(self) -> None:
         """Continue after a program pause (M0) or a feed hold."""
@@ -170,7 +176,7 @@ class Runtime:
         # Generator first, so that it is waiting on the NC FIFO when the first block lands.
         self.procs["generator"] = _CTX.Process(
             target=generator_main, name="cnc-generator", daemon=True,
-            args=(self.config, self.options.generate_fn, nc_fifo, ring, messages.info,
+            args=(self.config, self._generate_fn(), nc_fifo, ring, messages.info,
                   os.getpid()))
         self.procs["interpreter"] = _CTX.Process(
             target=interpreter_main, name="cnc-interpreter", daemon=True,

@@ -7,6 +7,7 @@ import os
 import resource
 import signal
 from collections.abc import Callable, Iterable, Iterator
+from dataclasses import replace
 from multiprocessing.queues import Queue
 from typing import Any
 
@@ -27,10 +28,22 @@ def blocks_source(path: str, config: MachineConfig,
     yield from read_program(path, config, start_mm)
 
 
-def reference_source(blocks: Iterable[Any], config: MachineConfig) -> Iterator[RefChunk]:
-    """The generator stage: the look-ahead reference-point generator (controller.generator.plan)."""
+def reference_source(blocks: Iterable[Any], config: MachineConfig,
+                     optional_stop: bool = False) -> Iterator[RefChunk]:
+    """The generator stage: the look-ahead reference-point generator (controller.generator.plan).
+
+    optional_stop: M1 pauses like M0 (the operator's optional-stop switch); else it is passed."""
     from controller.generator.plan import generate_reference
+    if optional_stop:
+        blocks = (_m1_as_m0(b) for b in blocks)
     yield from generate_reference(blocks, config)
+
+
+def _m1_as_m0(block: Any) -> Any:
+    from controller.blocks import StopBlock, StopKind
+    if isinstance(block, StopBlock) and block.kind is StopKind.OPTIONAL_PAUSE:
+        return replace(block, kind=StopKind.PAUSE)
+    return block
 
 
 def preload_stages() -> None:

@@ -107,3 +107,41 @@ def test_space_bar_holds_and_resumes_an_embedded_run(tmp_path: Path) -> None:
     assert b"feed override 90 %" in text
     final = json.loads(text[text.rindex(b'{"event": "done"'):].splitlines()[0])
     assert final["final_position_mm"] == {"x": 0.0, "y": 0.0} and final["underruns"] == 0
+
+
+M1_PROGRAM = "G21 G90 G64 F2400\nG1 X10\nM1\nG1 Y10\nM2\n"
+
+
+def _run_m1(tmp_path: Path, *extra: str, stdin: bytes = b"") -> tuple[int, list[dict], str]:
+    program = tmp_path / "m1.nc"
+    program.write_text(M1_PROGRAM)
+    env = {**os.environ, "CNCD_SOCKET": str(tmp_path / "none.sock")}
+    proc = subprocess.Popen([*CNCCTL, "run", str(program), "--json", "--virtual-time", *extra],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=env)
+    try:
+        assert proc.stderr is not None and proc.stdin is not None
+        if stdin:
+            err = b""
+            while b"paused at line 3" not in err:  # wait for the pause, then press Enter
+                chunk = proc.stderr.readline()
+                assert chunk, "the run ended without pausing"
+                err += chunk
+            proc.stdin.write(stdin)
+            proc.stdin.flush()
+        out, rest = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    events = [json.loads(line) for line in out.splitlines()]
+    return proc.returncode, events, (err if stdin else b"").decode() + rest.decode()
+
+
+def test_m1_is_skipped_unless_optional_stop_is_on(tmp_path: Path) -> None:
+    code, events, _ = _run_m1(tmp_path)
+    assert code == 0 and not any(e.get("state") == "paused" for e in events)
+    code, events, err = _run_m1(tmp_path, "--optional-stop", stdin=b"\n")
+    assert code == 0 and "paused at line 3 (M0)" in err.replace("(M1)", "(M0)")
+    assert events[-1]["event"] == "done"
+    assert events[-1]["final_position_mm"] == {"x": 10.0, "y": 10.0}

@@ -26,6 +26,7 @@ class Job:
     start_mm: tuple[float, float, float] | None = None  # where the machine stood
     progress: MotionProgress | None = None
     holding: bool = False  # a feed hold was asked and not resumed
+    optional_stop: bool = False  # M1 pauses like M0
     done: threading.Event = field(default_factory=threading.Event)
 
 

@@ -65,7 +65,7 @@ class Machine:
 
     # -- commands ---------------------------------------------------------------------------
     def start_job(self, name: str, text: bytes, emit: Emit, manual_move: bool = False,
-                  timeout_s: float | None = None) -> int:
+                  timeout_s: float | None = None, optional_stop: bool = False) -> int:
         """A program (or, manual_move, a jog: allowed before homing) as the next job."""
         with self._lock:
             self.require_idle()
@@ -73,7 +73,7 @@ class Machine:
                 self.require_homed()
             self._jobs += 1
             job = Job(self._jobs, name, hashlib.sha256(text).hexdigest(), text,
-                      text.count(b"\n"), emit)
+                      text.count(b"\n"), emit, optional_stop=optional_stop)
             self.job = self._last_job_started = job
             self._set_state(State.CHECKING)
         threading.Thread(target=self._run_job, args=(job,), name=f"job-{job.number}",
@@ -350,7 +350,7 @@ class Machine:
             job.emit(event)
             self.publish("progress", event)
         return replace(base, drive=self.drive, keep_drive_open=True, on_progress=progress,
-                       start_mm=job.start_mm)
+                       start_mm=job.start_mm, optional_stop=job.optional_stop)
 
     def _record(self, job: Job, result: MotionResult) -> None:
         summary = result_summary(result)

@@ -77,7 +77,9 @@ def _no_fields(request: Request) -> None:
 
 def _check_run(request: Request) -> None:
     f = request.fields
-    _known(request, {"name", "program_bytes", "follow"})
+    _known(request, {"name", "program_bytes", "follow", "optional_stop"})
+    if not isinstance(f.get("optional_stop", False), bool):
+        raise ProtocolError("bad-field", "optional_stop must be true or false")
     size = f.get("program_bytes")
     if not isinstance(size, int) or isinstance(size, bool) or size < 0:
         raise ProtocolError("bad-field", "run needs program_bytes, the size of the program "

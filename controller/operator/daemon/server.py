@@ -259,7 +259,8 @@ class Server:
         follow = request.fields.get("follow", True)
         emit = self.emitter(conn) if follow else (lambda event: None)
         try:
-            job = self.machine.start_job(name, text, emit)
+            job = self.machine.start_job(name, text, emit,
+                                         optional_stop=request.fields.get("optional_stop", False))
         except ProtocolError as exc:
             self._send(conn, reply_error(request.id, exc.code, exc.message))
             return
