@@ -39,3 +39,12 @@ class PlanningError(CncError):
 
 class DriveError(CncError):
     """A drive backend fault: drive fault, lost communication, underrun, following error."""
+
+
+class OffsetsError(CncError):
+    """The work-offset file (G54-G59, G92) cannot be read or written: names the file."""
+
+    def __init__(self, path: str, message: str) -> None:
+        self.path = path
+        self.message = message
+        super().__init__(f"{path}: {message}")

@@ -1,4 +1,5 @@
-"""Length and bounding box of NC blocks (for `cncctl check`): arcs exactly, NURBS by sampling."""
+"""Length and bounding box of NC blocks (for `cncctl check`): arcs exactly, NURBS by sampling;
+and the travel limits, checked on those boxes in machine coordinates."""
 
 from __future__ import annotations
 
@@ -6,8 +7,11 @@ import math
 
 import numpy as np
 
-from controller.blocks import ArcBlock, LineBlock, NurbsBlock
+from controller.blocks import ArcBlock, LineBlock, NcBlock, NurbsBlock
+from controller.config import MachineConfig
+from controller.errors import NcError
 from controller.interpreter.arcs import arc_box
+from controller.offsets import ZERO_MM, OffsetTable, work_origin
 
 Box = tuple[tuple[float, float, float], tuple[float, float, float]]  # (min xyz, max xyz)
 SAMPLES_PER_SPAN = 64
@@ -84,3 +88,40 @@ def arc_length_and_box(block: ArcBlock) -> tuple[float, Box]:
         return abs(sweep) * r, ((cx - r_max, cy - r_max, z), (cx + r_max, cy + r_max, z))
     x0, y0, x1, y1 = arc_box(sx, sy, ex, ey, cx, cy, sweep)
     return abs(sweep) * r, ((x0, y0, z), (x1, y1, z))
+
+
+def travel_error(path: str, block: NcBlock, axis: str, reached_mm: float, lo_mm: float,
+                 hi_mm: float, offsets: OffsetTable | None = None) -> NcError:
+    """The error of a block that leaves an axis's travel. Blocks, and so `reached_mm`, are in
+    machine coordinates; with a work offset in force the message also gives the program's
+    coordinate there (in mm)."""
+    name = axis.upper()
+    i = "XYZ".index(name)
+    where = f"{reached_mm:.4f} mm in machine coordinates"
+    if offsets is not None and work_origin(offsets)[i] != 0.0:
+        frame = offsets.active_name + (" + G92" if offsets.g92_mm != ZERO_MM else "")
+        where += (f" ({name}{reached_mm - work_origin(offsets)[i]:.4f} mm in the program's "
+                  f"{frame} frame)")
+    return NcError(path, block.source.first_line, 1, name,
+                   f"{name} travel limit exceeded: the path reaches {where}, travel is "
+                   f"[{lo_mm:g}, {hi_mm:g}] mm")
+
+
+class TravelLimits:
+    """The machine's soft limits (config `axes.*.travel_mm`), checked on the box of each motion
+    block before any motion; the boxes are in machine coordinates, as the blocks are."""
+
+    def __init__(self, config: MachineConfig) -> None:
+        self.axes = [(i, name, *config.axis(name).travel_mm)
+                     for i, name in enumerate(("x", "y", "z")) if config.has_axis(name)]
+
+    def check(self, path: str, block: NcBlock, box: Box,
+              offsets: OffsetTable | None = None) -> None:
+        """Raise travel_error at the first axis the box leaves; `offsets` (the table in force
+        for the block, e.g. ProgramOffsets.table while reading) only adds to the message."""
+        lo, hi = box
+        for i, name, tlo, thi in self.axes:
+            if lo[i] < tlo:
+                raise travel_error(path, block, name, lo[i], tlo, thi, offsets)
+            if hi[i] > thi:
+                raise travel_error(path, block, name, hi[i], tlo, thi, offsets)

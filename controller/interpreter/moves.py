@@ -24,7 +24,8 @@ class MotionMixin:
     has_z: bool
     rapid_mm_s: float
     out: list[NcBlock]
-    pos: tuple[float, float, float]
+    pos: tuple[float, float, float]  # machine coordinates
+    origin: tuple[float, float, float] | None  # work origin (machine = program + origin)
     scale: float
     absolute: bool
     arc_absolute: bool
@@ -34,7 +35,9 @@ class MotionMixin:
     nurbs: NurbsCollector | None
     _src: Callable[[int], Source]
 
-    def move(self, motion: int | None, vals: dict[str, float], lineno: int) -> None:
+    def move(self, motion: int | None, vals: dict[str, float], lineno: int,
+             machine: bool = False) -> None:
+        """The line's motion; `machine`: its X Y Z are machine coordinates (G53)."""
         if motion is not None:
             self.motion = None if motion in (800, 53) else motion
         mode = self.motion if motion is None else motion
@@ -48,7 +51,7 @@ class MotionMixin:
         if mode in (52, 62):
             self._start_nurbs(mode, vals, lineno)
             return
-        end = self._end_point(vals)
+        end = self._end_point(vals, machine)
         if mode == 0:
             self._line(end, True, lineno)
         elif mode == 10:
@@ -63,13 +66,19 @@ class MotionMixin:
             word = g_name(motion if motion is not None else self.motion or 10)
             raise WordError(word, f"{word} feed move with no feed rate: program F first")
 
-    def _end_point(self, vals: dict[str, float]) -> tuple[float, float, float]:
+    def _end_point(self, vals: dict[str, float],
+                   machine: bool = False) -> tuple[float, float, float]:
         x, y, z = self.pos
         s = self.scale
-        if self.absolute:
+        o = self.origin
+        if self.absolute and (o is None or machine):
             x = vals["X"] * s if "X" in vals else x
             y = vals["Y"] * s if "Y" in vals else y
             z = vals["Z"] * s if "Z" in vals else z
+        elif self.absolute:
+            x = vals["X"] * s + o[0] if "X" in vals else x
+            y = vals["Y"] * s + o[1] if "Y" in vals else y
+            z = vals["Z"] * s + o[2] if "Z" in vals else z
         else:
             x += vals.get("X", 0.0) * s
             y += vals.get("Y", 0.0) * s
@@ -123,8 +132,17 @@ class MotionMixin:
                 if letter not in vals:
                     raise WordError(letter if letter == "I" else "J",
                                     f"{letter} word missing in absolute-centre arc (G90.1)")
-            return vals["I"] * s, vals["J"] * s
+            return self._machine(0, vals["I"]), self._machine(1, vals["J"])
         return self.pos[0] + vals.get("I", 0.0) * s, self.pos[1] + vals.get("J", 0.0) * s
+
+    def _machine(self, axis: int, value: float) -> float:
+        """An absolute program coordinate (program units) in machine mm."""
+        mm = value * self.scale
+        return mm if self.origin is None else mm + self.origin[axis]
+
+    def _program(self, axis: int, mm: float) -> float:
+        """A machine coordinate (mm) in the program's frame and units."""
+        return (mm if self.origin is None else mm - self.origin[axis]) / self.scale
 
     # ---- NURBS ------------------------------------------------------------------------------
     def _start_nurbs(self, mode: int, vals: dict[str, float], lineno: int) -> None:
@@ -132,7 +150,7 @@ class MotionMixin:
         if not self.absolute:
             raise WordError(name, f"{name} NURBS in incremental mode (G91) is not supported")
         self._need_feed(mode)
-        if "Z" in vals and vals["Z"] * self.scale != self.pos[2]:
+        if "Z" in vals and self._machine(2, vals["Z"]) != self.pos[2]:
             raise WordError("Z", "NURBS must stay at constant Z (no Z motion)")
         x0, y0, z0 = self.pos
         if mode == 52:
@@ -154,8 +172,8 @@ class MotionMixin:
     def _g5_point(self, vals: dict[str, float], lineno: int) -> None:
         if "P" not in vals:
             raise WordError("X", "G5.2 control point needs a weight P")
-        s = self.scale
-        self.nurbs.add_point(vals["X"] * s, vals["Y"] * s, vals["P"], lineno)
+        self.nurbs.add_point(self._machine(0, vals["X"]), self._machine(1, vals["Y"]), vals["P"],
+                             lineno)
 
     def _start_g6(self, vals: dict[str, float], lineno: int, x0: float, y0: float,
                   z0: float) -> None:
@@ -164,12 +182,12 @@ class MotionMixin:
         order = check_order(vals["P"], "P")
         if "K" not in vals:
             raise WordError("G6.2", "G6.2 control point needs its knot K")
-        x = vals["X"] * self.scale if "X" in vals else x0
-        y = vals["Y"] * self.scale if "Y" in vals else y0
+        x = self._machine(0, vals["X"]) if "X" in vals else x0
+        y = self._machine(1, vals["Y"]) if "Y" in vals else y0
         if abs(x - x0) > SAME_POINT_MM or abs(y - y0) > SAME_POINT_MM:
             raise WordError("X" if "X" in vals else "Y",
                             f"the first G6.2 control point must be the current position "
-                            f"X{x0 / self.scale:.4f} Y{y0 / self.scale:.4f}")
+                            f"X{self._program(0, x0):.4f} Y{self._program(1, y0):.4f}")
         self.nurbs = NurbsCollector("G6.2", order, x0, y0, vals.get("R", 1.0), z0,
                                     self.feed_mm_s, self.path_control, self.path, lineno)
         self.nurbs.add_knot(vals["K"], lineno, knot_only=False)
@@ -190,8 +208,8 @@ class MotionMixin:
                 raise WordError("X" if "X" in vals else "Y" if "Y" in vals else "R",
                                 "G6.2 control point needs its knot K")
             last_x, last_y = self.nurbs.points[-1]
-            x = vals["X"] * self.scale if "X" in vals else last_x
-            y = vals["Y"] * self.scale if "Y" in vals else last_y
+            x = self._machine(0, vals["X"]) if "X" in vals else last_x
+            y = self._machine(1, vals["Y"]) if "Y" in vals else last_y
             self.nurbs.add_point(x, y, vals.get("R", 1.0), lineno)
             self.nurbs.add_knot(vals["K"], lineno, knot_only=False)
         elif "K" in vals:

@@ -1,7 +1,8 @@
-"""NC interpreter: streams an RS274/NGC file into typed NC blocks (absolute mm, mm/s).
+"""NC interpreter: streams an RS274/NGC file into typed NC blocks (machine mm, mm/s).
 
-Public API: `read_program(path, config)`. Memory stays bounded: one line is read at a time and
-only the current NURBS block (at most MAX_CONTROL_POINTS points) is held.
+Public API: `read_program(path, config, start_mm, offsets, from_line, track)`, and
+`position_at_line` / `final_offsets`. Memory stays bounded: one line is read at a time and only
+the current NURBS block (at most MAX_CONTROL_POINTS points) is held.
 """
 
 from __future__ import annotations
@@ -22,7 +23,9 @@ from controller.interpreter.codes import (
     g_name,
 )
 from controller.interpreter.lexer import CLEAN_RE, MAX_LINE_CHARS, WORD_RE, Line, lex_line
+from controller.interpreter.line_state import LineState
 from controller.interpreter.state import InterpState
+from controller.offsets import OffsetTable, ProgramOffsets
 
 _G_CACHE: dict[str, int] = {}  # G number text -> code10, for supported/known codes only
 _G_BY_VALUE: dict[float, int] = {}  # the same by value (G01 and G1 alike)
@@ -33,33 +36,83 @@ _CHUNK_CHARS = 1 << 16
 
 
 def read_program(path: str, config: MachineConfig,
-                 start_mm: tuple[float, float, float] | None = None) -> Iterator[NcBlock]:
-    """Yield the NC blocks of a program one by one; raise NcError at the first mistake. The
-    machine starts at start_mm (default X0 Y0 Z0: where a freshly opened drive stands)."""
+                 start_mm: tuple[float, float, float] | None = None,
+                 offsets: OffsetTable | None = None, from_line: int | None = None,
+                 track: ProgramOffsets | None = None) -> Iterator[NcBlock]:
+    """Yield the NC blocks of a program one by one, in machine coordinates; raise NcError at
+    the first mistake. The machine starts at start_mm (machine coordinates, default X0 Y0 Z0:
+    where a freshly opened drive stands) with the work offsets `offsets` (default: all zero,
+    G54). `track`, if given, always holds the offset table in force after the last line read.
+
+    from_line N: the lines before N are read and checked (modes, feed, offsets, position) but
+    yield nothing; the blocks from the first line at or after N on are yielded as in the whole
+    program, so the first motion block starts where the program stands at line N. N inside a
+    multi-line NURBS block, or after the program's end, is an NcError naming line N."""
+    yield from _open_and_run(Interpreter(path, config, start_mm, offsets, track), from_line)
+
+
+def position_at_line(path: str, config: MachineConfig, line: int,
+                     start_mm: tuple[float, float, float] | None = None,
+                     offsets: OffsetTable | None = None) -> LineState:
+    """Machine position and modal state (feed, G90/G91, G20/G21, work offsets, G61/G64,
+    spindle, coolant, tool) just before `line` runs; the program is read up to there."""
+    interp = Interpreter(path, config, start_mm, offsets)
+    blocks = _open_and_run(interp, line)
+    for _ in blocks:
+        break
+    blocks.close()
+    if interp.state.at_line is None:  # run() raises first when line N is never reached
+        raise NcError(path, line, 0, "", f"cannot run from line {line}")
+    return interp.state.at_line
+
+
+def final_offsets(path: str, config: MachineConfig,
+                  start_mm: tuple[float, float, float] | None = None,
+                  offsets: OffsetTable | None = None) -> OffsetTable:
+    """The offset table a whole program leaves behind (G10, G92, G54-G59), without motion.
+    (A caller that checks the program anyway gets it in the same pass: read_program's track.)"""
+    track = ProgramOffsets()
+    for _ in read_program(path, config, start_mm, offsets, track=track):
+        pass
+    return track.table
+
+
+def _open_and_run(interp: Interpreter, from_line: int | None) -> Iterator[NcBlock]:
+    path = interp.path
     try:
         handle = open(path, encoding="utf-8-sig", errors="replace", newline=None)  # noqa: SIM115
     except OSError as exc:
         raise NcError(path, 0, 0, "", f"cannot open program: {exc.strerror or exc}") from exc
     with handle:
-        yield from Interpreter(path, config, start_mm).run(handle)
+        yield from interp.run(handle, from_line)
 
 
 class Interpreter:
     """Reads lines, checks words and modal groups, and hands each line to InterpState."""
 
     def __init__(self, path: str, config: MachineConfig,
-                 start_mm: tuple[float, float, float] | None = None) -> None:
+                 start_mm: tuple[float, float, float] | None = None,
+                 offsets: OffsetTable | None = None,
+                 track: ProgramOffsets | None = None) -> None:
         self.path = path
-        self.state = InterpState(path, config, start_mm)
+        self.state = InterpState(path, config, start_mm, offsets, track)
         self.params: dict[int, float] = {}
         self.percent_seen = False
         self.words_seen = False
 
-    def run(self, handle: TextIO) -> Iterator[NcBlock]:
+    def run(self, handle: TextIO, from_line: int | None = None) -> Iterator[NcBlock]:
+        """The blocks of the program; from `from_line` on only (see read_program)."""
         out = self.state.out
         lineno = 0
+        first = 1 if from_line is None else from_line
+        if first < 1:
+            raise NcError(self.path, first, 0, "",
+                          f"cannot run from line {first}: lines are numbered from 1")
+        emitting = from_line is None
         for raw in _raw_lines(handle, self.path):
             lineno += 1
+            if not emitting and lineno >= first:
+                emitting = self._start_here(first)
             text = raw.upper()
             # The hot path (almost every line of a CAM program): plain ASCII words, no comment.
             if raw.isascii() and len(text) <= MAX_LINE_CHARS and CLEAN_RE.fullmatch(text):
@@ -75,14 +128,35 @@ class Interpreter:
                         break
                     continue
                 self._execute(line, lineno)  # type: ignore[arg-type]
+            if not emitting:
+                emitting = self.state.at_line is not None
             if out:
-                yield from out
+                if emitting:
+                    yield from out
                 out.clear()
             if self.state.ended:
                 break
         self.state.finish_program(lineno)
+        if not emitting and self.state.mark_pending is not None:
+            self.state.mark(first)  # a G6.2 block ended by the end of the file, before `first`
+            emitting = True
+        if not emitting:
+            raise NcError(self.path, first, 0, "", f"cannot run from line {first}: the "
+                                                   f"program ends at line {lineno}")
         yield from out
         out.clear()
+
+    def _start_here(self, line: int) -> bool:
+        """Run from `line`: the state here starts the run, unless a NURBS block is open (G5.2:
+        an error; G6.2: the state decides at the next line that does not belong to it)."""
+        state = self.state
+        if state.nurbs is None:
+            state.mark(line)
+            return True
+        if state.nurbs.kind == "G5.2":
+            raise state.inside_nurbs(line)
+        state.mark_pending = line
+        return False
 
     def _execute_plain(self, words: list[tuple[str, str]], text: str, lineno: int) -> None:
         """A line of plain words; the usual case (each letter once, one G, no M) inline."""

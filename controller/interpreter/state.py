@@ -15,7 +15,10 @@ from controller.blocks import (
 from controller.config import MachineConfig
 from controller.errors import NcError
 from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
+from controller.interpreter.frames import AXIS_CODES, OffsetsMixin
+from controller.interpreter.line_state import LineState
 from controller.interpreter.moves import MotionMixin
+from controller.offsets import OffsetTable, ProgramOffsets
 
 MM_PER_INCH = 25.4
 _AXES = frozenset("XYZ")
@@ -24,7 +27,7 @@ _STOPS = {0: StopKind.PAUSE, 1: StopKind.OPTIONAL_PAUSE, 2: StopKind.END, 30: St
 _USES: dict[int, frozenset[str]] = {
     0: _AXES, 10: _AXES, 20: _AXES | set("IJRP") | {"K"}, 30: _AXES | set("IJRP") | {"K"},
     52: frozenset("XYZPL"), 62: frozenset("XYZRKPQ"), 40: frozenset("P"),
-    640: frozenset("PQ"), 430: frozenset("H"),
+    640: frozenset("PQ"), 430: frozenset("H"), 100: _AXES | set("LPR"), 920: _AXES,
 }
 _ALWAYS = frozenset("FST")
 _FAST_MOTIONS = frozenset((0, 10, 20, 30))
@@ -32,11 +35,13 @@ _LINE_LETTERS = frozenset("XYZF")
 _ARC_LETTERS = frozenset("XYZFIJR")
 
 
-class InterpState(MotionMixin):
-    """Position (absolute mm), modal codes, feed and spindle; collects blocks in `out`."""
+class InterpState(MotionMixin, OffsetsMixin):
+    """Position (machine mm), modal codes, offsets, feed and spindle; collects blocks in `out`."""
 
     def __init__(self, path: str, config: MachineConfig,
-                 start_mm: tuple[float, float, float] | None = None) -> None:
+                 start_mm: tuple[float, float, float] | None = None,
+                 offsets: OffsetTable | None = None,
+                 track: ProgramOffsets | None = None) -> None:
         self.path = path
         self.config = config
         self.has_z = config.has_axis("z")
@@ -51,31 +56,56 @@ class InterpState(MotionMixin):
         self.path_control = PathControl()
         self.spindle_rpm = 0.0
         self.spindle_on = False
+        self.spindle_code = 5  # M3, M4 or M5
+        self.coolant: tuple[str, ...] = ()
         self.css = False  # G96: S is a surface speed
         self.tool = 0
         self.ended = False
         self.nurbs = None  # the NurbsCollector of an open G5.2 or G6.2 block
+        self.track = track
+        self.origin = None
+        self.set_offsets(offsets if offsets is not None else OffsetTable())
+        self.mark_pending: int | None = None  # run from this line once the NURBS block ends
+        self.at_line: LineState | None = None  # the state where the run from line starts
 
     # ---- one line ---------------------------------------------------------------------------
     def execute(self, gs: list[int], ms: list[int], vals: dict[str, float], lineno: int) -> None:
         if self.nurbs is not None and self.nurbs_line(gs, ms, vals, lineno):
+            if self.mark_pending is not None:
+                raise self.inside_nurbs(self.mark_pending)
             return
+        if self.mark_pending is not None:
+            self.mark(self.mark_pending)
         if not ms and len(gs) <= 1 and self.fast(gs[0] if gs else -1, vals, lineno):
             return
         groups = _groups(gs, G_GROUP, g_name)
         mgroups = _groups(ms, M_GROUP, lambda m: f"M{m}")
         motion = groups.get("motion")
-        _check_letters(groups, vals, motion if motion is not None else self.motion)
+        nonmodal = groups.get("non-modal")
+        axis_code = nonmodal in AXIS_CODES
+        if axis_code and motion is not None and motion != 800:
+            raise WordError(g_name(nonmodal), f"{g_name(nonmodal)} and {g_name(motion)} both "
+                                              f"use axis words: put them on separate lines")
+        _check_letters(groups, vals, motion if motion is not None or axis_code else self.motion)
         self._modes(groups, vals)
         self._feed_speed_tool(vals, ms, mgroups, lineno)
-        if groups.get("non-modal") == 40:
+        if nonmodal == 40:
             self._dwell(vals, lineno)
-        if motion is not None or not _AXES.isdisjoint(vals):
-            self.move(motion, vals, lineno)
+        elif nonmodal is not None and nonmodal != 530:
+            self.offset_code(nonmodal, vals)
+        if axis_code:
+            if motion is not None:
+                self.move(motion, {}, lineno)  # G80: cancels the motion mode
+        elif motion is not None or not _AXES.isdisjoint(vals):
+            if nonmodal == 530:
+                self._need_straight(motion)
+            self.move(motion, vals, lineno, machine=nonmodal == 530)
         stop = mgroups.get("stopping")
         if stop is not None:
             self.out.append(StopBlock(_STOPS[stop], self.pos, self._src(lineno)))
             self.ended = stop in (2, 30)
+            if self.ended and self.offsets.active != 1:
+                self.select_system(540)  # LinuxCNC: M2/M30 go back to G54 (G92 stays)
 
     def fast(self, code: int, vals: dict[str, float], lineno: int) -> bool:
         """G0 G1 G2 G3 lines with only X Y Z F (and I J R for arcs): most lines of a program.
@@ -102,6 +132,30 @@ class InterpState(MotionMixin):
     def _src(self, lineno: int) -> Source:
         return Source(self.path, lineno, lineno)
 
+    def _need_straight(self, motion: int | None) -> None:
+        mode = motion if motion is not None else self.motion
+        if mode not in (0, 10):
+            raise WordError("G53", "G53 (machine coordinates) needs G0 or G1 in force")
+
+    def mark(self, line: int) -> None:
+        """Run from `line`: note the state here and drop what the earlier lines produced."""
+        self.out.clear()
+        self.mark_pending = None
+        x, y, z = self.pos
+        self.at_line = LineState(
+            line=line, position_mm=(float(x), float(y), float(z)), offsets=self.offsets,
+            feed_mm_s=self.feed_mm_s, absolute=self.absolute, inch=self.scale != 1.0,
+            motion=None if self.motion is None else g_name(self.motion),
+            path_control=self.path_control, spindle=f"M{self.spindle_code}",
+            spindle_rpm=self._rpm(), coolant=self.coolant, tool=self.tool)
+
+    def inside_nurbs(self, line: int) -> NcError:
+        """Run from a line inside a multi-line NURBS block: an error naming that line."""
+        first = self.nurbs.first_line
+        return NcError(self.path, line, 1, self.nurbs.kind,
+                       f"cannot run from line {line}: it is inside the {self.nurbs.kind} NURBS "
+                       f"block that starts at line {first}; run from line {first}")
+
     def _modes(self, groups: dict[str, int], vals: dict[str, float]) -> None:
         if "units" in groups:
             self.scale = MM_PER_INCH if groups["units"] == 200 else 1.0
@@ -111,6 +165,8 @@ class InterpState(MotionMixin):
             self.arc_absolute = groups["arc distance"] == 901
         if "spindle mode" in groups:
             self.css = groups["spindle mode"] == 960
+        if "coordinate system" in groups:
+            self.select_system(groups["coordinate system"])
         path = groups.get("path control")
         if path == 610:
             self.path_control = PathControl(PathMode.EXACT_STOP)
@@ -119,8 +175,8 @@ class InterpState(MotionMixin):
         elif path == 640:
             self.path_control = PathControl(PathMode.BLEND, self._tol(vals, "P"),
                                             self._tol(vals, "Q"))
-        # G17, G40, G43/G49 (no tool table: zero length), G54 (no offset), G94, G98/G99 and
-        # G97 change nothing in phcnc's model; they are accepted because CAM headers use them.
+        # G17, G40, G43/G49 (no tool table: zero length), G94, G98/G99 and G97 change nothing
+        # in phcnc's model; they are accepted because CAM headers use them.
 
     def _tol(self, vals: dict[str, float], letter: str) -> float | None:
         if letter not in vals:
@@ -151,10 +207,12 @@ class InterpState(MotionMixin):
         spindle = mgroups.get("spindle")
         if spindle is not None:
             self.spindle_on = spindle != 5
+            self.spindle_code = spindle
             rpm = self._rpm() if self.spindle_on else None
             self.out.append(AuxBlock(f"M{spindle}", rpm, None, self._src(lineno)))
         for m in ms:
             if m in (7, 8, 9):
+                self.coolant = () if m == 9 else tuple(sorted({*self.coolant, f"M{m}"}))
                 self.out.append(AuxBlock(f"M{m}", None, None, self._src(lineno)))
 
     def _rpm(self) -> float | None:

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from nc_helpers import XY_TABLE, XYZ_MILL
 
 from controller.errors import NcError
+from controller.interpreter.program import position_at_line, read_program
 from controller.operator.check_cmd import check_program
 
 REPO = Path(__file__).resolve().parents[2]
@@ -77,3 +78,26 @@ def test_huge_line_and_huge_numbers() -> None:
     _check_only_nc_errors(b"G0 X1\n" + b"9" * 10_000_000 + b"\n")
     _check_only_nc_errors(b"G1 F99999999999999999999 X99999999999999999999.99999999999999999999\n")
     _check_only_nc_errors(b"G0 X1\n(" + b"a" * 10_000_000)
+
+
+OFFSET_WORDS = ["G10", "L2", "L20", "L1", "P0", "P2", "P7", "P1.5", "R1", "G92", "G92.1",
+                "G92.2", "G53", "G54", "G55", "G59", "G0", "G1", "G2", "G91", "G90", "G20",
+                "X1", "Y-2", "Z3", "X99999999999999999999", "F100", "I1", "J1", "G5.2", "G5.3",
+                "G6.2", "K0", "K1", "M2", "G80", "G4"]
+
+
+@FUZZ
+@given(st.lists(st.lists(st.sampled_from(OFFSET_WORDS), max_size=5).map(" ".join),
+                max_size=12), st.integers(-1, 14))
+def test_offset_words_and_run_from_line_raise_only_nc_errors(lines: list[str], n: int) -> None:
+    data = ("\n".join(lines) + "\n").encode()
+    _check_only_nc_errors(data)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "fuzz.nc"
+        path.write_bytes(data)
+        for config in (XY_TABLE, XYZ_MILL):
+            try:
+                list(read_program(str(path), config, from_line=n))
+                position_at_line(str(path), config, n)
+            except NcError as exc:
+                assert exc.format().startswith(f"{path}:{exc.line}:{exc.col}: error: ")
