@@ -75,6 +75,8 @@ def start_cncd(tmp_path: Path, *extra: str, env: dict[str, str] | None = None,
                preexec: Any = None, name: str = "cncd") -> Cncd:
     notify_path = str(tmp_path / f"{name}-notify")
     manager = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    if os.path.exists(notify_path):
+        os.unlink(notify_path)  # a daemon started again in the same directory (a restart)
     manager.bind(notify_path)
     notify = NotifyLog(manager)
     threading.Thread(target=notify.drain, daemon=True).start()

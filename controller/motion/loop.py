@@ -113,6 +113,7 @@ class MotionController:
         self.holding = False  # feed hold asked: decelerate along the path, then wait
         self.program_pause = False  # the standstill being reached is a program pause (M0)
         self.restarting = False  # resumed from a pause: the FIFO is empty by design
+        self.seq0: int | None = None  # the drive's number of this run's first frame
 
     def _cycle(self) -> None:
         try:
@@ -121,6 +122,7 @@ class MotionController:
             self.position_known = False
             self._finish(Outcome.FAULT, str(exc))
             return
+        fb = self._own_numbers(fb)
         self._account(fb)
         if status.halted:
             self.underruns += int(CardStatus.UNDERRUN in status)
@@ -136,6 +138,18 @@ class MotionController:
             self._send_stop(level)
         self._settle(level, fb)
         self._report(level)
+
+    def _own_numbers(self, fb: Feedback) -> Feedback:
+        """Frame numbers of this run from 0: a drive kept open (cncd, a run from line after
+        its approach) numbers frames since it was opened. The FIFO is idle when a run starts,
+        so the first frame fed back is this run's first."""
+        if not len(fb):
+            return fb
+        if self.seq0 is None:
+            self.seq0 = int(fb.seq[0])
+        if not self.seq0:
+            return fb
+        return Feedback(fb.seq - self.seq0, fb.commanded_counts, fb.encoder_counts)
 
     def _account(self, fb: Feedback) -> None:
         if not len(fb):

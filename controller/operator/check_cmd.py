@@ -11,13 +11,15 @@ from dataclasses import asdict, dataclass, field
 
 from controller.blocks import ArcBlock, LineBlock, NcBlock, NurbsBlock
 from controller.config import MachineConfig, load_config
-from controller.errors import ConfigError, DriveError, NcError
+from controller.errors import ConfigError, DriveError, NcError, OffsetsError
 from controller.interpreter.extent import (
+    TravelLimits,
     arc_length_and_box,
     line_length_and_box,
     nurbs_length_and_box,
 )
 from controller.interpreter.program import read_program
+from controller.offsets import OffsetTable, ProgramOffsets, load_offsets
 from controller.operator.drive_args import (
     add_drive_option_argument,
     config_with_drive_options,
@@ -68,10 +70,13 @@ CHECK_BEAT_BLOCKS = 4096  # on_block is called every this many blocks
 
 def check_program(path: str, config: MachineConfig,
                   on_block: Callable[[int], None] | None = None,
-                  start_mm: tuple[float, float, float] | None = None) -> CheckSummary:
-    """Parse and check the whole program; raise NcError at the first problem. on_block(n), if
+                  start_mm: tuple[float, float, float] | None = None,
+                  offsets: OffsetTable | None = None, from_line: int | None = None,
+                  track: ProgramOffsets | None = None) -> CheckSummary:
+    """Parse and check the whole program (from from_line, if given) with the work offsets in
+    force; raise NcError at the first problem, travel in machine coordinates. on_block(n), if
     given, is called every CHECK_BEAT_BLOCKS blocks (the daemon's watchdog sees the check
-    alive on a program of millions of lines)."""
+    alive on a program of millions of lines); track.table is the offset table it leaves."""
     kinds: Counter[type] = Counter()
     start = start_mm if start_mm is not None else (0.0, 0.0, 0.0)
     lo, hi = list(start), list(start)  # where the machine stands (X0 Y0 Z0 by default)
@@ -79,7 +84,9 @@ def check_program(path: str, config: MachineConfig,
     feed_mm = rapid_mm = time_s = 0.0
     nurbs_points = 0
     n = 0
-    for block in read_program(path, config, start_mm):
+    track = track if track is not None else ProgramOffsets()
+    travel = TravelLimits(config)
+    for block in read_program(path, config, start_mm, offsets, from_line, track):
         n += 1
         if on_block is not None and n % CHECK_BEAT_BLOCKS == 0:
             on_block(n)
@@ -89,11 +96,8 @@ def check_program(path: str, config: MachineConfig,
         if geometry is None:
             continue
         length, (blo, bhi) = geometry(block)
-        for i, name, tlo, thi in limits:
-            if blo[i] < tlo:
-                raise _travel_error(path, block, name, blo[i], tlo, thi)
-            if bhi[i] > thi:
-                raise _travel_error(path, block, name, bhi[i], tlo, thi)
+        travel.check(path, block, (blo, bhi), track.table)
+        for i, _, _, _ in limits:
             if blo[i] < lo[i]:
                 lo[i] = blo[i]
             if bhi[i] > hi[i]:
@@ -131,15 +135,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("program", help="G-code program file")
     parser.add_argument("--config", help="machine config file or built-in name")
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
+    parser.add_argument("--offsets", metavar="FILE",
+                        help="work offset table (JSON, as cncd keeps it in its state "
+                             "directory) in force for the check")
     add_drive_option_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
-        summary = check_program(args.program, config)
+        offsets = load_offsets(args.offsets) if args.offsets else None
+        summary = check_program(args.program, config, offsets=offsets)
         probe_drive(config)
-    except ConfigError as exc:
+    except (ConfigError, OffsetsError) as exc:
         print(f"cncctl: config error: {exc}", file=sys.stderr)
         return 2
     except DriveError as exc:

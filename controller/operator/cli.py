@@ -25,6 +25,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("feed", _OPS + "control_cmd", "feed override in % (0-150) of the daemon's jobs"),
     ("home", _OPS + "control_cmd", "home the axes (switches or index, run by the drive)"),
     ("jog", _OPS + "control_cmd", "jog an axis within the soft limits: X+10, or X+ continuous"),
+    ("offset", _OPS + "control_cmd", "work offsets: show, set G54 --here, select G55, clear-g92"),
     ("log", _OPS + "control_cmd", "the daemon's last events"),
     ("simdrive", _OPS + "simdrive_cmd", "serve a simulated CANopen drive set or serial card"),
 )

@@ -43,6 +43,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--feed", type=float, default=600.0, help="mm/min (default 600)")
         parser.add_argument("--timeout", type=float, default=30.0,
                             help="continuous jog: stop after this many seconds (default 30)")
+    elif command == "offset":
+        parser.add_argument("action", choices=("show", "set", "select", "clear-g92"))
+        parser.add_argument("system", nargs="?", help="G54 .. G59")
+        parser.add_argument("values", nargs="*", help="X10 Y-5: origins in machine "
+                            "coordinates, or with --here what the current position reads")
+        parser.add_argument("--here", action="store_true",
+                            help="the current position becomes the system's zero (or reads "
+                                 "the values given)")
     elif command == "feed":
         parser.add_argument("percent", type=float,
                             help="feed override in %% of the programmed feed, 0-150 "
@@ -93,6 +101,11 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
               f"{s['feed_mm_s']:.1f} mm/s  following error {s['ferror_um']:.0f} um")
     print(f"  feed override {s.get('feed_override_pct', 100.0):g} %")
     print(f"  position {where}")
+    work = s.get("work_position_mm") or {}
+    if work:
+        system = (s.get("offsets") or {}).get("active", "G54")
+        print(f"  work position ({system}) "
+              + " ".join(f"{k.upper()}{v:.3f}" for k, v in work.items()))
     homed = s.get("homed") or {}
     if homed and not all(homed.values()):
         print("  not homed: " + " ".join(k.upper() for k, v in homed.items() if not v))
@@ -178,6 +191,27 @@ def _follow_job(client: DaemonClient) -> int:
     return EXIT_REFUSED
 
 
+AXIS_VALUE = re.compile(r"^([XYZxyz])([-+]?(\d+\.?\d*|\.\d+))$")
+
+
+def _offset(client: DaemonClient, args: argparse.Namespace) -> int:
+    if args.action == "show":
+        table = client.request("status").get("offsets", {})
+    else:
+        values: dict[str, float] = {}
+        for word in args.values:
+            m = AXIS_VALUE.match(word)
+            if m is None:
+                print(f"cncctl offset: {word!r}: expected an axis and a value (X10)",
+                      file=sys.stderr)
+                return EXIT_REFUSED
+            values[m.group(1).lower()] = float(m.group(2))
+        table = client.request("offset", action=args.action, system=args.system or "",
+                               values=values, here=args.here)["offsets"]
+    print(json.dumps(table, indent=2))
+    return 0
+
+
 def _feed(client: DaemonClient, args: argparse.Namespace) -> int:
     reply = client.request("feed", percent=args.percent)
     print(f"cncctl feed: {reply['feed_override_pct']:g} %")
@@ -202,4 +236,5 @@ def _print_event(event: dict[str, Any]) -> None:
 
 _COMMANDS = {"status": _status, "abort": _simple, "estop": _simple, "reset": _simple,
              "resume": _simple, "hold": _simple, "feed": _feed, "home": _home, "jog": _jog,
+             "offset": _offset,
              "log": _log}

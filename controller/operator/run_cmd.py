@@ -11,11 +11,13 @@ from pathlib import Path
 from typing import Any
 
 from controller.config import load_config
-from controller.errors import CncError, ConfigError, NcError
+from controller.errors import CncError, ConfigError, NcError, OffsetsError
 from controller.motion.types import MotionProgress, MotionState
+from controller.offsets import load_offsets
 from controller.operator.client import DaemonUnavailable, daemon_answers, default_socket_path
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
+from controller.operator.run_from_line import Sequence, run_from_line
 from controller.operator.run_keys import KeyControl, read_keys, stdin_fd
 from controller.operator.run_remote import run_on_daemon
 from controller.operator.run_view import JsonView, PlainView, RichView
@@ -28,6 +30,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", help="machine configuration (file or built-in name)")
     parser.add_argument("--json", action="store_true", help="one JSON object per line")
     add_drive_option_argument(parser)
+    parser.add_argument("--from-line", type=int, metavar="N",
+                        help="run from line N: modes, feed, offsets and position brought there "
+                             "without motion, then a straight approach the operator confirms")
+    parser.add_argument("--yes", action="store_true",
+                        help="with --from-line: do not ask before the approach")
+    parser.add_argument("--offsets", metavar="FILE",
+                        help="embedded runs: work offset table (JSON) in force")
     parser.add_argument("--optional-stop", action="store_true",
                         help="M1 pauses like M0 (optional stop on)")
     parser.add_argument("--virtual-time", action="store_true",
@@ -37,12 +46,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "$CNCD_SOCKET or /run/cncd/cncd.sock if it answers, else embedded)")
 
 
-def check_program(path: str, config: Any) -> None:
+def check_program(path: str, config: Any, **kw: Any) -> None:
     """The whole program through `cncctl check` (syntax, travel limits, feeds), no motion:
     raises NcError at the first error."""
     from controller.operator.check_cmd import check_program as check_whole_program
 
-    check_whole_program(path, config)
+    check_whole_program(path, config, **kw)
 
 
 def _view(args: argparse.Namespace, lines: list[str]) -> Any:
@@ -98,17 +107,22 @@ def run(args: argparse.Namespace) -> int:
             return 3
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
-        check_program(args.program, config)
-    except (NcError, ConfigError) as exc:
+        offsets = load_offsets(args.offsets) if args.offsets else None
+        check_program(args.program, config, offsets=offsets, from_line=args.from_line)
+    except (NcError, ConfigError, OffsetsError) as exc:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
     view = _view(args, _program_lines(args.program))
-    runtime = Runtime(args.program, config, RuntimeOptions(virtual_time=args.virtual_time,
-                                                           optional_stop=args.optional_stop))
+    options = RuntimeOptions(virtual_time=args.virtual_time, optional_stop=args.optional_stop,
+                             offsets=offsets)
+    runtime: Any = Runtime(args.program, config, options)
+    if args.from_line is not None:
+        runtime = Sequence()
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
                                                   flush=True))
-    runtime.options = replace(runtime.options, on_progress=_Announcer(view.progress,
-                                                                      keys).progress)
+    options = replace(options, on_progress=_Announcer(view.progress, keys).progress)
+    if args.from_line is None:
+        runtime.options = options
     fd = stdin_fd()
     restore_terminal = read_keys(fd, keys.key) if fd is not None else (lambda: None)
 
@@ -120,10 +134,21 @@ def run(args: argparse.Namespace) -> int:
     try:
         view.event("start", program=args.program, config=config.name,
                    drive=config.drive.backend, virtual_time=args.virtual_time)
-        result = runtime.run()
+        if args.from_line is None:
+            result = runtime.run()
+        else:
+            result = run_from_line(args, config, offsets, options, runtime)
+            if result is None:
+                view.close()
+                print("cncctl: not confirmed: nothing moved", file=sys.stderr)
+                return EXIT_REJECTED
     except DriveUnavailableError as exc:
         view.close()
         print(f"cncctl: {exc} (nothing moved)", file=sys.stderr)
+        return EXIT_REJECTED
+    except NcError as exc:
+        view.close()
+        print(exc.format(), file=sys.stderr)
         return EXIT_REJECTED
     except CncError as exc:
         view.close()

@@ -13,6 +13,7 @@ from typing import Any
 from controller.operator.client import DaemonClient, DaemonError, DaemonUnavailable
 from controller.operator.daemon.protocol import MAX_PROGRAM_BYTES
 from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
+from controller.operator.run_from_line import confirm
 from controller.operator.run_keys import KeyControl, read_keys, stdin_fd
 from controller.operator.run_view import progress_from_event
 
@@ -25,11 +26,18 @@ def run_on_daemon(args: argparse.Namespace, socket_path: str, view: Any) -> int:
     except (OSError, ValueError) as exc:
         print(f"cncctl: {args.program}: {exc}", file=sys.stderr)
         return EXIT_REJECTED
+    from_line = getattr(args, "from_line", None)
+    if from_line is not None and not confirm(args, f"cncctl: run from line {from_line}: the "
+                                                   "machine first moves in a straight line to "
+                                                   "where the program stands there"):
+        print("cncctl: not confirmed: nothing moved", file=sys.stderr)
+        return EXIT_REJECTED
     with DaemonClient(socket_path) as client:
         try:
             client.request("run", payload=text, name=args.program[-255:],
                            program_bytes=len(text), follow=True,
-                           optional_stop=bool(getattr(args, "optional_stop", False)))
+                           optional_stop=bool(getattr(args, "optional_stop", False)),
+                           **({"from_line": from_line} if from_line is not None else {}))
         except DaemonError as exc:
             print(f"cncctl: the daemon refused the job: {exc.code}: {exc}", file=sys.stderr)
             return EXIT_REJECTED

@@ -19,6 +19,7 @@ from controller.motion.realtime import back_to_normal, try_realtime
 from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
 from controller.motion.source import SourceState
 from controller.motion.types import MotionProgress, MotionResult, MotionSettings, MotionState
+from controller.offsets import OffsetTable
 from controller.runtime.stages import (
     BlocksFn,
     GenerateFn,
@@ -50,6 +51,8 @@ class RuntimeOptions:
     on_progress: Callable[[MotionProgress], None] | None = None
     rt_priority: int | None = 80  # real-time mode: try SCHED_FIFO for the motion process
     optional_stop: bool = False  # M1 pauses like M0
+    offsets: OffsetTable | None = None  # work offsets in force at the start (default none)
+    from_line: int | None = None  # run from this line (interpreter state brought there)
 
 
 class _Messages:
@@ -170,8 +173,10 @@ class Runtime:
         if self.options.blocks_fn is blocks_source or self.options.generate_fn is reference_source:
             preload_stages()
         blocks_fn = self.options.blocks_fn
-        if self.options.start_mm is not None and blocks_fn is blocks_source:
-            blocks_fn = functools.partial(blocks_source, start_mm=self.options.start_mm)
+        o = self.options
+        if blocks_fn is blocks_source and (o.start_mm, o.offsets, o.from_line) != (None,) * 3:
+            blocks_fn = functools.partial(blocks_source, start_mm=o.start_mm, offsets=o.offsets,
+                                          from_line=o.from_line)
         nc_fifo = _CTX.Queue(maxsize=self.config.runtime.nc_fifo_blocks)
         # Generator first, so that it is waiting on the NC FIFO when the first block lands.
         self.procs["generator"] = _CTX.Process(
@@ -253,6 +258,11 @@ class Runtime:
             extra["first_motion_epoch_s"] = self._pacer_t0_epoch_s + first
             first = (self._pacer_t0_s - t0_s) + first
         return replace(result, time_to_first_motion_s=first, extra=extra)
+
+
+def build_drive(config: MachineConfig, virtual_time: bool) -> Drive:
+    """The configured backend, not yet opened (virtual time: the sim card clocked by the loop)."""
+    return _build_drive(config, virtual_time)
 
 
 def _build_drive(config: MachineConfig, virtual_time: bool) -> Drive:

@@ -22,10 +22,11 @@ GenerateFn = Callable[[Iterable[Any], MachineConfig], Iterable[RefChunk]]
 
 
 def blocks_source(path: str, config: MachineConfig,
-                  start_mm: tuple[float, float, float] | None = None) -> Iterator[Any]:
+                  start_mm: tuple[float, float, float] | None = None,
+                  offsets: Any = None, from_line: int | None = None) -> Iterator[Any]:
     """The interpreter stage: read_program, block by block (its process is interpreter_main)."""
     from controller.interpreter.program import read_program
-    yield from read_program(path, config, start_mm)
+    yield from read_program(path, config, start_mm, offsets, from_line)
 
 
 def reference_source(blocks: Iterable[Any], config: MachineConfig,

@@ -27,6 +27,9 @@ class Job:
     progress: MotionProgress | None = None
     holding: bool = False  # a feed hold was asked and not resumed
     optional_stop: bool = False  # M1 pauses like M0
+    from_line: int | None = None  # run from this line, after an approach move
+    manual_move: bool = False  # a jog: machine coordinates, no offsets
+    approach_mm: tuple[float, float, float] | None = None  # where line from_line starts
     done: threading.Event = field(default_factory=threading.Event)
 
 

@@ -16,13 +16,17 @@ from typing import Any
 
 from controller.config import MachineConfig
 from controller.errors import CncError, NcError
+from controller.interpreter.program import position_at_line
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
+from controller.offsets import ProgramOffsets
 from controller.operator.check_cmd import check_program
 from controller.operator.daemon import manual
 from controller.operator.daemon.job import Emit, Job, progress_event
 from controller.operator.daemon.journal import Journal
 from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
+from controller.operator.daemon.operations import OperatorCommands
 from controller.operator.daemon.protocol import ProtocolError
+from controller.operator.from_line import approach_program
 from controller.operator.run_view import result_summary
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.base import Drive
@@ -41,7 +45,7 @@ class State(enum.StrEnum):
     FAULT = "FAULT"
 
 
-class Machine:
+class Machine(OperatorCommands):
     """All state changes go through here, under one lock; jobs run in a thread of their own."""
 
     def __init__(self, config: MachineConfig, drive: Drive, state_dir: Path, log: EventLog,
@@ -57,6 +61,7 @@ class Machine:
         self._jobs = 0
         self.beat_s = time.monotonic()  # last sign of life of the check or the motion loop
         self.journal = Journal(state_dir)
+        self.load_offsets()
         self.last_job = self.journal.after_restart()
         threading.Thread(target=self._journal_loop, name="journal", daemon=True).start()
         if self.last_job.get("state") == "INTERRUPTED":
@@ -65,15 +70,18 @@ class Machine:
 
     # -- commands ---------------------------------------------------------------------------
     def start_job(self, name: str, text: bytes, emit: Emit, manual_move: bool = False,
-                  timeout_s: float | None = None, optional_stop: bool = False) -> int:
-        """A program (or, manual_move, a jog: allowed before homing) as the next job."""
+                  timeout_s: float | None = None, optional_stop: bool = False,
+                  from_line: int | None = None) -> int:
+        """A program (or, manual_move, a jog: allowed before homing, in machine coordinates)
+        as the next job; from_line: approach the program's position at that line, go on."""
         with self._lock:
             self.require_idle()
             if not manual_move:
                 self.require_homed()
             self._jobs += 1
             job = Job(self._jobs, name, hashlib.sha256(text).hexdigest(), text,
-                      text.count(b"\n"), emit, optional_stop=optional_stop)
+                      text.count(b"\n"), emit, optional_stop=optional_stop,
+                      from_line=from_line, manual_move=manual_move)
             self.job = self._last_job_started = job
             self._set_state(State.CHECKING)
         threading.Thread(target=self._run_job, args=(job,), name=f"job-{job.number}",
@@ -89,19 +97,8 @@ class Machine:
             if self.job is job:
                 self._stop_job(job, "jog time-out: stopped along the path")
 
-    def jog(self, axis: str, distance_mm: float | None, direction: int, feed_mm_min: float,
-            emit: Emit, timeout_s: float | None) -> tuple[int, str]:
-        """Jog one axis as a one-line job within the soft limits; (job, what it does)."""
-        position = self._position_mm() or {}
-        text, note = manual.jog_program(self.config, position, axis, distance_mm, direction,
-                                        feed_mm_min)
-        job = self.start_job(f"jog {axis.upper()}", text.encode(), emit, manual_move=True,
-                             timeout_s=timeout_s)
-        self.log.log(NOTICE, note)
-        return job, note
-
-    def home(self, axes: list[str]) -> None:
-        manual.start_homing(self, axes)
+    def _is_running(self) -> bool:
+        return self.state is State.RUNNING
 
     @property
     def lock(self) -> threading.RLock:
@@ -146,40 +143,6 @@ class Machine:
             if job is None:
                 raise ProtocolError("not-running", "no job is running")
             self._stop_job(job, reason)
-
-    def resume(self) -> None:
-        """Continue a job paused at a program pause (M0), held, or on its way to a hold."""
-        with self._lock:
-            job = self.job
-            waiting = job is not None and job.progress is not None and (
-                job.progress.state in (MotionState.PAUSED, MotionState.HELD) or job.holding)
-            if not waiting or job.runtime is None:
-                raise ProtocolError("not-paused", "no job is paused or held")
-            job.holding = False
-            job.runtime.request_resume()
-        self.log.log(NOTICE, f"job {job.number}: resumed at line {job.progress.line}")
-
-    def hold(self) -> None:
-        """Feed hold: the running job decelerates along the path and waits for resume."""
-        with self._lock:
-            job = self.job
-            if job is None or job.runtime is None or self.state is not State.RUNNING:
-                raise ProtocolError("not-running", "no job is running")
-            job.holding = True
-            job.runtime.request_hold()
-        self.log.log(NOTICE, f"job {job.number}: feed hold at line "
-                             f"{job.progress.line if job.progress else 0}")
-
-    def feed(self, percent: float) -> None:
-        """Feed override for this and the next jobs (0-150 %; 0 holds until raised)."""
-        with self._lock:
-            self.feed_override_pct = percent
-            job = self.job
-            if job is not None and job.runtime is not None:
-                job.runtime.set_feed_override(percent)
-        self.log.log(NOTICE, f"feed override {percent:g} %")
-
-    feed_override_pct = 100.0
 
     def estop(self, reason: str) -> None:
         with self._lock:
@@ -240,6 +203,7 @@ class Machine:
         out["feed_override_pct"] = self.feed_override_pct
         out["position_mm"] = self._position_mm()
         out["homed"] = manual.homed_status(self)
+        out.update(self.offsets_status())
         out["last_homing"] = self.last_homing
         out["last_job"] = self.last_job
         return out
@@ -314,13 +278,21 @@ class Machine:
     def _check_and_run(self, job: Job, path: str) -> None:
         self.log.log(INFO, f"job {job.number}: checking {job.name!r} ({job.sha256[:12]})")
         start_mm = self._start_mm()
+        offsets = None if job.manual_move else self.offsets
+        track = ProgramOffsets()
         try:
-            check_program(path, self.config, on_block=self._beat, start_mm=start_mm)
+            if job.from_line is not None:  # lines before it are read from where it stands
+                at = position_at_line(path, self.config, job.from_line, start_mm, offsets)
+                job.approach_mm = at.position_mm
+            check_program(path, self.config, on_block=self._beat, offsets=offsets,
+                          start_mm=start_mm, from_line=job.from_line, track=track)
         except NcError as exc:
             message = NcError(job.name, exc.line, exc.col, exc.word, exc.message).format()
             self.log.log(NOTICE, f"job {job.number} rejected: {message}")
             job.emit({"event": "rejected", "message": message})
             self._finish(job, None, None)
+            return
+        if job.approach_mm is not None and not self._approach(job, start_mm):
             return
         with self._lock:
             if job.cancel is not None:
@@ -328,7 +300,8 @@ class Machine:
                 self._finish(job, None, None)
                 return
             job.start_mm = start_mm
-            job.runtime = Runtime(path, self.config, self._options(job))
+            job.runtime = Runtime(path, self.config, replace(
+                self._options(job), offsets=offsets, from_line=job.from_line))
             job.runtime.set_feed_override(self.feed_override_pct)
             self.journal.start(job.name, job.sha256, job.lines)
             self._beat()
@@ -336,7 +309,32 @@ class Machine:
         job.emit({"event": "start", "program": job.name, "config": self.config.name,
                   "drive": self.config.drive.backend, "job": job.number})
         result = job.runtime.run()
+        if result.outcome is Outcome.DONE and not job.manual_move:
+            self.store_offsets(track.table, f"left by {job.name}")
         self._record(job, result)
+
+    def _approach(self, job: Job, start_mm: tuple[float, float, float]) -> bool:
+        """Run from line: the straight move (Z up first, then XY, then Z down, on a mill) to
+        where the program stands at that line; False if it did not end there."""
+        text = approach_program(self.config, start_mm, job.approach_mm or start_mm)
+        if not text:
+            return True
+        fd, approach = tempfile.mkstemp(prefix="approach-", suffix=".nc", dir=self.state_dir)
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        try:
+            with self._lock:
+                job.start_mm = start_mm
+                job.runtime = Runtime(approach, self.config, self._options(job))
+                self._set_state(State.RUNNING)
+            self.log.log(NOTICE, f"job {job.number}: approach to line {job.from_line}")
+            result = job.runtime.run()
+        finally:
+            os.unlink(approach)
+        if result.outcome is Outcome.DONE:
+            return True
+        self._record(job, result)
+        return False
 
     def _options(self, job: Job) -> RuntimeOptions:
         base = self.runtime_options()

@@ -9,7 +9,7 @@ from typing import Any
 MAX_LINE_BYTES = 64 * 1024  # any request line
 MAX_PROGRAM_BYTES = 64 * 1024 * 1024  # the program text that follows a run request
 COMMANDS = frozenset({"status", "run", "abort", "estop", "reset", "log", "subscribe",
-                      "resume", "hold", "feed", "home", "jog"})
+                      "resume", "hold", "feed", "home", "jog", "offset"})
 MAX_FEED_OVERRIDE_PCT = 150.0
 TOPICS = frozenset({"state", "progress", "log"})
 
@@ -77,7 +77,10 @@ def _no_fields(request: Request) -> None:
 
 def _check_run(request: Request) -> None:
     f = request.fields
-    _known(request, {"name", "program_bytes", "follow", "optional_stop"})
+    _known(request, {"name", "program_bytes", "follow", "optional_stop", "from_line"})
+    line = f.get("from_line")
+    if line is not None and (not isinstance(line, int) or isinstance(line, bool) or line < 1):
+        raise ProtocolError("bad-field", "from_line must be a line number (1 or more)")
     if not isinstance(f.get("optional_stop", False), bool):
         raise ProtocolError("bad-field", "optional_stop must be true or false")
     size = f.get("program_bytes")
@@ -151,8 +154,23 @@ def _check_jog(request: Request) -> None:
                                          "(continuous), not both")
 
 
-_CHECKS = {"run": _check_run, "log": _check_log, "subscribe": _check_subscribe,
-           "feed": _check_feed, "home": _check_home, "jog": _check_jog}
+def _check_offset(request: Request) -> None:
+    _known(request, {"action", "system", "values", "here"})
+    f = request.fields
+    if f.get("action") not in ("set", "select", "clear-g92"):
+        raise ProtocolError("bad-field", "action must be set, select or clear-g92")
+    values = f.get("values", {})
+    if not isinstance(values, dict) or not all(
+            k in ("x", "y", "z") and isinstance(v, int | float) and not isinstance(v, bool)
+            and abs(v) < 1e5 for k, v in values.items()):
+        raise ProtocolError("bad-field", "values must map x, y, z to numbers")
+    if not isinstance(f.get("here", False), bool) or not isinstance(f.get("system", ""), str):
+        raise ProtocolError("bad-field", "here must be true or false, system a name")
+
+
+_CHECKS = {"offset": _check_offset, "run": _check_run, "log": _check_log,
+           "subscribe": _check_subscribe, "feed": _check_feed, "home": _check_home,
+           "jog": _check_jog}
 
 
 class LineReader:

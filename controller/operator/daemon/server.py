@@ -227,6 +227,11 @@ class Server:
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
         elif cmd == "jog":
             self._start_jog(conn, request)
+        elif cmd == "offset":
+            f = request.fields
+            table = self.machine.offset(f["action"], f.get("system"), f.get("values", {}),
+                                        f.get("here", False))
+            self._send(conn, reply_ok(rid, offsets=table))
         elif cmd == "feed":
             self.machine.feed(float(request.fields["percent"]))
             self._send(conn, reply_ok(rid, feed_override_pct=self.machine.feed_override_pct))
@@ -260,7 +265,8 @@ class Server:
         emit = self.emitter(conn) if follow else (lambda event: None)
         try:
             job = self.machine.start_job(name, text, emit,
-                                         optional_stop=request.fields.get("optional_stop", False))
+                                         optional_stop=request.fields.get("optional_stop", False),
+                                         from_line=request.fields.get("from_line"))
         except ProtocolError as exc:
             self._send(conn, reply_error(request.id, exc.code, exc.message))
             return

@@ -1,0 +1,161 @@
+"""The daemon's operator commands during and between jobs: hold, resume, feed override, jog,
+home, and the work offset table (kept in the state directory across restarts)."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import Any
+
+from controller.config import MachineConfig
+from controller.motion.types import MotionState
+from controller.offsets import (
+    OffsetTable,
+    describe,
+    load_offsets,
+    save_offsets,
+    select,
+    to_program_mm,
+    with_g92,
+    with_system,
+)
+from controller.operator.daemon import manual
+from controller.operator.daemon.job import Emit, Job
+from controller.operator.daemon.log import NOTICE, EventLog
+from controller.operator.daemon.protocol import ProtocolError
+
+OFFSETS_FILE = "offsets.json"
+SYSTEMS = ("G54", "G55", "G56", "G57", "G58", "G59")
+
+
+class OperatorCommands:
+    """Mixed into Machine: the attributes below are Machine's."""
+
+    config: MachineConfig
+    log: EventLog
+    state_dir: Path
+    job: Job | None
+    _lock: threading.RLock
+    offsets: OffsetTable
+
+    def _position_mm(self) -> dict[str, float] | None: ...
+
+    def start_job(self, name: str, text: bytes, emit: Emit, manual_move: bool = False,
+                  timeout_s: float | None = None, optional_stop: bool = False,
+                  from_line: int | None = None) -> int: ...
+
+    def require_idle(self) -> None: ...
+
+    def _is_running(self) -> bool: ...
+
+    def jog(self, axis: str, distance_mm: float | None, direction: int, feed_mm_min: float,
+            emit: Emit, timeout_s: float | None) -> tuple[int, str]:
+        """Jog one axis as a one-line job within the soft limits; (job, what it does)."""
+        position = self._position_mm() or {}
+        text, note = manual.jog_program(self.config, position, axis, distance_mm, direction,
+                                        feed_mm_min)
+        job = self.start_job(f"jog {axis.upper()}", text.encode(), emit, manual_move=True,
+                             timeout_s=timeout_s)
+        self.log.log(NOTICE, note)
+        return job, note
+
+    def home(self, axes: list[str]) -> None:
+        manual.start_homing(self, axes)
+
+    def resume(self) -> None:
+        """Continue a job paused at a program pause (M0), held, or on its way to a hold."""
+        with self._lock:
+            job = self.job
+            waiting = job is not None and job.progress is not None and (
+                job.progress.state in (MotionState.PAUSED, MotionState.HELD) or job.holding)
+            if not waiting or job.runtime is None:
+                raise ProtocolError("not-paused", "no job is paused or held")
+            job.holding = False
+            job.runtime.request_resume()
+        self.log.log(NOTICE, f"job {job.number}: resumed at line {job.progress.line}")
+
+    def hold(self) -> None:
+        """Feed hold: the running job decelerates along the path and waits for resume."""
+        with self._lock:
+            job = self.job
+            if job is None or job.runtime is None or not self._is_running():
+                raise ProtocolError("not-running", "no job is running")
+            job.holding = True
+            job.runtime.request_hold()
+        self.log.log(NOTICE, f"job {job.number}: feed hold at line "
+                             f"{job.progress.line if job.progress else 0}")
+
+    def feed(self, percent: float) -> None:
+        """Feed override for this and the next jobs (0-150 %; 0 holds until raised)."""
+        with self._lock:
+            self.feed_override_pct = percent
+            job = self.job
+            if job is not None and job.runtime is not None:
+                job.runtime.set_feed_override(percent)
+        self.log.log(NOTICE, f"feed override {percent:g} %")
+
+    feed_override_pct = 100.0
+
+    # -- work offsets -----------------------------------------------------------------------
+    def _offsets_path(self) -> Path:
+        return self.state_dir / OFFSETS_FILE
+
+    def load_offsets(self) -> None:
+        """The table kept across restarts; a damaged file is refused at start-up (named)."""
+        self.offsets = load_offsets(self._offsets_path())
+
+    def store_offsets(self, table: OffsetTable, why: str) -> None:
+        with self._lock:
+            save_offsets(self._offsets_path(), table)
+            self.offsets = table
+        self.log.log(NOTICE, f"work offsets ({why}): {describe(table)}")
+
+    def offset(self, action: str, system: str | None, values: dict[str, float],
+               here: bool) -> dict[str, Any]:
+        """set SYSTEM (X.. Y.. origins in machine coordinates, or --here: the current position
+        becomes the system's zero for the axes given, all of them if none), select SYSTEM,
+        clear-g92; only between jobs (a running program reads the table it started with)."""
+        with self._lock:
+            self.require_idle()
+            table = self.offsets
+            if action == "clear-g92":
+                table = with_g92(table, (0.0, 0.0, 0.0))
+            else:
+                n = _system_number(system)
+                if action == "select":
+                    table = select(table, n)
+                else:
+                    table = with_system(table, n, self._origin(table, n, values, here))
+            self.store_offsets(table, f"{action} {system or ''}".strip())
+            return describe(table)
+
+    def _origin(self, table: OffsetTable, n: int, values: dict[str, float],
+                here: bool) -> tuple[float, float, float]:
+        origin = list(table.systems_mm[n - 1])
+        if here:
+            pos = self._position_mm() or {}
+            axes = values or {a: 0.0 for a in pos}
+            for axis, reads in axes.items():
+                if axis not in pos:
+                    raise ProtocolError("bad-field", f"no axis {axis.upper()}")
+                # the current position reads `reads` in that system (G10 L20), G92 included
+                origin["xyz".index(axis)] = pos[axis] - reads - table.g92_mm["xyz".index(axis)]
+        else:
+            for axis, value in values.items():
+                origin["xyz".index(axis)] = value
+        return origin[0], origin[1], origin[2]
+
+    def offsets_status(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"offsets": describe(self.offsets)}
+        pos = self._position_mm()
+        if pos is not None:
+            machine = [pos.get(a, 0.0) for a in "xyz"]
+            work = to_program_mm(self.offsets, machine)
+            out["work_position_mm"] = {a: round(float(work["xyz".index(a)]), 6) for a in pos}
+        return out
+
+
+def _system_number(system: str | None) -> int:
+    if system is None or system.upper() not in SYSTEMS:
+        raise ProtocolError("bad-field", f"system must be one of {', '.join(SYSTEMS)}")
+    return SYSTEMS.index(system.upper()) + 1
