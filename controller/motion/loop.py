@@ -61,8 +61,8 @@ class MotionController:
         self._hold_requested = True
 
     def set_feed_override(self, percent: float) -> None:
-        """Operator: feed override in % of the planned feed (0 holds; above 100 is capped at
-        the plan, which already runs at the programmed feed or the machine's limits)."""
+        """Operator: feed override in % of the planned feed, 0-150 (0 holds; above 100 only
+        as far as the rows ahead allow within Vmax, Amax and the contour limit)."""
         self.override_pct = min(max(float(percent), 0.0), 150.0)
 
     def request_abort(self, message: str = "aborted by operator") -> None:
@@ -184,7 +184,7 @@ class MotionController:
         if self._resume_requested and self.holding and not self.pausing:
             self.holding = False  # resumed before the standstill: ramp back up from here
             self._resume_requested = False
-        rate = 0.0 if self.holding else min(self.override_pct, 100.0) / 100.0
+        rate = 0.0 if self.holding else self.override_pct / 100.0
         self.retimer.set_target(rate)
 
     # -- streaming ------------------------------------------------------------------------

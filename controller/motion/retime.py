@@ -23,6 +23,11 @@ MAX_RAMP_S = 5.0
 RAMP_GROWTH = 1.25  # a ramp that breaks Amax is tried again this much longer
 AT_REST_RATE = 1e-9  # a time scale below this is a standstill
 SERVO_MEMORY = 256  # output samples kept to start the servo model of a check (settles in 32)
+MAX_RATE = 1.5  # feed override 150 %
+HORIZON_ROWS = 600  # above 100 %: rows looked at ahead for what would break a limit
+RATE_STEP = 0.05  # above 100 %: the scale goes up in steps this big (no ramp per row)
+CAP_EVERY_ROWS = 20  # ... looked at again after this many rows (the horizon is 600)
+CONTOUR_SHARE = 0.9  # above 100 %: the plan's error times rate^2 kept within this of the limit
 
 
 def smoothstep5(u: np.ndarray) -> np.ndarray:
@@ -92,28 +97,37 @@ class Retimer:
         self.limit_mm = planning_limit_mm(config)
         self.settle = int(round(SETTLE_S / self.period_s))
         self.recent = np.zeros((0, 2))  # the last outputs (XY), the servo model's history
+        self.max_feed_mm_s = config.interpolator.max_feed_mm_s
         self.rate = 1.0
         self.target = 1.0
+        self.wanted = 1.0  # the operator's override; above 1 governed by the rows ahead
+        self.rows_passed = 0  # rows crossed since the start (the governor's clock)
+        self.cap_at: int | None = None  # when the rows ahead were last looked at
+        self.cap_goal = 1.0
+        self.cap_wanted = 1.0
         self.ramp: Ramp | None = None
         self.frac = 0.0  # position between the last row passed and the first held row
         self.back = np.zeros((0, self.n_axes + 2))  # the two last rows passed (interpolation)
 
     @property
     def identity(self) -> bool:
-        return self.rate == 1.0 and self.ramp is None and self.frac == 0.0 and self.target == 1.0
+        return self.rate == 1.0 and self.ramp is None and self.frac == 0.0 \
+            and self.target == 1.0 and self.wanted == 1.0
 
     @property
     def at_rest(self) -> bool:
         return self.rate <= AT_REST_RATE and self.ramp is None
 
     def set_target(self, rate: float) -> None:
-        """Ask for a new time scale; the ramp is planned at the next take()."""
-        self.target = min(max(rate, 0.0), 1.0)
+        """Ask for a new time scale; the ramp is planned at the next take(). Above 1 the
+        scale is whatever the rows ahead allow up to it (see _governed)."""
+        self.wanted = min(max(rate, 0.0), MAX_RATE)
+        self.target = min(self.wanted, 1.0)
 
     def passed(self, rows: np.ndarray) -> None:
         """Rows sent as they are (identity): remember the last two for a later ramp."""
         if len(rows):
-            self.back = np.vstack([self.back, rows])[-2:]
+            self.back = np.vstack([self.back, rows])[-SERVO_MEMORY:]
             self._remember(rows)
 
     def _remember(self, rows: np.ndarray) -> None:
@@ -131,6 +145,8 @@ class Retimer:
             n = max(0, min(count, limit))
             self.passed(held[:n])
             return held[:n], n
+        if self.wanted > 1.0 or self.rate > 1.0 or (self.ramp and self.ramp.rate1 > 1.0):
+            self.target = self._governed(held)
         if self.target != (self.ramp.rate1 if self.ramp else self.rate):
             self.ramp = self._plan_ramp(held)
         if self.at_rest or count <= 0:
@@ -156,7 +172,8 @@ class Retimer:
         whole = int(math.floor(end + 1e-12))
         passed = max(0, whole - (len(self.back) - 1))
         self.frac = max(0.0, end - whole) if end - whole > 1e-12 else 0.0
-        self.back = base[max(0, whole - 1): whole + 1]
+        self.back = base[max(0, whole - SERVO_MEMORY + 1): whole + 1]
+        self.rows_passed += passed
         return out, passed
 
     def _rows(self, base: np.ndarray, tau: np.ndarray, rates: np.ndarray) -> np.ndarray:
@@ -210,17 +227,64 @@ class Retimer:
         """The same ramp back to rate 1 stretched (by less than 2 / (1 - rate0) samples) so
         that it ends on a whole row: from there the planned rows pass through unchanged,
         where points between rows would differ from them by interpolation (0.1 % in speed)."""
-        lo, hi = ramp.span, ramp.span + 2.0 / max(1.0 - ramp.rate0, 1e-3) + 2.0
+        lo, hi = ramp.span, ramp.span + 2.0 / max(abs(1.0 - ramp.rate0), 1e-3) + 2.0
         horizon = math.ceil(hi) + 1
+        down = ramp.rate0 < 1.0  # from below 1 a longer ramp advances less, from above more
 
         def advance(span: float) -> float:
             return self.frac + float(np.sum(Ramp(ramp.rate0, 1.0, span).rates(horizon)))
 
-        target = math.floor(advance(lo))  # a longer ramp advances less: down to this row
+        first = advance(lo)
+        target = math.floor(first) if down else math.ceil(first)
         for _ in range(60):
             mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if advance(mid) > target else (lo, mid)
+            short = advance(mid) > target if down else advance(mid) < target
+            lo, hi = (mid, hi) if short else (lo, mid)
         return Ramp(ramp.rate0, 1.0, hi)
+
+    # -- above 100 % ------------------------------------------------------------------------
+    def _governed(self, held: np.ndarray) -> float:
+        """The scale above 1 the rows ahead allow, up to the operator's: the planned feed
+        times it within Vmax, its tangential acceleration times its square within Amax, and
+        the plan's own contour error (servo model, rate 1) times its square within the limit.
+        Down at once when something ahead needs it (the ramp is planned and checked as any),
+        up only by whole RATE_STEPs; never below 1 on its account (the plan is checked at 1)."""
+        if self.wanted <= 1.0:
+            return self.wanted
+        now = self.ramp.rate1 if self.ramp else self.rate
+        if self.cap_at is not None and self.rows_passed - self.cap_at < CAP_EVERY_ROWS \
+                and self.cap_wanted == self.wanted:
+            return now if self.cap_goal >= now else self.cap_goal
+        goal = self._cap_goal(held)
+        self.cap_at, self.cap_goal, self.cap_wanted = self.rows_passed, goal, self.wanted
+        return goal if goal < now or goal >= now + RATE_STEP - 1e-9 else now
+
+    def _cap_goal(self, held: np.ndarray) -> float:
+        base = np.vstack([self.back, held]) if len(self.back) else held
+        i0 = max(0, int(len(self.back) - 1 + self.frac))
+        ahead = base[i0: i0 + HORIZON_ROWS]
+        if len(ahead) < 2:
+            return 1.0
+        feed = np.abs(ahead[:, self.n_axes])
+        accel = np.abs(np.diff(base[max(0, i0 - 1): i0 + HORIZON_ROWS, self.n_axes])) \
+            / self.period_s
+        dist = self._plan_distance_mm(base, i0, len(ahead))
+        tiny = 1e-12
+        cap = min(self.wanted,
+                  float(np.min(self.max_feed_mm_s / np.maximum(feed, tiny))),
+                  float(np.sqrt(ACCEL_MARGIN * self.accel_mm_s2 / max(accel.max(), tiny))),
+                  float(np.sqrt(CONTOUR_SHARE * self.limit_mm / max(dist.max(), tiny))))
+        return max(1.0, math.floor(cap / RATE_STEP) * RATE_STEP)
+
+    def _plan_distance_mm(self, base: np.ndarray, i0: int, n: int) -> np.ndarray:
+        """The plan's own (rate 1) model distance of the tool from its rows i0.. i0+n, the
+        rows before them (up to SERVO_MEMORY) starting the model."""
+        xy = base[: i0 + n, :2]
+        v = np.diff(xy, axis=0, prepend=xy[:1]) / self.period_s
+        sx, sy = rest_state(self.servos)
+        err = np.column_stack([filter_block(self.servos[0], v[:, 0], sx)[0],
+                               filter_block(self.servos[1], v[:, 1], sy)[0]])
+        return distance_from_reference_mm(xy, xy - err)[i0:]
 
     def _path_points(self, base: np.ndarray, ramp: Ramp, extra: int) -> np.ndarray:
         """The points the ramp would send (all axes), then `extra` more at its final rate, a

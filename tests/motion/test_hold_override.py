@@ -29,8 +29,15 @@ BUTTERFLY = Path(__file__).resolve().parents[2] / "nc_programs" / "butterfly.nc"
 
 
 @cache
-def butterfly_chunks() -> tuple:
-    return tuple(generate_reference(read_program(str(BUTTERFLY), CFG), CFG))
+def butterfly_chunks(feed_mm_min: int = 3500) -> tuple:
+    """The butterfly as programmed (F3500 = Vmax), or at a lower programmed feed."""
+    path = BUTTERFLY
+    if feed_mm_min != 3500:
+        import tempfile
+        tmp = Path(tempfile.mkdtemp()) / f"butterfly_f{feed_mm_min}.nc"
+        tmp.write_text(BUTTERFLY.read_text().replace("F3500", f"F{feed_mm_min}"))
+        path = tmp
+    return tuple(generate_reference(read_program(str(path), CFG), CFG))
 
 
 @dataclass
@@ -43,7 +50,7 @@ class Run:
 
 
 def run(events: list[tuple[float, str, float]], held_cycles: int = 20,
-        when_held: tuple[str, float] = ("resume", 0.0)) -> Run:
+        when_held: tuple[str, float] = ("resume", 0.0), feed_mm_min: int = 3500) -> Run:
     """Run the butterfly in virtual time; events (executed time, 'hold' | 'feed', value) are
     given as the operator would; after `held_cycles` progress reports at a standstill,
     when_held is given: a resume, or a feed override."""
@@ -70,8 +77,8 @@ def run(events: list[tuple[float, str, float]], held_cycles: int = 20,
             else:
                 ctrl.set_feed_override(when_held[1])
 
-    ctrl = MotionController(CFG, card, ChunkSource(butterfly_chunks()), pacer, settings,
-                            on_progress=progress)
+    ctrl = MotionController(CFG, card, ChunkSource(butterfly_chunks(feed_mm_min)), pacer,
+                            settings, on_progress=progress)
     send = ctrl._send
 
     def recording_send(r: np.ndarray, end: bool, pause: bool = False) -> None:
@@ -165,6 +172,24 @@ def test_override_steps_keep_feed_accel_and_contour_limits() -> None:
     assert np.allclose(v[k30 + settle_rows: k150].max(), 0.3 * VMAX, rtol=0.02)
     assert r.result.motion_time_s > plain().result.motion_time_s + 1.0
     assert all(s.override_pct in (100.0, 30.0, 150.0) for s in r.seen)
+
+
+def test_override_above_100_speeds_up_within_every_limit() -> None:
+    """Programmed at F1500 (25 mm/s), below Vmax: 150 % runs at 37.5 mm/s where the rows ahead
+    allow it, and back to the plan where Vmax, Amax or the contour limit would break."""
+    plan = run([], feed_mm_min=1500)
+    r = run([(0.5, "feed", 30.0), (2.0, "feed", 150.0), (9.0, "feed", 100.0)],
+            feed_mm_min=1500)
+    assert r.result.outcome is Outcome.DONE and r.result.underruns == 0
+    assert r.result.final_position_mm == plan.result.final_position_mm
+    v = speeds(r.sent)
+    assert v.max() <= 1.5 * 25.0 * (1 + 1e-4)  # feed <= override x programmed
+    assert v.max() >= 1.5 * 25.0 * (1 - 1e-3)  # and it did go faster than programmed
+    assert np.abs(np.diff(v)).max() / T <= AMAX * (1 + 1e-6)
+    assert predicted_distance_mm(r.sent).max() <= planning_limit_mm(CFG) + 1e-9
+    assert r.result.contour_error_um["max"] <= CFG.interpolator.contour_error_limit_mm * 1e3
+    assert path_distance(plan.sent, r.sent).distance_mm.max() < \
+        CFG.interpolator.chord_tolerance_mm
 
 
 def test_zero_override_is_a_hold_until_turned_up() -> None:
