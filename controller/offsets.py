@@ -251,3 +251,5 @@ class ProgramOffsets:
     table the program leaves behind)."""
 
     table: OffsetTable = field(default_factory=OffsetTable)
+    # M49 ... M48: [first line, last line] stretches where the feed override is off
+    override_off_lines: list[list[int]] = field(default_factory=list)

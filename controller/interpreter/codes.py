@@ -58,6 +58,7 @@ M_GROUP: dict[int, str] = {
     6: "tool change",
     3: "spindle", 4: "spindle", 5: "spindle",
     7: "coolant", 8: "coolant", 9: "coolant",
+    48: "override", 49: "override",
 }
 
 

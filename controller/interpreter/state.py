@@ -211,9 +211,23 @@ class InterpState(MotionMixin, OffsetsMixin):
             rpm = self._rpm() if self.spindle_on else None
             self.out.append(AuxBlock(f"M{spindle}", rpm, None, self._src(lineno)))
         for m in ms:
+            if m in (48, 49):
+                self._override(m == 48, lineno)
             if m in (7, 8, 9):
                 self.coolant = () if m == 9 else tuple(sorted({*self.coolant, f"M{m}"}))
                 self.out.append(AuxBlock(f"M{m}", None, None, self._src(lineno)))
+
+    def _override(self, enabled: bool, lineno: int) -> None:
+        """M48/M49 (LinuxCNC): feed override on/off from this line; the stretches with it off
+        go to `track` for the motion controller, which then runs those lines at 100 %."""
+        if self.track is None:
+            return
+        spans = self.track.override_off_lines
+        open_span = bool(spans) and spans[-1][1] < 0
+        if not enabled and not open_span:
+            spans.append([lineno, -1])
+        elif enabled and open_span:
+            spans[-1][1] = lineno
 
     def _rpm(self) -> float | None:
         """Spindle speed for AuxBlock: None under G96, where S is a surface speed."""

@@ -60,6 +60,18 @@ class MotionController:
         """Operator: feed hold, a planned deceleration along the path to a standstill."""
         self._hold_requested = True
 
+    def set_override_off_lines(self, spans: list[list[int]]) -> None:
+        """M49 ... M48 stretches [first, last] (last -1: to the end): lines run at 100 %."""
+        self.override_off = [(a, b if b >= 0 else 1 << 62) for a, b in spans]
+
+    override_off: list[tuple[int, int]] = []
+
+    def _override_allowed(self) -> bool:
+        if not self.override_off:
+            return True
+        line = int(row_lines(self.held[:1])[0]) if len(self.held) else self.line
+        return not any(a <= line < b for a, b in self.override_off)
+
     def set_feed_override(self, percent: float) -> None:
         """Operator: feed override in % of the planned feed, 0-150 (0 holds; above 100 only
         as far as the rows ahead allow within Vmax, Amax and the contour limit)."""
@@ -184,7 +196,8 @@ class MotionController:
         if self._resume_requested and self.holding and not self.pausing:
             self.holding = False  # resumed before the standstill: ramp back up from here
             self._resume_requested = False
-        rate = 0.0 if self.holding else self.override_pct / 100.0
+        rate = 0.0 if self.holding else (self.override_pct / 100.0
+                                         if self._override_allowed() else 1.0)
         self.retimer.set_target(rate)
 
     # -- streaming ------------------------------------------------------------------------

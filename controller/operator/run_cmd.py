@@ -13,7 +13,7 @@ from typing import Any
 from controller.config import load_config
 from controller.errors import CncError, ConfigError, NcError, OffsetsError
 from controller.motion.types import MotionProgress, MotionState
-from controller.offsets import load_offsets
+from controller.offsets import ProgramOffsets, load_offsets
 from controller.operator.client import DaemonUnavailable, daemon_answers, default_socket_path
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
@@ -108,13 +108,15 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
         offsets = load_offsets(args.offsets) if args.offsets else None
-        check_program(args.program, config, offsets=offsets, from_line=args.from_line)
+        track = ProgramOffsets()
+        check_program(args.program, config, offsets=offsets, from_line=args.from_line,
+                      track=track)
     except (NcError, ConfigError, OffsetsError) as exc:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
     view = _view(args, _program_lines(args.program))
     options = RuntimeOptions(virtual_time=args.virtual_time, optional_stop=args.optional_stop,
-                             offsets=offsets)
+                             offsets=offsets, override_off_lines=track.override_off_lines)
     runtime: Any = Runtime(args.program, config, options)
     if args.from_line is not None:
         runtime = Sequence()

@@ -53,6 +53,7 @@ class RuntimeOptions:
     optional_stop: bool = False  # M1 pauses like M0
     offsets: OffsetTable | None = None  # work offsets in force at the start (default none)
     from_line: int | None = None  # run from this line (interpreter state brought there)
+    override_off_lines: list[list[int]] = field(default_factory=list)  # M49..M48 stretches
 
 
 class _Messages:
@@ -232,6 +233,7 @@ class Runtime:
                                            on_progress=self.options.on_progress,
                                            watch=watch)
         self.controller.set_feed_override(self.feed_override_pct)
+        self.controller.set_override_off_lines(self.options.override_off_lines)
         if self._abort_early is not None:
             self.controller.request_abort(self._abort_early)
         return self.controller.run()

@@ -223,3 +223,33 @@ def test_abort_while_held_ends_at_rest_where_it_stood() -> None:
     assert np.allclose(final, stood, atol=1e-9)  # settled on the held point, no motion after
     assert np.abs(final - held.position_mm).max() < 0.01  # (the tool was still settling)
     assert result.commanded_counts == result.executed_counts
+
+
+def test_m49_runs_its_lines_at_100_percent_whatever_the_override(tmp_path: Path) -> None:
+    from controller.offsets import ProgramOffsets
+    program = tmp_path / "m49.nc"
+    program.write_text("G21 G90 G61 F1200\nG1 X20\nM49\nG1 Y20\nM48\nG1 X0\nM2\n")
+    track = ProgramOffsets()
+    chunks = tuple(generate_reference(read_program(str(program), CFG, track=track), CFG))
+    assert track.override_off_lines == [[3, 5]]
+    card = virtual_card(CFG)
+    settings = MotionSettings.from_config(CFG)
+    ctrl = MotionController(CFG, card, ChunkSource(chunks), VirtualPacer(2, T, card.advance),
+                            settings)
+    ctrl.set_override_off_lines(track.override_off_lines)
+    ctrl.set_feed_override(50.0)
+    rows: list[np.ndarray] = []
+    send = ctrl._send
+
+    def record(r: np.ndarray, end: bool, pause: bool = False) -> None:
+        rows.append(r.copy())
+        send(r, end, pause)
+    ctrl._send = record  # type: ignore[method-assign]
+    result = ctrl.run()
+    assert result.outcome is Outcome.DONE
+    sent = np.vstack([r for r in rows if len(r)])
+    v = np.linalg.norm(np.diff(sent[:, :2], axis=0), axis=1) / T
+    line = np.floor(np.abs(sent[1:, -1])).astype(int)
+    assert np.isclose(v[line == 2].max(), 10.0, rtol=1e-3)  # 50 % of F1200
+    assert np.isclose(v[line == 4].max(), 20.0, rtol=1e-3)  # M49: the programmed feed
+    assert np.isclose(v[line == 6].max(), 10.0, rtol=1e-3)

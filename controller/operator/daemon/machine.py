@@ -301,7 +301,8 @@ class Machine(OperatorCommands):
                 return
             job.start_mm = start_mm
             job.runtime = Runtime(path, self.config, replace(
-                self._options(job), offsets=offsets, from_line=job.from_line))
+                self._options(job), offsets=offsets, from_line=job.from_line,
+                override_off_lines=track.override_off_lines))
             job.runtime.set_feed_override(self.feed_override_pct)
             self.journal.start(job.name, job.sha256, job.lines)
             self._beat()
