@@ -33,6 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--from-line", type=int, metavar="N",
                         help="run from line N: modes, feed, offsets and position brought there "
                              "without motion, then a straight approach the operator confirms")
+    parser.add_argument("--home", action="store_true",
+                        help="embedded runs: home the axes that have a homing sequence first")
     parser.add_argument("--yes", action="store_true",
                         help="with --from-line: do not ask before the approach")
     parser.add_argument("--offsets", metavar="FILE",
@@ -114,16 +116,23 @@ def run(args: argparse.Namespace) -> int:
     except (NcError, ConfigError, OffsetsError) as exc:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
+    needs_homing = any(a.homing is not None for a in config.axes) and not config.allow_unhomed
+    if needs_homing and not args.home:
+        print("cncctl: the axes with a homing sequence are not homed: run with --home (or "
+              "through cncd after `cncctl home`); the config's allow_unhomed permits it",
+              file=sys.stderr)
+        return EXIT_REJECTED
     view = _view(args, _program_lines(args.program))
     options = RuntimeOptions(virtual_time=args.virtual_time, optional_stop=args.optional_stop,
                              offsets=offsets, override_off_lines=track.override_off_lines)
     runtime: Any = Runtime(args.program, config, options)
-    if args.from_line is not None:
+    shared_drive = args.from_line is not None or args.home
+    if shared_drive:
         runtime = Sequence()
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
                                                   flush=True))
     options = replace(options, on_progress=_Announcer(view.progress, keys).progress)
-    if args.from_line is None:
+    if not shared_drive:
         runtime.options = options
     fd = stdin_fd()
     restore_terminal = read_keys(fd, keys.key) if fd is not None else (lambda: None)
@@ -136,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         view.event("start", program=args.program, config=config.name,
                    drive=config.drive.backend, virtual_time=args.virtual_time)
-        if args.from_line is None:
+        if not shared_drive:
             result = runtime.run()
         else:
             result = run_from_line(args, config, offsets, options, runtime)

@@ -1,5 +1,5 @@
-"""`cncctl run PROG --from-line N` embedded: approach where the program stands at line N, then
-run it from there, both on one open drive (the daemon does the same in its job thread)."""
+"""`cncctl run PROG --from-line N` / `--home` embedded: home, approach where the program stands
+at line N, then run it, all on one open drive (the daemon does the same in its job thread)."""
 
 from __future__ import annotations
 
@@ -13,8 +13,11 @@ from controller.config import MachineConfig
 from controller.interpreter.program import position_at_line
 from controller.motion.types import MotionResult, Outcome
 from controller.offsets import OffsetTable
+from controller.operator.check_cmd import check_program
 from controller.operator.from_line import approach_program
 from controller.runtime.processes import Runtime, RuntimeOptions, build_drive
+from drivers.base import Drive
+from drivers.homing import homing_groups
 
 
 class Sequence:
@@ -56,15 +59,18 @@ def confirm(args: argparse.Namespace, text: str) -> bool:
 
 def run_from_line(args: argparse.Namespace, config: MachineConfig, offsets: OffsetTable | None,
                   options: RuntimeOptions, seq: Sequence) -> MotionResult | None:
-    """None if the operator declined the approach (nothing moved)."""
+    """On one open drive: homing first (--home), then the program, from line N after an
+    approach (--from-line). None if the operator declined the approach (nothing moved)."""
     drive = build_drive(config, options.virtual_time)
     drive.open()
     try:
-        cmd, _ = drive.position_counts()
-        here = [0.0, 0.0, 0.0]
-        for axis, counts in zip(config.axes, cmd, strict=True):
-            here["xyz".index(axis.name)] = float(counts) * axis.pulse_mm
-        start = (here[0], here[1], here[2])
+        if getattr(args, "home", False):
+            home_all(drive, config)
+        start = _position(drive, config)
+        if args.from_line is None:
+            check_program(args.program, config, start_mm=start, offsets=offsets)
+            return _run(seq, args.program, config, replace(
+                options, drive=drive, keep_drive_open=True, start_mm=start))
         at = position_at_line(args.program, config, args.from_line, start, offsets)
         approach = approach_program(config, start, at.position_mm)
         where = " ".join(f"{n}{v:.3f}" for n, v in zip("XYZ", at.position_mm, strict=False))
@@ -85,6 +91,22 @@ def run_from_line(args: argparse.Namespace, config: MachineConfig, offsets: Offs
                                                        from_line=args.from_line))
     finally:
         drive.close()
+
+
+def home_all(drive: Drive, config: MachineConfig) -> None:
+    """Every axis with a homing sequence, group by group (drivers.homing)."""
+    for group in homing_groups(config):
+        names = ", ".join(config.axes[i].name.upper() for i in group)
+        print(f"cncctl: homing {names}", file=sys.stderr, flush=True)
+        drive.home(group)
+
+
+def _position(drive: Drive, config: MachineConfig) -> tuple[float, float, float]:
+    cmd, _ = drive.position_counts()
+    here = [0.0, 0.0, 0.0]
+    for axis, counts in zip(config.axes, cmd, strict=True):
+        here["xyz".index(axis.name)] = float(counts) * axis.pulse_mm
+    return here[0], here[1], here[2]
 
 
 def _run(seq: Sequence, path: str, config: MachineConfig, options: RuntimeOptions) -> Any:

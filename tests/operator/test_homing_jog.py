@@ -93,3 +93,21 @@ def test_estop_during_homing_halts_it(tmp_path: Path) -> None:
         p1 = status["position_mm"]
         time.sleep(0.3)
         assert d.status()["position_mm"] == p1  # standing still
+
+
+def test_embedded_run_refused_unhomed_and_homes_with_home(tmp_path: Path) -> None:
+    import os
+    program = tmp_path / "p.nc"
+    program.write_text("G21 G90 G1 X-140 Y140 F1200\nM2\n")
+    env = {**os.environ, "CNCD_SOCKET": str(tmp_path / "none.sock")}
+    base = [*CNCCTL, "run", str(program), "--config", str(switches_config(tmp_path)),
+            "--virtual-time", "--json"]
+    refused = subprocess.run(base, capture_output=True, text=True, env=env, timeout=60,
+                             stdin=subprocess.DEVNULL)
+    assert refused.returncode == 2 and "--home" in refused.stderr
+    done = subprocess.run([*base, "--home"], capture_output=True, text=True, env=env,
+                          timeout=60, stdin=subprocess.DEVNULL)
+    assert done.returncode == 0, done.stderr
+    assert "homing X, Y" in done.stderr
+    final = json.loads(done.stdout.splitlines()[-1])
+    assert final["final_position_mm"] == {"x": -140.0, "y": 140.0}
