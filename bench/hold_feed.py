@@ -44,7 +44,7 @@ def run(chunks: tuple, at_s: float, action: str, value: float = 0.0) -> dict:
     card.open()
     settings = MotionSettings.from_config(CFG, progress_every_s=T)
     pacer = VirtualPacer(settings.cycle_frames, T, card.advance)
-    sent: list[np.ndarray] = []
+    sent: list[tuple[int, np.ndarray]] = []
     info: dict = {"held_reports": 0}
 
     def progress(p: MotionProgress) -> None:
@@ -65,12 +65,18 @@ def run(chunks: tuple, at_s: float, action: str, value: float = 0.0) -> dict:
     send = ctrl._send
 
     def record(rows: np.ndarray, end: bool, pause: bool = False) -> None:
-        sent.append(rows[:, :2].copy())
+        sent.append((ctrl.sent, rows[:, :2].copy()))
         send(rows, end, pause)
     ctrl._send = record  # type: ignore[method-assign]
     ctrl.run()
     card.close()
-    info["xy"] = np.vstack([r for r in sent if len(r)])
+    # The rows the card ran: frames taken back for a hold are replaced by later sends.
+    xy = np.zeros((ctrl.sent, 2))
+    for start, rows in sent:
+        n = max(0, min(len(rows), ctrl.sent - start))
+        xy[start: start + n] = rows[:n]
+    info["xy"] = xy
+    info["recalled"] = ctrl.recalled_frames
     return info
 
 
@@ -88,7 +94,7 @@ def hold_figures(chunks: tuple, at_s: float) -> dict:
     dist = float(step[k0:rest].sum())
     return {"at_s": at_s, "v0": v0, "t_s": (rest - k0) * T, "d_mm": dist,
             "t_min_s": v0 / AMAX, "d_min_mm": v0 * v0 / (2 * AMAX),
-            "fifo_ms": info["queued"] * T * 1e3}
+            "fifo_ms": info["queued"] * T * 1e3, "recalled_ms": info["recalled"] * T * 1e3}
 
 
 def arc_mm(xy: np.ndarray) -> np.ndarray:
@@ -126,12 +132,12 @@ def main() -> None:
           f"Amax {AMAX:g} mm/s^2, card FIFO high water {CFG.runtime.card_fifo_high_water_ms:g} "
           "ms)\n")
     head = ["at t (s)", "feed (mm/s)", "to standstill (ms)", "minimum (ms)", "distance (mm)",
-            "minimum (mm)", "of which FIFO (ms)"]
+            "minimum (mm)", "card FIFO (ms)", "taken back (ms)"]
     print("| " + " | ".join(head) + " |\n|" + "---|" * len(head))
     for h in holds:
         print(f"| {h['at_s']:.2f} | {h['v0']:.1f} | {h['t_s'] * 1e3:.0f} | "
               f"{h['t_min_s'] * 1e3:.1f} | {h['d_mm']:.2f} | {h['d_min_mm']:.3f} | "
-              f"{h['fifo_ms']:.0f} |")
+              f"{h['fifo_ms']:.0f} | {h['recalled_ms']:.0f} |")
     ratio_t = [h["t_s"] / h["t_min_s"] for h in holds if h["t_min_s"] > 0]
     print(f"\nmedian time to standstill {statistics.median(h['t_s'] for h in holds) * 1e3:.0f}"
           f" ms; median ratio to the minimum {statistics.median(ratio_t):.1f}")

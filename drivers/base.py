@@ -94,6 +94,14 @@ class Drive(ABC):
     def fifo_capacity(self) -> int:
         return self._fifo_capacity()
 
+    def recall_frames(self, n: int, keep: int) -> int:
+        """Take back the last n frames queued and not yet clocked (a feed hold then starts
+        behind `keep` frames instead of the whole FIFO). All or nothing: returns n, or 0 when
+        fewer than n + keep are queued, one of them ends the stream, or the backend cannot
+        (a card-side FIFO: the serial card). The sequence numbers taken back are reused."""
+        self._require_open()
+        return self._recall_frames(n, keep) if n > 0 else 0
+
     def feedback(self) -> Feedback:
         self._require_open()
         return self._read_feedback()
@@ -229,6 +237,10 @@ class Drive(ABC):
 
     def _fault_message(self) -> str:
         return ""
+
+    def _recall_frames(self, n: int, keep: int) -> int:
+        """Backend hook; the default cannot recall."""
+        return 0
 
     def _stream_active(self) -> bool:
         """Backend hook: frames queued, or a stream not yet ended (home() is refused)."""

@@ -11,6 +11,8 @@ from controller.config import MachineConfig
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter
+from controller.motion.recall import SendJournal, Sent, restore_retimer, retimer_state
+from controller.motion.result import build_result
 from controller.motion.retime import Retimer
 from controller.motion.source import RefSource, SourceState, pause_index, row_lines
 from controller.motion.stopping import stop_along_path
@@ -126,6 +128,8 @@ class MotionController:
         self.program_pause = False  # the standstill being reached is a program pause (M0)
         self.restarting = False  # resumed from a pause: the FIFO is empty by design
         self.seq0: int | None = None  # the drive's number of this run's first frame
+        self.journal = SendJournal()  # what each send changed (a hold takes frames back)
+        self.recalled_frames = 0
 
     def _cycle(self) -> None:
         try:
@@ -141,7 +145,7 @@ class MotionController:
             self._finish(Outcome.FAULT, self.drive.fault_message())
             return
         self._supervise(fb)
-        self._operator_requests()
+        self._operator_requests(level)
         if self.pausing and self.outcome is None:
             self._pause_step(level)
         elif self.state in (MotionState.WAITING, MotionState.RUNNING) and not self.sent_eos:
@@ -188,8 +192,10 @@ class MotionController:
         if self._abort_message is not None:
             self._begin_stop(Outcome.ABORTED, self._abort_message)
 
-    def _operator_requests(self) -> None:
-        """Hold and override become the re-timer's target rate (resume: see _pause_step)."""
+    def _operator_requests(self, level: int) -> None:
+        """Hold and override become the re-timer's target rate (resume: see _pause_step); a
+        slower one first takes back what the card has queued beyond its low-water mark."""
+        before = self.retimer.wanted
         if self._hold_requested and not self.holding:
             self.holding = True
         self._hold_requested = False
@@ -198,6 +204,9 @@ class MotionController:
             self._resume_requested = False
         rate = 0.0 if self.holding else (self.override_pct / 100.0
                                          if self._override_allowed() else 1.0)
+        if rate < before and self.state is MotionState.RUNNING and not self.pausing \
+                and self.outcome is None:
+            self._take_back(level)
         self.retimer.set_target(rate)
 
     # -- streaming ------------------------------------------------------------------------
@@ -230,19 +239,47 @@ class MotionController:
         # Everything up to a pause goes out whatever the holdback: the path is at rest there
         # (a stop along it is not needed), and the card idles after it, no underrun.
         limit = pause + 1 if pause is not None else sendable
+        before = self._before_send()
         out, used = self.retimer.take(self.held, limit, max(want, 0),
                                       land=pause is not None or final)
-        self.held = self.held[used:]
+        consumed, self.held = self.held[:used], self.held[used:]
         whole = self.retimer.frac == 0.0
         at_pause = pause is not None and used == pause + 1 and whole
         at_hold = self.retimer.at_rest and not at_pause
         self.program_pause = self.program_pause or at_pause
-        self._send(out, end=final and not len(self.held) and whole,
-                   pause=at_pause or at_hold)
+        end = final and not len(self.held) and whole
+        self._send(out, end=end, pause=at_pause or at_hold)
+        if end or at_pause or at_hold:
+            self.journal.clear()  # the card ends its stream there: nothing to take back
+        else:
+            self.journal.record(len(out), consumed, before)
         if self.sent and not final and pause is None and not self.pausing \
                 and level + len(out) < low:
             self._begin_stop(Outcome.FAULT, f"feed hold at line {self.line}: reference points "
                              "ran late (generator starved), stopped along the path")
+
+    def _before_send(self) -> Sent:
+        return Sent(0, self.held[:0], retimer_state(self.retimer), self.prev_mm, self.last_mm,
+                    self.pulses.counts, self.hist.count)
+
+    def _take_back(self, level: int) -> None:
+        """A hold or a lower override: take back the frames queued beyond the low-water mark
+        (where the drive can), undoing their sends, so the new ramp starts there instead of
+        behind the whole FIFO. The ramp is planned from the state restored."""
+        keep = self._frames(self.settings.low_water_ms)
+        undo = self.journal.newest_within(level - keep)
+        total = sum(e.frames for e in undo)
+        if not undo or self.drive.recall_frames(total, keep) != total:
+            return
+        oldest = undo[-1]
+        restore_retimer(self.retimer, oldest.retimer)
+        self.prev_mm, self.last_mm = oldest.prev_mm, oldest.last_mm
+        self.pulses.counts = oldest.counts
+        self.hist.count = oldest.hist_count
+        self.sent -= total
+        self.held = np.vstack([e.consumed for e in reversed(undo)] + [self.held])
+        self.journal.drop(len(undo))
+        self.recalled_frames += total
 
     def _read_ahead(self, max_rows: int = 4096) -> None:
         """More held rows while re-timing: a ramp looks at the rows it will cross."""
@@ -366,39 +403,3 @@ class MotionController:
 
     def _result(self) -> MotionResult:
         return build_result(self)
-
-
-def _read_position(ctrl: MotionController) -> tuple[np.ndarray | None, np.ndarray, bool]:
-    """(card step counter or None, encoder counts, known?) -- last known if the card is mute."""
-    try:
-        cmd, enc = ctrl.drive.position_counts()
-        return cmd, enc, True
-    except LostCommunicationError:
-        return None, ctrl.last_enc, False
-
-
-def build_result(ctrl: MotionController) -> MotionResult:
-    names = ctrl.config.axis_names
-    cmd, enc, known = _read_position(ctrl)
-    commanded = ctrl.pulses.commanded_counts
-    executed = (cmd - ctrl.start_cmd) if cmd is not None else np.full(len(names), -1)
-    motion_s = 0.0 if ctrl.first_motion_s is None else ctrl.last_motion_s - ctrl.first_motion_s
-    min_fifo_ms = (ctrl.min_fifo_frames or 0) * ctrl.period_s * 1e3
-    return MotionResult(
-        outcome=ctrl.outcome or Outcome.DONE,
-        message=ctrl.message,
-        line=ctrl.line,
-        motion_time_s=motion_s + (ctrl.period_s if ctrl.first_motion_s is not None else 0.0),
-        planned_time_s=ctrl.sent * ctrl.period_s,
-        contour_error_um=ctrl.contour.summary_um(),
-        following_error_um_max=ctrl.ferr.max_abs_mm * 1e3,
-        underruns=ctrl.underruns,
-        late_cycles=ctrl.pacer.late_cycles,
-        min_fifo_ms=min_fifo_ms,
-        commanded_counts={n: int(c) for n, c in zip(names, commanded, strict=True)},
-        executed_counts={n: int(c) for n, c in zip(names, executed, strict=True)},
-        final_position_mm={n: float(e * p) for n, e, p in
-                           zip(names, enc, ctrl.pulse_mm, strict=True)},
-        position_known=known,
-        time_to_first_motion_s=ctrl.first_motion_s,
-    )

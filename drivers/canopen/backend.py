@@ -137,6 +137,15 @@ class CanopenDrive(Drive):
             link.written += frames.shape[0]
             link.streaming = True
 
+    def _recall_frames(self, n: int, keep: int) -> int:
+        """The FIFO is host-side (the SYNC thread streams it): frames not yet sent to the
+        drives can be taken back."""
+        link = self._check_comm()
+        with link.lock:
+            got = link.fifo.recall(n, keep) if not link.status.halted else 0
+            link.written -= got
+            return got
+
     def _fifo_level(self) -> int:
         link = self._check_comm()
         with link.lock:

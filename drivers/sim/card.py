@@ -78,6 +78,12 @@ class SimCard(Drive):
             self._thread.join(timeout=1.0)
         self._thread = None
 
+    def _recall_frames(self, n: int, keep: int) -> int:
+        with self._lock:
+            got = self._fifo.recall(n, keep) if not self._status.halted else 0
+            self._written -= got
+            return got
+
     def _send_frames(self, frames: np.ndarray, end_of_stream: bool) -> None:
         self._check_comm()
         if frames.size and int(np.abs(frames).max()) > self.max_pulses:

@@ -40,6 +40,17 @@ class FrameFifo:
         self._eos[(self._tail - 1) % self.capacity] = True
         return True
 
+    def recall(self, n: int, keep: int) -> int:
+        """Take back the last n frames queued, if at least `keep` stay queued and none of them
+        ends the stream; returns n, or 0 (nothing changed)."""
+        if n <= 0 or len(self) - n < keep:
+            return 0
+        idx = np.arange(self._tail - n, self._tail) % self.capacity
+        if self._eos[idx].any():
+            return 0
+        self._tail -= n
+        return n
+
     def pop(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Up to n frames from the head: (frames, seq, eos flags)."""
         n = min(n, len(self))

@@ -47,6 +47,7 @@ class Run:
     feed: np.ndarray  # the feed column sent with it
     seen: list[MotionProgress] = field(default_factory=list)
     changes: list[tuple[int, float]] = field(default_factory=list)  # (sent rows, override)
+    recalled: int = 0  # frames the card gave back for a hold or a lower override
 
 
 def run(events: list[tuple[float, str, float]], held_cycles: int = 20,
@@ -57,7 +58,7 @@ def run(events: list[tuple[float, str, float]], held_cycles: int = 20,
     card = virtual_card(CFG)
     settings = MotionSettings.from_config(CFG, progress_every_s=0.002)
     pacer = VirtualPacer(settings.cycle_frames, T, card.advance)
-    rows: list[np.ndarray] = []
+    rows: list[tuple[int, np.ndarray]] = []
     pending = sorted(events)
     out = Run(None, np.zeros((0, 2)), np.zeros(0))
 
@@ -69,7 +70,7 @@ def run(events: list[tuple[float, str, float]], held_cycles: int = 20,
                 ctrl.request_hold()
             else:
                 ctrl.set_feed_override(value)
-                out.changes.append((sum(len(r) for r in rows), value))
+                out.changes.append((ctrl.sent, value))
         if p.state is MotionState.HELD and \
                 sum(s.state is MotionState.HELD for s in out.seen) == held_cycles:
             if when_held[0] == "resume":
@@ -82,13 +83,25 @@ def run(events: list[tuple[float, str, float]], held_cycles: int = 20,
     send = ctrl._send
 
     def recording_send(r: np.ndarray, end: bool, pause: bool = False) -> None:
-        rows.append(r.copy())
+        rows.append((ctrl.sent, r.copy()))
         send(r, end, pause)
 
     ctrl._send = recording_send  # type: ignore[method-assign]
     out.result = ctrl.run()
-    sent = np.vstack([r for r in rows if len(r)])
+    sent = as_executed(rows, ctrl.sent)
     out.sent, out.feed = sent[:, :2], sent[:, 2]
+    out.recalled = ctrl.recalled_frames
+    return out
+
+
+def as_executed(sends: list, total: int) -> np.ndarray:
+    """The rows the card ran: a hold takes queued frames back (Drive.recall_frames) and the
+    loop sends others in their place, so a later send at the same frame number wins."""
+    width = next(r.shape[1] for _, r in sends if len(r))
+    out = np.zeros((total, width))
+    for start, r in sends:
+        n = max(0, min(len(r), total - start))
+        out[start: start + n] = r[:n]
     return out
 
 
@@ -157,6 +170,7 @@ def test_hold_and_resume_stay_on_the_path_within_the_limits(k: int) -> None:
     # It stopped: several samples at exactly the same point in the reference sent.
     v = speeds(r.sent)
     assert np.any(v == 0.0)
+    assert r.recalled > 0  # the frames queued beyond the low-water mark were taken back
 
 
 def test_override_steps_keep_feed_accel_and_contour_limits() -> None:
@@ -238,16 +252,16 @@ def test_m49_runs_its_lines_at_100_percent_whatever_the_override(tmp_path: Path)
                             settings)
     ctrl.set_override_off_lines(track.override_off_lines)
     ctrl.set_feed_override(50.0)
-    rows: list[np.ndarray] = []
+    rows: list[tuple[int, np.ndarray]] = []
     send = ctrl._send
 
     def record(r: np.ndarray, end: bool, pause: bool = False) -> None:
-        rows.append(r.copy())
+        rows.append((ctrl.sent, r.copy()))
         send(r, end, pause)
     ctrl._send = record  # type: ignore[method-assign]
     result = ctrl.run()
     assert result.outcome is Outcome.DONE
-    sent = np.vstack([r for r in rows if len(r)])
+    sent = as_executed(rows, ctrl.sent)
     v = np.linalg.norm(np.diff(sent[:, :2], axis=0), axis=1) / T
     line = np.floor(np.abs(sent[1:, -1])).astype(int)
     assert np.isclose(v[line == 2].max(), 10.0, rtol=1e-3)  # 50 % of F1200
