@@ -67,6 +67,7 @@ class MotionController:
         self.override_off = [(a, b if b >= 0 else 1 << 62) for a, b in spans]
 
     override_off: list[tuple[int, int]] = []
+    work_origin_mm: tuple[float, ...] = ()  # for the progress reports' work position
 
     def _override_allowed(self) -> bool:
         if not self.override_off:
@@ -399,7 +400,8 @@ class MotionController:
             executed_s=self.executed * self.period_s,
             planned_s=None if total is None else total * self.period_s,
             override_pct=self.override_pct,
-            position_mm=tuple(float(v) for v in self.last_enc * self.pulse_mm)))
+            position_mm=tuple(float(v) for v in self.last_enc * self.pulse_mm),
+            work_origin_mm=self.work_origin_mm))
 
     def _result(self) -> MotionResult:
         return build_result(self)

@@ -57,6 +57,14 @@ class MotionProgress:
     planned_s: float | None  # known once the generator has finished
     override_pct: float = 100.0
     position_mm: tuple[float, ...] = ()  # encoder position, machine coordinates
+    work_origin_mm: tuple[float, ...] = ()  # the work offsets the job started with (G5x + G92)
+
+    @property
+    def work_position_mm(self) -> tuple[float, ...]:
+        """Machine position less the starting work origin (a program's own G10/G92 mid-run
+        are not followed here)."""
+        origin = self.work_origin_mm or (0.0,) * len(self.position_mm)
+        return tuple(p - o for p, o in zip(self.position_mm, origin, strict=False))
 
 
 @dataclass(frozen=True)

@@ -53,7 +53,8 @@ class JsonView:
                     "feed_mm_s": round(p.feed_mm_s, 3), "ferror_um": round(p.ferror_um, 1),
                     "fifo_ms": round(p.fifo_ms, 1), "executed_s": round(p.executed_s, 3),
                     "planned_s": p.planned_s, "override_pct": p.override_pct,
-                    "position_mm": [round(v, 4) for v in p.position_mm]})
+                    "position_mm": [round(v, 4) for v in p.position_mm],
+                    "work_position_mm": [round(v, 4) for v in p.work_position_mm]})
 
     def final(self, result: MotionResult) -> None:
         self.final_summary(result_summary(result))
@@ -107,7 +108,11 @@ def status_text(p: MotionProgress, lines: list[str]) -> str:
 
 
 def position_text(p: MotionProgress) -> str:
-    return " ".join(f"{n}{v:.3f}" for n, v in zip("XYZ", p.position_mm, strict=False))
+    machine = " ".join(f"{n}{v:.3f}" for n, v in zip("XYZ", p.position_mm, strict=False))
+    if not any(p.work_origin_mm):
+        return machine
+    work = " ".join(f"{n}{v:.3f}" for n, v in zip("XYZ", p.work_position_mm, strict=False))
+    return f"{machine} (work {work})"
 
 
 class RichView(PlainView):
@@ -170,4 +175,6 @@ def progress_from_event(event: dict[str, Any]) -> MotionProgress:
                           elapsed_s=float(event.get("elapsed_s", 0.0)),
                           executed_s=float(event["executed_s"]), planned_s=event.get("planned_s"),
                           override_pct=float(event.get("override_pct", 100.0)),
-                          position_mm=tuple(float(v) for v in event.get("position_mm", ())))
+                          position_mm=tuple(float(v) for v in event.get("position_mm", ())),
+                          work_origin_mm=tuple(float(v)
+                                               for v in event.get("work_origin_mm", ())))

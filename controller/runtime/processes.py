@@ -19,7 +19,7 @@ from controller.motion.realtime import back_to_normal, try_realtime
 from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
 from controller.motion.source import SourceState
 from controller.motion.types import MotionProgress, MotionResult, MotionSettings, MotionState
-from controller.offsets import OffsetTable
+from controller.offsets import OffsetTable, work_origin
 from controller.runtime.stages import (
     BlocksFn,
     GenerateFn,
@@ -234,6 +234,10 @@ class Runtime:
                                            watch=watch)
         self.controller.set_feed_override(self.feed_override_pct)
         self.controller.set_override_off_lines(self.options.override_off_lines)
+        if self.options.offsets is not None:
+            origin = work_origin(self.options.offsets)
+            self.controller.work_origin_mm = tuple(
+                origin["xyz".index(a.name)] for a in self.config.axes)
         if self._abort_early is not None:
             self.controller.request_abort(self._abort_early)
         return self.controller.run()

@@ -38,4 +38,5 @@ def progress_event(p: MotionProgress) -> dict[str, Any]:
             "feed_mm_s": round(p.feed_mm_s, 3), "ferror_um": round(p.ferror_um, 1),
             "fifo_ms": round(p.fifo_ms, 1), "elapsed_s": round(p.elapsed_s, 3),
             "executed_s": round(p.executed_s, 3), "planned_s": p.planned_s,
-            "override_pct": p.override_pct, "position_mm": list(p.position_mm)}
+            "override_pct": p.override_pct, "position_mm": list(p.position_mm),
+            "work_origin_mm": list(p.work_origin_mm)}
