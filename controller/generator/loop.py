@@ -45,6 +45,7 @@ from controller.generator.ph.construct import (
     find_corners,
     widen,
 )
+from controller.generator.repeats import Repeats
 from controller.generator.sampling import Interpolation, Samples, interpolate
 from controller.geometry.path import Piece, PieceKind
 
@@ -159,7 +160,9 @@ def _widen_at(geo: Geometry, curves: list[BlockCurve], zones: dict, s_mm: float)
     piece = path.pieces[int(path.piece_index(np.array([s_mm]))[0])]
     if piece.kind != PieceKind.NURBS or piece.corner >= 0:
         return
-    block = next((i for i, bc in enumerate(curves) if bc.curve is piece.curve), None)
+    # The block by its curve and line: a long program's windows share a curve between copies.
+    block = next((i for i, bc in enumerate(curves)
+                  if bc.curve is piece.curve and bc.line == piece.line), None)
     if block is None:
         return
     u = float(piece.u_at(np.array([s_mm]))[0])
@@ -186,6 +189,7 @@ class Continuation:
     xy_mm: np.ndarray  # reference point at the cut
     servo: ServoState  # servo model state at the cut
     end_mm: tuple[float, float, float]  # programmed end point of the last of those blocks
+    history_xy: np.ndarray | None = None  # reference points up to the cut (its last one)
 
 
 def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: MachineConfig,
@@ -200,7 +204,8 @@ def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: Mac
     pred = predict(samples.xy_mm, samples.phi_rad, start_xy_mm, axis_servos(config), T,
                    None if cont is None else cont.servo)
     limit = planning_limit_mm(config)
-    true_mm = true_error_mm(samples.xy_mm, pred, exact_above_mm=EXACT_ABOVE_SHARE * limit)
+    true_mm = true_error_mm(samples.xy_mm, pred, exact_above_mm=EXACT_ABOVE_SHARE * limit,
+                            history_xy=None if cont is None else cont.history_xy)
     n = len(samples.xy_mm)
     stops = stop_errors(true_mm, samples.s_mm, _stops_mm(geo), n, T)
     # In motion the true distance stands beside eq. 28 (at a sharp curve it can exceed it);
@@ -210,29 +215,44 @@ def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: Mac
     return _Attempt(feed, samples, pred, tuple(find_violations(measure, limit)), tuple(stops))
 
 
+def _zones_signature(zones: dict) -> tuple:
+    return tuple((i, tuple((z.u_start, z.u_end) for z in zs)) for i, zs in sorted(zones.items()))
+
+
 def plan_contour_run(curves: list[BlockCurve], start_xy_mm: np.ndarray, config: MachineConfig,
-                     settings: RunSettings = PH_LOOKAHEAD,
-                     cont: Continuation | None = None) -> RunPlan:
+                     settings: RunSettings = PH_LOOKAHEAD, cont: Continuation | None = None,
+                     repeats: Repeats | None = None) -> RunPlan:
     """Modules 1-4 on one run of XY blocks to rest (Figure 4's loop), from rest or from where
-    the previous look-ahead window was cut.
+    the previous look-ahead window was cut; repeats: what a long program's windows share.
 
     If a later round cannot be planned, the last plan is returned with its status."""
     cpu0 = time.process_time()
     ip = config.interpolator
-    zones = find_corners(curves, ip.kappa_threshold_per_mm)
+    if repeats is None:
+        zones = find_corners(curves, ip.kappa_threshold_per_mm)
+    else:
+        zones = {i: repeats.corners(bc.curve, ip.kappa_threshold_per_mm)
+                 for i, bc in enumerate(curves) if bc.nurbs}
     reductions: tuple[Reduction, ...] = ()
     stop_accels: dict[int, float] = {}
     model = _braking_model(config) if settings.use_ph else None
     lookback = int(round(LOOKBACK_S / config.sample_period_s))
     status = RunStatus.CONTOUR_LIMIT_NOT_MET
-    fit_cache: dict = {}
+    fit_cache: dict = {} if repeats is None else repeats.fits
+    blend_cache: dict = {}
     sample_cache: dict = {}
     prefix = () if cont is None else cont.pieces
     tol = None if cont is None else cont.tolerance_mm
     good: tuple[Geometry, _Attempt] | None = None
+    built: tuple[tuple, Geometry] | None = None
     for rounds in range(1, ip.max_dynamics_rounds + 1):
-        geo = build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph, fit_cache,
-                         prefix, tol)
+        # Only a widened corner zone changes the geometry: otherwise the round reuses it (and
+        # with it every cache keyed by its pieces; build_path would give the same numbers).
+        signature = _zones_signature(zones)
+        if built is None or built[0] != signature:
+            built = (signature, build_path(curves, zones, ip.ph_error_limit_mm, settings.use_ph,
+                                           fit_cache, prefix, tol, blend_cache, repeats))
+        geo = built[1]
         inp = _feed_input(config, settings, reductions, stop_accels, geo, model)
         att = _attempt(geo, inp, start_xy_mm, config, settings, sample_cache, cont)
         if att.samples is None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, replace
 from enum import StrEnum
@@ -31,12 +32,17 @@ from controller.generator.loop import (
     plan_contour_run,
 )
 from controller.generator.ph.construct import BlockCurve, block_curve
+from controller.generator.repeats import Repeats
 from controller.generator.window import continuation_cut
 from controller.refpoints import RefChunk
 
 MAX_RUN_BLOCKS = 500  # baselines: a longer contour is planned in pieces, stopping between
 IN_POSITION_S = 0.04  # wait at rest before the next move: the servo settles to 2 % in 32 ms
-WINDOW_BLOCKS = 200  # ph-lookahead: new blocks per look-ahead window (cut and continued)
+WINDOW_BLOCKS = 200  # ph-lookahead: new blocks per look-ahead window (cut and continued) ...
+# ... or fewer, once they add up to this nominal motion time (length / programmed feed): a
+# window of NURBS blocks stays a bounded stretch of motion (memory and re-planning), however
+# long each block is. Every program of nc_programs/ is under half of it (plans unchanged).
+WINDOW_NOMINAL_S = 30.0
 
 
 class Algorithm(StrEnum):
@@ -112,31 +118,37 @@ def _pause(block: StopBlock, config: MachineConfig, t0_s: float) -> RefChunk:
 
 def plan_run(curves: list[BlockCurve], start_xy: np.ndarray, config: MachineConfig,
              algorithm: Algorithm, cont: Continuation | None = None,
+             repeats: Repeats | None = None,
              ) -> tuple[RunPlan | None, np.ndarray, np.ndarray, np.ndarray]:
     """Plan one XY contour run with the chosen algorithm: (report, xy, feed, line)."""
     if algorithm in FORMULA_FEEDS:
         s = plan_formula_run(curves, config, algorithm.value)
         return None, s.xy_mm, s.v_mm_s, s.line
     settings = PH_LOOKAHEAD if algorithm == Algorithm.PH_LOOKAHEAD else NURBS_LOOKAHEAD
-    run = plan_contour_run(curves, start_xy, config, settings, cont)
+    run = plan_contour_run(curves, start_xy, config, settings, cont, repeats)
     return run, run.samples.xy_mm, run.samples.v_mm_s, run.samples.line
 
 
-def _curves(blocks: list[NcBlock], config: MachineConfig) -> list[BlockCurve]:
+def _curves(blocks: list[NcBlock], config: MachineConfig,
+            repeats: Repeats | None = None) -> list[BlockCurve]:
     ip = config.interpolator
-    return [c for b in blocks
-            if (c := block_curve(b, ip.max_feed_mm_s, ip.contour_error_limit_mm)) is not None]
+    curves = [c for b in blocks
+              if (c := block_curve(b, ip.max_feed_mm_s, ip.contour_error_limit_mm)) is not None]
+    return curves if repeats is None else [repeats.intern(c) for c in curves]
 
 
 def _contour(blocks: list[NcBlock], config: MachineConfig, algorithm: Algorithm,
-             t0_s: float, cont: Continuation | None = None) -> PlannedStep | None:
-    """Plan pending blocks (after a cut of the previous window, if any) all the way to rest."""
-    curves = _curves(blocks, config)
+             t0_s: float, cont: Continuation | None = None,
+             repeats: Repeats | None = None) -> PlannedStep | None:
+    """Plan pending blocks (after a cut of the previous window, if any) all the way to rest;
+    repeats only when they end a long program's windows (cont)."""
+    repeats = repeats if cont is not None else None
+    curves = _curves(blocks, config, repeats)
     if not curves and cont is None:
         return None
     start = np.array(blocks[0].start[:2]) if cont is None else cont.xy_mm
     end = blocks[-1].end if blocks else cont.end_mm  # type: ignore[union-attr]
-    run, xy, v, line = plan_run(curves, start, config, algorithm, cont)
+    run, xy, v, line = plan_run(curves, start, config, algorithm, cont, repeats)
     return _run_step(xy, v, line, run, t0_s, config, end[2], end[:2])
 
 
@@ -154,16 +166,17 @@ def _run_step(xy: np.ndarray, v: np.ndarray, line: np.ndarray, run: RunPlan | No
 
 
 def _window(blocks: list[NcBlock], config: MachineConfig, t0_s: float,
-            cont: Continuation | None) -> tuple[PlannedStep | None, Continuation | None]:
+            cont: Continuation | None,
+            repeats: Repeats) -> tuple[PlannedStep | None, Continuation | None]:
     """Plan a look-ahead window to rest, then keep only what precedes its last cruise sample
     before the overlap; the rest is planned again with the next blocks (no stop between).
 
     Without such a cruise sample the whole window is kept and the machine stops at its end."""
-    curves = _curves(blocks, config)
+    curves = _curves(blocks, config, repeats)
     if not curves:  # nothing moves in XY (all blocks shorter than a micrometre): keep going
         return None, cont
     start = np.array(blocks[0].start[:2]) if cont is None else cont.xy_mm
-    run = plan_contour_run(curves, start, config, PH_LOOKAHEAD, cont)
+    run = plan_contour_run(curves, start, config, PH_LOOKAHEAD, cont, repeats)
     cut = continuation_cut(run, curves[-1].blend_tolerance_mm, blocks[-1].end, config, cont)
     end, s = blocks[-1].end, run.samples
     if cut is None or run.status != RunStatus.OK:
@@ -171,6 +184,19 @@ def _window(blocks: list[NcBlock], config: MachineConfig, t0_s: float,
     k, nxt = cut
     return _run_step(s.xy_mm[:k + 1], s.v_mm_s[:k + 1], s.line[:k + 1], run, t0_s, config,
                      end[2]), nxt
+
+
+def nominal_s(block: NcBlock, max_feed_mm_s: float) -> float:
+    """Length over programmed feed: a lower bound of a contour block's motion time (a NURBS by
+    its control polygon, which is at least as long as the curve)."""
+    if isinstance(block, NurbsBlock):
+        length = float(np.sum(np.hypot(*np.diff(block.control_points, axis=0).T)))
+    elif isinstance(block, ArcBlock):
+        length = block.length_mm
+    else:
+        assert isinstance(block, LineBlock)
+        length = math.hypot(block.end[0] - block.start[0], block.end[1] - block.start[1])
+    return length / max(min(block.feed_mm_s, max_feed_mm_s), 1e-9)
 
 
 def _is_contour_block(block: NcBlock) -> bool:
@@ -183,14 +209,17 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
                  algorithm: Algorithm | str = Algorithm.PH_LOOKAHEAD) -> Iterator[PlannedStep]:
     """Group blocks into runs (rest to rest) and plan each; chunks follow each other in time.
 
-    ph-lookahead plans long runs in look-ahead windows of WINDOW_BLOCKS new blocks, each cut
-    mid-cruise and continued by the next (see _window); the other algorithms stop between
-    windows."""
+    ph-lookahead plans long runs in look-ahead windows of WINDOW_BLOCKS new blocks (or
+    WINDOW_NOMINAL_S of nominal motion), each cut mid-cruise and continued by the next (see
+    _window); the other algorithms stop between windows of MAX_RUN_BLOCKS."""
     algorithm = Algorithm(algorithm)
     T = config.sample_period_s  # noqa: N806
     t_s = 0.0
     pending: list[NcBlock] = []
+    pending_s = [0.0]  # nominal motion time of the pending blocks
+    vmax = config.interpolator.max_feed_mm_s
     cont: Continuation | None = None
+    repeats = Repeats()  # shared by the windows of a long run (repeats.py)
 
     settle_after: PlannedStep | None = None  # the last step, if it came to rest moving
 
@@ -216,7 +245,8 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
         if pending or cont is not None:
             run_blocks = list(pending)
             pending.clear()
-            step = _contour(run_blocks, config, algorithm, t_s, cont)
+            pending_s[0] = 0.0
+            step = _contour(run_blocks, config, algorithm, t_s, cont, repeats)
             cont = None
             yield from emit(step)
 
@@ -224,16 +254,19 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
         nonlocal cont
         run_blocks = list(pending)
         pending.clear()
-        step, cont = _window(run_blocks, config, t_s, cont)
+        pending_s[0] = 0.0
+        step, cont = _window(run_blocks, config, t_s, cont, repeats)
         yield from emit(step, at_rest=cont is None)
 
     for block in blocks:
         if _is_contour_block(block):
             pending.append(block)  # type: ignore[arg-type]
+            pending_s[0] += nominal_s(block, vmax)
             exact = block.path.mode != PathMode.BLEND  # type: ignore[union-attr]
             if exact:
                 yield from flush()
-            elif len(pending) >= WINDOW_BLOCKS and algorithm == Algorithm.PH_LOOKAHEAD:
+            elif (len(pending) >= WINDOW_BLOCKS or pending_s[0] >= WINDOW_NOMINAL_S) \
+                    and algorithm == Algorithm.PH_LOOKAHEAD:
                 yield from window()
             elif len(pending) >= MAX_RUN_BLOCKS:
                 yield from flush()

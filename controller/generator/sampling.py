@@ -78,6 +78,30 @@ def _points_on_curve(path: Path, pieces: list[int], idx: np.ndarray,
     return all_rows, d[0], np.arctan2(d[1, :, 1], d[1, :, 0])
 
 
+def _points_on_lines(path: Path, pieces: np.ndarray, idx: np.ndarray,
+                     s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """_points_on_curve for the samples on LINE pieces (sorted piece indices), all at once: the
+    same operations per sample (LineCurve: u = s / length, p0 + u d, the tangent of d), so the
+    same numbers, without a call per line of a G1 program."""
+    ps = [path.pieces[i] for i in pieces.tolist()]
+    k = np.searchsorted(pieces, idx)
+    ends = np.array([(*p.curve.p0, *p.curve.p1) for p in ps])  # type: ignore[attr-defined]
+    d = np.column_stack((ends[:, 2] - ends[:, 0], ends[:, 3] - ends[:, 1]))
+    length = np.array([p.curve.length_mm for p in ps])
+    u0 = np.array([p.u0 for p in ps])
+    u1 = np.array([p.u1 for p in ps])
+    start = np.array([p.s0_mm for p in ps])
+    piece_len = np.array([p.length_mm for p in ps])
+    local = clamp(s - start[k], 0.0, piece_len[k])
+    u = (local + (u0 * length)[k]) / length[k]
+    u = clamp(u, np.minimum(u0, u1)[k], np.maximum(u0, u1)[k])
+    xy = np.empty((len(s), 2))
+    xy[:, 0] = ends[k, 0] + u * d[k, 0]
+    xy[:, 1] = ends[k, 1] + u * d[k, 1]
+    tangent = d[k]
+    return xy, np.arctan2(tangent[:, 1], tangent[:, 0])
+
+
 def _sequential_taylor(path: Path, idx: np.ndarray, v: np.ndarray, a: np.ndarray,
                        xy: np.ndarray, sample_period_s: float) -> None:
     """Fill xy for NURBS pieces by running eq. 5 along each NURBS curve from its first sample."""
@@ -109,11 +133,19 @@ def interpolate(path: Path, profile: FeedProfile, sample_period_s: float,
     if ph_pieces.size:  # every PH corner's samples in one vectorised Newton iteration
         rows = np.flatnonzero(is_in_sorted(idx, ph_pieces))
         which = np.searchsorted(ph_pieces, idx[rows])
-        s0 = np.array([path.pieces[i].s0_mm for i in ph_pieces.tolist()])
+        ph = [path.pieces[i] for i in ph_pieces.tolist()]
+        s0 = np.array([p.s0_mm for p in ph])
+        local = s[rows] - s0[which]
+        if any(p.u0 != 0.0 for p in ph):  # a PH piece trimmed by a look-ahead window's cut
+            local = local + np.array([p.curve_s0_mm if p.u0 != 0.0 else 0.0 for p in ph])[which]
         xy[rows], phi[rows] = ph_interpolate_many(
-            [path.pieces[i].curve for i in ph_pieces.tolist()],  # type: ignore[misc]
-            which, s[rows] - s0[which])
-    for pieces in _by_curve(path, present[~kinds]):
+            [p.curve for p in ph], which, local)  # type: ignore[misc]
+    others = present[~kinds]
+    lines = np.array([path.pieces[i].kind == PieceKind.LINE for i in others.tolist()], bool)
+    if lines.any():
+        rows = np.flatnonzero(is_in_sorted(idx, others[lines]))
+        xy[rows], phi[rows] = _points_on_lines(path, others[lines], idx[rows], s[rows])
+    for pieces in _by_curve(path, others[~lines]):
         rows, xy_exact, phi_exact = _points_on_curve(path, pieces, idx, s)
         phi[rows] = phi_exact
         if path.pieces[pieces[0]].kind != PieceKind.NURBS or \
@@ -122,4 +154,5 @@ def interpolate(path: Path, profile: FeedProfile, sample_period_s: float,
     if method == Interpolation.SEQUENTIAL_TAYLOR:
         _sequential_taylor(path, idx, v, a, xy, sample_period_s)
     xy[-1] = path.end_xy
-    return Samples(t, s, v, a, xy, phi, path.line_at(s))
+    lines = np.array([p.line for p in path.pieces], np.int32)  # path.line_at(s), gathered
+    return Samples(t, s, v, a, xy, phi, lines[idx])

@@ -6,24 +6,28 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.generator.dynamics.prediction import axis_servos, state_after
+from controller.generator.dynamics.stops import NEAR_SAMPLES
 from controller.generator.loop import Continuation, RunPlan
-from controller.geometry.path import Piece, PieceKind, chain, make_piece
+from controller.geometry.path import Piece, chain, make_piece
 
-OVERLAP_SHARE = 0.25  # the last quarter of a window is planned again with the next blocks
-MIN_OVERLAP_MM = 10.0  # ... and at least this much (several braking distances at Vmax)
+# The end of a window is planned again with the next blocks: this share of it, and at least
+# MIN_OVERLAP_MM (several braking distances at Vmax: what the stop at the window's end and the
+# dynamics rounds' look-back can reach). A quarter cost a third more planning on long runs.
+OVERLAP_SHARE = 0.05
+MIN_OVERLAP_MM = 10.0
 MIN_PIECE_MM = 1e-6
 
 
 def _cruise_samples(run: RunPlan) -> np.ndarray:
-    """Samples inside a cruise (zero acceleration before, at and after them), not on a PH."""
+    """Samples inside a cruise (zero acceleration before, at and after them), on any piece: in
+    a run of short G1 moves the only cruises are through the PH blends, where the curvature
+    holds the feed (a cut there is a trimmed PH piece, sampling.py)."""
     s = run.samples
     a, v = s.a_mm_s2, s.v_mm_s
     flat = np.zeros(len(a), bool)
     flat[1:-1] = (a[:-2] == 0.0) & (a[1:-1] == 0.0) & (a[2:] == 0.0) & (v[1:-1] > 0.0) \
         & (v[:-2] == v[1:-1]) & (v[2:] == v[1:-1])
-    path = run.geometry.path
-    kinds = np.array([p.kind != PieceKind.PH for p in path.pieces])
-    return flat & kinds[path.piece_index(s.s_mm)]
+    return flat
 
 
 def _tail(pieces: tuple[Piece, ...], index: int, s_cut_mm: float) -> tuple[Piece, ...]:
@@ -56,5 +60,7 @@ def continuation_cut(run: RunPlan, tolerance_mm: float | None, end_mm: tuple[flo
     tail = _tail(path.pieces, index, float(s.s_mm[k]))
     if not tail:
         return None
+    before = s.xy_mm[:k + 1] if cont is None or cont.history_xy is None else \
+        np.vstack([cont.history_xy, s.xy_mm[:k + 1]])
     return k, Continuation(tail, tolerance_mm, float(s.v_mm_s[k]), s.xy_mm[k].copy(), state,
-                           end_mm)
+                           end_mm, before[-(NEAR_SAMPLES + 1):].copy())

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import json
+import os
 import sys
+from typing import TextIO
 
 import numpy as np
 
@@ -14,7 +15,10 @@ from controller.errors import CncError, NcError
 from controller.generator.plan import Algorithm
 from controller.interpreter.program import read_program
 from controller.operator.check_cmd import check_program
-from controller.runtime.simulation import Trajectory, report, simulate
+from controller.operator.simulate_plot import PlotSeries
+from controller.runtime.sim_figures import Figures
+from controller.runtime.sim_stream import SampleBlock
+from controller.runtime.simulation import limit_um, simulate_stream
 
 TABLE_ROWS = (
     ("X tracking error max (um)", lambda r: r["tracking_error_um"]["x"]["max"]),
@@ -38,6 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--trajectory", metavar="CSV", help="write t,x_ref,y_ref,x_act,y_act,feed")
     parser.add_argument("--plot", metavar="PNG", help="feedrate and contour error along the path")
+    parser.add_argument("--stats", action="store_true",
+                        help="add how the plan was obtained: look-ahead windows, dynamics rounds")
 
 
 def _check_whole_program(path: str, config: MachineConfig) -> None:
@@ -46,18 +52,61 @@ def _check_whole_program(path: str, config: MachineConfig) -> None:
     check_program(path, config)
 
 
-def _one(path: str, config: MachineConfig, algorithm: str) -> tuple[dict, Trajectory]:
-    traj = simulate(read_program(path, config), config, algorithm)
-    return report(traj, path, algorithm, config), traj
+def _one(path: str, config: MachineConfig, algorithm: str, trajectory: str | None = None,
+         plot: PlotSeries | None = None, stats: bool = False) -> dict:
+    """Simulate one algorithm, streaming: the figures, and the trajectory CSV and the plot's
+    series if asked for, are gathered sample block by sample block (memory bounded)."""
+    figures = Figures(len(config.axis_names), config.sample_period_s)
+    sinks = [figures.add] + ([plot.add] if plot is not None else [])
+    writer = TrajectoryWriter(trajectory, config.sample_period_s) if trajectory else None
+    if writer is not None:
+        sinks.append(writer.add)
+    try:
+        cpu = simulate_stream(read_program(path, config), config, algorithm, sinks,
+                              figures.runs.add)
+    except BaseException:
+        if writer is not None:
+            writer.abandon()
+        raise
+    if writer is not None:
+        writer.close()
+    out = figures.report(path, algorithm, limit_um(config), cpu)
+    if stats:
+        out["stats"] = figures.runs.stats()
+    return out
 
 
-def write_trajectory(path: str, traj: Trajectory) -> None:
-    with open(path, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow(["t", "x_ref", "y_ref", "x_act", "y_act", "feed"])
-        rows = np.column_stack([traj.t_s, traj.ref_mm[:, 0], traj.ref_mm[:, 1],
-                                traj.act_mm[:, 0], traj.act_mm[:, 1], traj.feed_mm_s])
-        w.writerows([f"{v:.9g}" for v in row] for row in rows)
+class TrajectoryWriter:
+    """`--trajectory CSV`, written as the samples come (t,x_ref,y_ref,x_act,y_act,feed, %.9g,
+    CRLF as the csv module writes): into CSV.part, renamed to CSV once the run is complete."""
+
+    HEADER = "t,x_ref,y_ref,x_act,y_act,feed\r\n"
+    ROW = ",".join(["%.9g"] * 6) + "\r\n"
+
+    def __init__(self, path: str, sample_period_s: float) -> None:
+        self.path, self.part = path, path + ".part"
+        self.T = sample_period_s  # noqa: N815
+        self.fh: TextIO = open(self.part, "w", encoding="utf-8", newline="")  # noqa: SIM115
+        self.fh.write(self.HEADER)
+
+    def add(self, b: SampleBlock) -> None:
+        n = b.n_ref
+        if n == 0:
+            return
+        ref = b.ref_mm[:n]
+        rows = np.column_stack([np.arange(b.i0 + 1, b.i0 + n + 1) * self.T, ref[:, 0], ref[:, 1],
+                                ref[:, 0] - b.ex_mm[:n], ref[:, 1] - b.ey_mm[:n],
+                                b.feed_mm_s[:n]])
+        fmt = self.ROW
+        self.fh.write("".join([fmt % tuple(r) for r in rows.tolist()]))
+
+    def close(self) -> None:
+        self.fh.close()
+        os.replace(self.part, self.path)
+
+    def abandon(self) -> None:
+        self.fh.close()
+        os.unlink(self.part)
 
 
 def format_table(program: str, results: list[dict]) -> str:
@@ -78,29 +127,27 @@ def _print_summary(r: dict) -> None:
           f"planning CPU {r['planning_cpu_s']:.3f} s")
 
 
-
 def run(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config)
         _check_whole_program(args.program, config)
         algorithms = [a.value for a in Algorithm] if args.compare else [args.algorithm]
-        results = [_one(args.program, config, a) for a in algorithms]
+        chosen = args.algorithm if args.compare else algorithms[-1]
+        series = {a: PlotSeries(config) for a in algorithms} if args.plot else {}
+        reports = [_one(args.program, config, a, args.trajectory if a == chosen else None,
+                        series.get(a), args.stats) for a in algorithms]
     except NcError as exc:
         print(exc.format(), file=sys.stderr)
         return 2
     except CncError as exc:
         print(f"cncctl: error: {exc}", file=sys.stderr)
         return 2
-    chosen = results[-1] if not args.compare else next(
-        (x for x in results if x[0]["algorithm"] == args.algorithm), results[-1])
-    if args.trajectory:
-        write_trajectory(args.trajectory, chosen[1])
+    picked = next(r for r in reports if r["algorithm"] == chosen)
     if args.plot:
         from controller.operator.simulate_plot import plot_simulation
 
-        plot_simulation(args.plot, [t for _, t in results], [r for r, _ in results], config)
-    reports = [r for r, _ in results]
-    code = 0 if chosen[0]["contour_limit_met"] else 1
+        plot_simulation(args.plot, [series[a] for a in algorithms], reports, config)
+    code = 0 if picked["contour_limit_met"] else 1
     if args.json:
         out = {"program": args.program, "results": reports} if args.compare else reports[0]
         print(json.dumps(out, indent=2))
@@ -109,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print_summary(reports[0])
     if code:
-        print(limit_message(chosen[0], config), file=sys.stderr)
+        print(limit_message(picked, config), file=sys.stderr)
     return code
 
 

@@ -3,19 +3,17 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from controller.blocks import NcBlock
 from controller.config import MachineConfig
-from controller.generator.dynamics.prediction import SETTLE_S, axis_servos
-from controller.generator.dynamics.servo import contour_error_mm, tracking_error_mm
-from controller.generator.dynamics.stops import distance_from_reference_mm
-from controller.generator.loop import RunPlan, RunStatus
+from controller.generator.loop import RunPlan
 from controller.generator.plan import Algorithm, PlannedStep, plan_program
+from controller.runtime.sim_figures import Figures
+from controller.runtime.sim_stream import SampleBlock, ServoStream
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,115 +45,98 @@ def tangent_angles(xy: np.ndarray) -> np.ndarray:
     return phi[idx]
 
 
-def _exact_where_known(phi: np.ndarray, steps: list[PlannedStep]) -> np.ndarray:
-    """Eq. 28 wants the path tangent: the generator's exact one where it has it (contour runs),
-    central differences of the reference elsewhere (straight moves, holds)."""
-    k = 0
-    for step in steps:
-        n = len(step.chunk)
-        if step.phi_rad is not None:
-            phi[k:k + n] = step.phi_rad
-        k += n
-    phi[k:] = phi[k - 1] if k else phi[k:]
-    return phi
+SampleSink = Callable[[SampleBlock], None]
+
+
+def _timed(steps: Iterator[PlannedStep], clock: list[float]) -> Iterator[PlannedStep]:
+    """The steps, the CPU time spent producing them added to clock[0]."""
+    while True:
+        cpu0 = time.process_time()
+        step = next(steps, None)
+        clock[0] += time.process_time() - cpu0
+        if step is None:
+            return
+        yield step
+
+
+def simulate_stream(blocks: Iterable[NcBlock], config: MachineConfig, algorithm: Algorithm | str,
+                    sinks: list[SampleSink], on_run: Callable[[RunPlan], None] | None = None,
+                    ) -> float:
+    """Plan the program and run it through both axis models from X0 Y0 at rest, handing every
+    finished block of samples to each sink as it comes (memory bounded whatever the length).
+    on_run sees each contour run's plan. Returns the CPU time spent planning."""
+    clock = [0.0]
+    stream = ServoStream(config)
+    for step in _timed(iter(plan_program(blocks, config, algorithm)), clock):
+        if step.run is not None and on_run is not None:
+            on_run(step.run)
+        c = step.chunk
+        for b in stream.push(c.pos_mm, c.feed_mm_s, c.line, step.rapid, step.phi_rad):
+            for sink in sinks:
+                sink(b)
+    for b in stream.finish():
+        for sink in sinks:
+            sink(b)
+    return clock[0]
+
+
+class _Collector:
+    """Every sample block kept, for the whole-array Trajectory."""
+
+    def __init__(self) -> None:
+        self.blocks: list[SampleBlock] = []
+
+    def add(self, b: SampleBlock) -> None:
+        self.blocks.append(b)
+
+    def trajectory(self, config: MachineConfig, runs: list[RunPlan], cpu_s: float) -> Trajectory:
+        bs = self.blocks
+        if not bs:
+            empty = np.zeros((0, len(config.axis_names)))
+            z = np.zeros(0)
+            return Trajectory(z, empty, empty, z, z.astype(np.int32), z, z, z, z.astype(bool), z,
+                              tuple(runs), cpu_s)
+
+        def cat(name: str, ref_only: bool = False) -> np.ndarray:
+            return np.concatenate([getattr(b, name)[:b.n_ref] if ref_only else getattr(b, name)
+                                   for b in bs])
+        ref = cat("ref_mm", True)
+        n = len(ref)
+        ex, ey = cat("ex_mm"), cat("ey_mm")
+        act = ref.copy()
+        act[:, 0] -= ex[:n]
+        act[:, 1] -= ey[:n]
+        return Trajectory(np.arange(1, n + 1) * config.sample_period_s, ref, act,
+                          cat("feed_mm_s", True), cat("line", True), ex, ey, cat("contour_mm"),
+                          cat("contouring"), cat("true_mm"), tuple(runs), cpu_s)
 
 
 def simulate(blocks: Iterable[NcBlock], config: MachineConfig,
              algorithm: Algorithm | str) -> Trajectory:
-    """Plan the program, then run the reference through both axis models from X0 Y0 at rest."""
-    cpu0 = time.process_time()
-    steps = list(plan_program(blocks, config, algorithm))
-    cpu = time.process_time() - cpu0
-    if not steps:
-        empty = np.zeros((0, len(config.axis_names)))
-        z = np.zeros(0)
-        return Trajectory(z, empty, empty, z, z.astype(np.int32), z, z, z, z.astype(bool), z,
-                          (), cpu)
-    ref = np.vstack([s.chunk.pos_mm for s in steps])
-    T = config.sample_period_s  # noqa: N806
-    settle = int(round(SETTLE_S / T))
-    start = np.zeros((1, ref.shape[1]))
-    pos = np.vstack([start, ref, np.repeat(ref[-1:], settle, axis=0)])
-    v = np.diff(pos, axis=0) / T
-    servos = axis_servos(config)
-    ex = tracking_error_mm(servos[0], v[:, 0])
-    ey = tracking_error_mm(servos[1], v[:, 1])
-    phi = _exact_where_known(tangent_angles(pos[1:, :2]), steps)
-    n = len(ref)
-    act = ref.copy()
-    act[:, 0] -= ex[:n]
-    act[:, 1] -= ey[:n]
-    runs = tuple(s.run for s in steps if s.run is not None)
-    rapid = np.concatenate([np.full(len(s.chunk), s.rapid) for s in steps])
-    contouring = ~np.r_[rapid, np.full(settle, rapid[-1])]
-    held = pos[1:, :2]
-    true = distance_from_reference_mm(held, held - np.column_stack([ex, ey]))
-    return Trajectory(np.arange(1, n + 1) * T, ref, act,
-                      np.concatenate([s.chunk.feed_mm_s for s in steps]),
-                      np.concatenate([s.chunk.line for s in steps]), ex, ey,
-                      contour_error_mm(ex, ey, phi), contouring, true, runs, cpu)
-
-
-def _stats_um(e_mm: np.ndarray) -> dict[str, float]:
-    a = np.abs(e_mm) * 1000.0
-    if a.size == 0:
-        return {"max": 0.0, "rms": 0.0, "mean": 0.0}
-    return {"max": float(a.max()), "rms": float(np.sqrt(np.mean(a * a))), "mean": float(a.mean())}
-
-
-def _ph_fit(runs: tuple[RunPlan, ...]) -> dict[str, float]:
-    infos = [c for r in runs for c in r.corners if c.ph_count]
-    if not infos:
-        return {"max": 0.0, "rms": 0.0}
-    return {"max": max(c.fit_max_mm for c in infos) * 1000.0,
-            "rms": float(np.sqrt(np.mean([c.fit_rms_mm**2 for c in infos]))) * 1000.0}
-
-
-def _true_um(traj: Trajectory, T: float) -> dict[str, Any]:  # noqa: N803
-    """The true contour error's max and RMS over contouring samples, and where the max is."""
-    e = np.where(traj.contouring, traj.true_mm, 0.0)
-    if e.size == 0:
-        return {"max": 0.0, "rms": 0.0, "at": None}
-    k = int(np.argmax(e))
-    n = len(traj.t_s)
-    row = traj.ref_mm[min(k, n - 1)]
-    at = {"t_s": round((k + 1) * T, 6), "line": int(traj.line[min(k, n - 1)]),
-          "x_mm": round(float(row[0] - traj.ex_mm[k]), 6),
-          "y_mm": round(float(row[1] - traj.ey_mm[k]), 6), "after_end": k >= n}
-    used = traj.true_mm[traj.contouring] * 1000.0  # none when the program only has rapids
-    rms = float(np.sqrt(np.mean(used * used))) if used.size else 0.0
-    return {"max": float(e[k] * 1000.0), "rms": rms, "at": at}
+    """The whole program's trajectory as arrays (simulate_stream, every sample kept: for tests
+    and short programs; `cncctl simulate` streams)."""
+    collect = _Collector()
+    runs: list[RunPlan] = []
+    cpu = simulate_stream(blocks, config, algorithm, [collect.add], runs.append)
+    return collect.trajectory(config, runs, cpu)
 
 
 def report(traj: Trajectory, program: str, algorithm: str, config: MachineConfig) -> dict:
-    """The JSON object of `cncctl simulate --json`."""
-    T = config.sample_period_s  # noqa: N806
-    start = np.zeros((1, traj.ref_mm.shape[1]))
-    steps = np.linalg.norm(np.diff(np.vstack([start, traj.ref_mm]), axis=0), axis=1) / T
-    accel = np.diff(steps) / T if steps.size > 1 else np.zeros(1)
-    x, y = _stats_um(traj.ex_mm), _stats_um(traj.ey_mm)
-    true = _true_um(traj, T)
-    return {
-        "program": program,
-        "algorithm": algorithm,
-        "motion_time_s": float(len(traj.t_s) * T),
-        "samples": int(len(traj.t_s)),
-        "sample_period_s": T,
-        "tracking_error_um": {"x": {"max": x["max"], "rms": x["rms"]},
-                              "y": {"max": y["max"], "rms": y["rms"]}},
-        "contour_error_um": _stats_um(traj.contour_mm[traj.contouring]),
-        "contour_error_true_um": true,
-        "max_feed_mm_s": float(steps.max()) if steps.size else 0.0,
-        "max_tangential_accel_mm_s2": float(np.abs(accel).max()) if accel.size else 0.0,
-        "sharp_corners": sum(len(r.corners) for r in traj.runs),
-        "ph_segments": sum(len(r.geometry.ph_pieces) for r in traj.runs),
-        "ph_fit_error_um": _ph_fit(traj.runs),
-        "dynamics_rounds": max((r.dynamics_rounds for r in traj.runs), default=0),
-        # The limit is on the tool's distance from the path (eq. 28 stays, for Table IV).
-        "contour_limit_met": all(r.status == RunStatus.OK for r in traj.runs)
-        and true["max"] <= config.interpolator.contour_error_limit_mm * 1000.0 + 1e-9,
-        "planning_cpu_s": traj.planning_cpu_s,
-    }
+    """The JSON object of `cncctl simulate --json`, from a whole trajectory."""
+    n = len(traj.t_s)
+    figures = Figures(traj.ref_mm.shape[1], config.sample_period_s)
+    for run in traj.runs:
+        figures.runs.add(run)
+    if len(traj.ex_mm):
+        ref = np.vstack([traj.ref_mm, np.repeat(traj.ref_mm[-1:], len(traj.ex_mm) - n, axis=0)])
+        line = np.r_[traj.line, np.full(len(traj.ex_mm) - n, traj.line[-1])]
+        figures.add(SampleBlock(0, n, ref, traj.feed_mm_s, line, traj.ex_mm, traj.ey_mm,
+                                traj.contour_mm, traj.contouring, traj.true_mm))
+    return figures.report(program, algorithm, limit_um(config), traj.planning_cpu_s)
+
+
+def limit_um(config: MachineConfig) -> float:
+    return config.interpolator.contour_error_limit_mm * 1000.0
 
 
 def table_iv_failures(results: dict[str, dict], limit_um: float) -> list[str]:

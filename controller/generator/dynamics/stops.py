@@ -17,7 +17,7 @@ from controller.numeric import segment_distance
 # along the path than this from its reference (at 1 ms, 40 samples hold 50 um even at 1.25 mm/s).
 NEAR_SAMPLES = 40
 BEFORE_S = 0.05  # a stop's window starts this long before it ...
-BLOCK_SAMPLES = 4096  # samples measured at once: about 10 MB of temporaries whatever the length
+WINDOW_BLOCK = 512  # samples measured at once: their temporaries stay in the cache
 
 
 @dataclass(frozen=True)
@@ -34,12 +34,18 @@ def held_reference(xy_mm: np.ndarray, pred: ServoPrediction) -> np.ndarray:
 
 
 def true_error_mm(xy_mm: np.ndarray, pred: ServoPrediction, exact_above_mm: float = 0.0,
-                  near: int = NEAR_SAMPLES) -> np.ndarray:
+                  near: int = NEAR_SAMPLES, history_xy: np.ndarray | None = None) -> np.ndarray:
     """Per sample (run and settling): the distance of the modelled tool from the path (see
-    distance_from_reference_mm for exact_above_mm)."""
+    distance_from_reference_mm for exact_above_mm). history_xy, for a run continuing a
+    look-ahead window, is the reference just before its first sample: the polyline starts
+    there, so the tool still lagging behind the cut is measured to the path, not to its end."""
     ref = held_reference(xy_mm, pred)
-    return distance_from_reference_mm(ref, ref - np.column_stack([pred.ex_mm, pred.ey_mm]),
-                                      exact_above_mm, near)
+    act = ref - np.column_stack([pred.ex_mm, pred.ey_mm])
+    if history_xy is None or not len(history_xy):
+        return distance_from_reference_mm(ref, act, exact_above_mm, near)
+    k = len(history_xy)  # their own distances (zero: act there is the reference) are dropped
+    return distance_from_reference_mm(np.vstack([history_xy, ref]), np.vstack([history_xy, act]),
+                                      exact_above_mm, near)[k:]
 
 
 def distance_from_reference_mm(ref: np.ndarray, act: np.ndarray, exact_above_mm: float = 0.0,
@@ -60,11 +66,38 @@ def distance_from_reference_mm(ref: np.ndarray, act: np.ndarray, exact_above_mm:
     if k.size == 0:
         return bound
     out = bound.copy()
-    window = np.arange(-near, near)[None, :]
-    for lo in range(0, k.size, BLOCK_SAMPLES):  # bounded memory on programs of any length
-        kb = k[lo:lo + BLOCK_SAMPLES]
-        j = np.clip(kb[:, None] + window, 0, n - 2)
-        out[kb] = segment_distance(act[kb, None, :], ref[j], ref[j + 1]).min(axis=1)
+    out[k] = window_distance_mm(ref, act[k], k, near)
+    return out
+
+
+def window_distance_mm(ref: np.ndarray, points: np.ndarray, k: np.ndarray,
+                       near: int = NEAR_SAMPLES) -> np.ndarray:
+    """For the samples k (sorted), the distance of points (one per k) from the segments j of
+    ref with j in [k - near, k + near) (clipped to the polyline), exactly as
+    numeric.segment_distance gives it for each and the least taken. Segment terms are formed
+    once per segment and the windows are views of them (padded at both ends as the clipping
+    would repeat the end segments); the square root is taken of the least squared distance
+    (sqrt is monotonic: the same number). 12 times faster than segment_distance on gathered
+    windows of 80 segments, so `cncctl simulate` can measure every sample exactly."""
+    a = ref[:-1]
+    ab = ref[1:] - a
+    len2 = ab[:, 0] * ab[:, 0] + ab[:, 1] * ab[:, 1]
+    cols = (a[:, 0], a[:, 1], ab[:, 0], ab[:, 1], np.where(len2 > 0.0, len2, 1.0))
+    pad = [np.concatenate((np.full(near, c[0]), c, np.full(near, c[-1]))) for c in cols]
+    # Padded index k + m (m < 2 near) holds segment clip(k - near + m, 0, n - 2).
+    views = [np.lib.stride_tricks.sliding_window_view(c, 2 * near) for c in pad]
+    out = np.empty(k.size)
+    contiguous = k.size > 0 and int(k[-1]) - int(k[0]) == k.size - 1
+    for lo in range(0, k.size, WINDOW_BLOCK):
+        kb = k[lo:lo + WINDOW_BLOCK]
+        sel = slice(int(kb[0]), int(kb[-1]) + 1) if contiguous else kb
+        ax, ay, abx, aby, den = (v[sel] for v in views)
+        p = points[lo:lo + WINDOW_BLOCK]
+        px, py = p[:, 0][:, None], p[:, 1][:, None]
+        apx, apy = px - ax, py - ay
+        t = np.minimum(np.maximum((apx * abx + apy * aby) / den, 0.0), 1.0)
+        gx, gy = apx - t * abx, apy - t * aby
+        out[lo:lo + WINDOW_BLOCK] = np.sqrt((gx * gx + gy * gy).min(axis=1))
     return out
 
 

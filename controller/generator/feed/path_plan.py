@@ -13,7 +13,7 @@ from controller.generator.feed.planner import PlanResult, plan_feed
 from controller.generator.feed.profile import FeedPhase, FeedProfile
 from controller.generator.feed.stops import approach_split, model_stop_accel, stop_accel_at
 from controller.geometry.curves import Curve
-from controller.geometry.path import Path, Piece
+from controller.geometry.path import Path, Piece, PieceKind
 from controller.numeric import sorted_unique
 
 # Feed-limit samples per run, their spacing clamped: at most 35 um, under the 58 um a sample
@@ -86,6 +86,35 @@ def _piece_samples(p: Piece, n: int) -> tuple[np.ndarray, np.ndarray]:
     return s, kappa
 
 
+def _line_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
+    """_piece_samples of many LINE pieces at once, into the cache: the same operations on
+    arrays of pieces with the same count (curvature 0; the trapezoids of a constant speed,
+    then rescaled to the piece length), so the same numbers, without numpy's cost per call
+    on every line of a G1 program."""
+    by_count: dict[int, list[Piece]] = {}
+    for p, n in todo:
+        by_count.setdefault(n, []).append(p)
+    for n, ps in by_count.items():
+        u0, u1 = np.array([p.u0 for p in ps]), np.array([p.u1 for p in ps])
+        if np.any(u1 == u0):  # linspace treats a zero step apart: piece by piece
+            for p in ps:
+                cache[(p.curve, p.u0, p.u1, n)] = _piece_samples(p, n)
+            continue
+        u = np.linspace(u0, u1, n, axis=1)
+        dx = np.array([p.curve.p1[0] - p.curve.p0[0] for p in ps])  # type: ignore[attr-defined]
+        dy = np.array([p.curve.p1[1] - p.curve.p0[1] for p in ps])  # type: ignore[attr-defined]
+        speed = np.sqrt(dx * dx + dy * dy)[:, None]
+        s = np.zeros((len(ps), n))
+        np.cumsum(0.5 * (speed + speed) * np.diff(u, axis=1), axis=1, out=s[:, 1:])
+        length = np.array([p.length_mm for p in ps])
+        last = s[:, -1].copy()
+        scale = length / np.where(last > 0, last, 1.0)
+        s[last > 0] *= scale[last > 0, None]
+        kappa = np.zeros(n)
+        for p, row in zip(ps, s, strict=True):
+            cache[(p.curve, p.u0, p.u1, n)] = (row, kappa)
+
+
 def grid_step_mm(path: Path) -> float:
     """Target spacing of the feed-limit grid (each piece's own step is at most this)."""
     return float(np.clip(path.length_mm / GRID_POINTS, MIN_SPACING_MM, MAX_SPACING_MM))
@@ -98,8 +127,10 @@ def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.nda
     spacing = grid_step_mm(path)
     cache = {} if cache is None else cache
     s_parts, k_parts = [], []
-    for p in path.pieces:
-        n = max(int(np.ceil(p.length_mm / spacing)), 8) + 1
+    counts = [max(int(np.ceil(p.length_mm / spacing)), 8) + 1 for p in path.pieces]
+    _line_samples([(p, n) for p, n in zip(path.pieces, counts, strict=True)
+                   if p.kind == PieceKind.LINE and (p.curve, p.u0, p.u1, n) not in cache], cache)
+    for p, n in zip(path.pieces, counts, strict=True):
         key = (p.curve, p.u0, p.u1, n)
         if key not in cache:
             cache[key] = _piece_samples(p, n)
@@ -133,7 +164,9 @@ def feed_limit_mm_s(path: Path, s: np.ndarray, kappa: np.ndarray, inp: FeedInput
 
     A reduction by factor f scales the normal acceleration kappa v^2, and with it the servo's
     contour error, by f: the feed limit is scaled by sqrt(f)."""
-    cap = np.minimum(path.feed_cap(s), inp.max_feed_mm_s)
+    # path.feed_cap(s), gathered in one go (it masks the grid once per piece)
+    feeds = np.array([p.feed_mm_s for p in path.pieces])
+    cap = np.minimum(feeds[path.piece_index(s)], inp.max_feed_mm_s)
     vlim = chord_error_feed_mm_s(kappa, inp.sample_period_s, inp.chord_tolerance_mm, cap)
     if inp.policy == LimitPolicy.CONTINUOUS:
         with np.errstate(divide="ignore"):
@@ -175,7 +208,13 @@ def _section(s: np.ndarray, vlim: np.ndarray, a: float,
     s_sec, v_sec = s[keep].copy(), vlim[keep]
     s_sec[0], s_sec[-1] = a, b
     inner = np.r_[True, np.diff(s_sec) > 0]  # drop points squeezed onto the ends
-    return s_sec[inner], v_sec[inner]
+    s_sec, v_sec = s_sec[inner], v_sec[inner]
+    if len(s_sec) > 2 and np.any(np.diff(s_sec) <= 0):
+        # Several grid points within eps of an end (a piece of a few nm sampled on its own
+        # points, found at a trailing edge of a long program): keep only those between.
+        between = np.r_[True, (s_sec[1:-1] > a) & (s_sec[1:-1] < b), True]
+        s_sec, v_sec = s_sec[between], v_sec[between]
+    return s_sec, v_sec
 
 
 def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None,
@@ -185,7 +224,13 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
     Sections are separated by the path's stops (G1 corners brought to zero feed). The first
     starts at v_start_mm_s (a window continuing a cruise of the previous one), the others at
     rest."""
-    s, kappa = limit_samples(path, cache)
+    if cache is None:
+        s, kappa = limit_samples(path)
+    else:  # a dynamics round on the same path (the loop reuses it) samples it once
+        key = ("grid", path)  # the path itself (eq=False: by identity, kept alive by the key)
+        if key not in cache:
+            cache[key] = limit_samples(path, cache)  # type: ignore[index]
+        s, kappa = cache[key]  # type: ignore[index]
     vlim = feed_limit_mm_s(path, s, kappa, inp)
     cuts = [0.0, *path.stops_at_mm, path.length_mm]
     profiles: list[FeedProfile] = []

@@ -8,6 +8,7 @@ import numpy as np
 
 from controller.geometry.path import Piece, PieceKind, make_piece
 from controller.geometry.ph_quintic import PhQuintic
+from controller.numeric import clamp
 
 MAX_BLEND_ANGLE_RAD = math.radians(175.0)  # sharper reversals stop instead of looping round
 MAX_SHARE = 0.45  # a blend takes at most this share of each neighbouring piece
@@ -15,29 +16,85 @@ BISECTIONS = 30
 MIN_CUT_MM = 1e-4
 
 
+def _line_u(piece: Piece, s_path_mm: float) -> float:
+    """Piece.u_at of a LINE piece at one arc length, in Python floats: the same operations as
+    the arrays (LineCurve's u = s / length), without numpy's cost per call; G1 programs blend
+    every joint, so this is on the planner's path once per line."""
+    length = piece.curve.length_mm
+    local = min(max(s_path_mm - piece.s0_mm, 0.0), piece.length_mm)
+    u = (local + piece.u0 * length) / length
+    return min(max(u, min(piece.u0, piece.u1)), max(piece.u0, piece.u1))
+
+
+def _line_xy(piece: Piece, u: float) -> tuple[float, float, float, float]:
+    """LineCurve.evaluate at one parameter: point and derivative."""
+    (x0, y0), (x1, y1) = piece.curve.p0, piece.curve.p1  # type: ignore[attr-defined]
+    dx, dy = x1 - x0, y1 - y0
+    return x0 + u * dx, y0 + u * dy, dx, dy
+
+
 def _point(piece: Piece, s_local: float) -> tuple[complex, complex]:
-    """Point and unit tangent at a local arc length of a piece (before chaining, s0 = 0)."""
-    u = piece.u_at(np.array([s_local]))
+    """Point and unit tangent at a local arc length of a piece (from its start: a piece of a
+    look-ahead window's prefix is chained, s0 > 0; the blocks' own pieces have s0 = 0)."""
+    if piece.kind == PieceKind.LINE:
+        x, y, dx, dy = _line_xy(piece, _line_u(piece, piece.s0_mm + s_local))
+        t = complex(dx, dy)
+        return complex(x, y), t / abs(t)
+    u = piece.u_at(np.array([piece.s0_mm + s_local]))
     d = piece.curve.evaluate(u, 1)[:, 0]
     t = complex(d[1, 0], d[1, 1])
     return complex(d[0, 0], d[0, 1]), t / abs(t)
 
 
-def _blend(a: Piece, b: Piece, cut_mm: float) -> PhQuintic:
-    p0, t0 = _point(a, a.length_mm - cut_mm)
-    p5, t1 = _point(b, cut_mm)
-    chord = abs(p5 - p0)
-    return PhQuintic.hermite(p0, p5, t0 * chord, t1 * chord)
+class _Side:
+    """One piece of a joint, as each trial of the bisection needs it: the point and tangent at
+    the cut and the programmed path between the cut and the joint (n points, or the two ends
+    of a line). Piece.u_at with the curve's offset computed once, and point, tangent and path
+    from one arc-length inversion and one evaluation (both are per element: the numbers are
+    those of separate calls)."""
 
+    def __init__(self, piece: Piece, at_end: bool, n: int = 64) -> None:
+        self.p, self.at_end, self.n = piece, at_end, n
+        if piece.kind != PieceKind.LINE:
+            self.curve_s0 = piece.curve_s0_mm
+            self.lo, self.hi = min(piece.u0, piece.u1), max(piece.u0, piece.u1)
 
-def _polyline(a: Piece, b: Piece, cut_mm: float, n: int = 64) -> np.ndarray:
-    """The programmed path the blend replaces: the end of a and the start of b (a line needs
-    only its two ends)."""
-    s_a = np.linspace(a.length_mm - cut_mm, a.length_mm, 2 if a.kind == PieceKind.LINE else n)
-    s_b = np.linspace(0.0, cut_mm, 2 if b.kind == PieceKind.LINE else n)
-    pa = a.curve.evaluate(a.u_at(s_a), 0)[0]
-    pb = b.curve.evaluate(b.u_at(s_b), 0)[0]
-    return np.vstack([pa, pb])
+    def _prime(self, s_path_mm: float) -> None:
+        """A NURBS's arc-length inverse is built where first asked, by intervals, and how the
+        intervals are grouped in one build moves its last bits (matrix products): build the
+        cut's interval first, then the span's, as separate calls for the point and the span
+        did (what u_of_s would do with the cut alone, without its evaluation)."""
+        table = getattr(self.p.curve, "arc_length_table", None)
+        if table is None:
+            return
+        local = min(max(s_path_mm - self.p.s0_mm, 0.0), self.p.length_mm)
+        s = clamp(np.array([local + self.curve_s0]), 0.0, table.total_length_mm)
+        table._inverse.ensure(s)  # noqa: SLF001
+
+    def u_at(self, s_path_mm: np.ndarray) -> np.ndarray:
+        p = self.p
+        local = clamp(s_path_mm - p.s0_mm, 0.0, p.length_mm)
+        return clamp(p.curve.u_of_s(local + self.curve_s0), self.lo, self.hi)
+
+    def trial(self, cut_mm: float) -> tuple[complex, complex, np.ndarray]:
+        """(point, unit tangent) at the cut, and the path from the cut to the joint (for the
+        end of a piece) or from the joint to the cut (for its start)."""
+        p = self.p
+        s_cut = p.length_mm - cut_mm if self.at_end else cut_mm
+        if p.kind == PieceKind.LINE:
+            pt, t = _point(p, s_cut)
+            ends = (p.length_mm - cut_mm, p.length_mm) if self.at_end else (0.0, cut_mm)
+            pts = np.array([_line_xy(p, _line_u(p, p.s0_mm + s))[:2] for s in ends])
+            return pt, t, pts
+        span = np.linspace(s_cut, p.length_mm, self.n) if self.at_end else \
+            np.linspace(0.0, cut_mm, self.n)
+        self._prime(p.s0_mm + s_cut)
+        # The cut is the first point of the end's span and the last of the start's (linspace
+        # returns its ends exactly).
+        d = p.curve.evaluate(self.u_at(p.s0_mm + span), 1)
+        k = 0 if self.at_end else -1
+        t = complex(d[1, k, 0], d[1, k, 1])
+        return complex(d[0, k, 0], d[0, k, 1]), t / abs(t), d[0]
 
 
 def deviation_mm(ph: PhQuintic, poly: np.ndarray, n: int = 65) -> float:
@@ -53,13 +110,35 @@ def deviation_mm(ph: PhQuintic, poly: np.ndarray, n: int = 65) -> float:
     return float(np.min(np.linalg.norm(pts[:, None, :] - nearest, axis=2), axis=1).max())
 
 
-def _fits(a: Piece, b: Piece, cut_mm: float, tol_mm: float) -> tuple[float, PhQuintic] | None:
-    ph = _blend(a, b, cut_mm)
-    return (cut_mm, ph) if deviation_mm(ph, _polyline(a, b, cut_mm)) <= tol_mm else None
+def _fits(a: _Side, b: _Side, cut_mm: float, tol_mm: float) -> tuple[float, PhQuintic] | None:
+    p0, t0, pa = a.trial(cut_mm)
+    p5, t1, pb = b.trial(cut_mm)
+    chord = abs(p5 - p0)
+    ph = PhQuintic.hermite(p0, p5, t0 * chord, t1 * chord)
+    return (cut_mm, ph) if deviation_mm(ph, np.vstack([pa, pb])) <= tol_mm else None
 
 
-def blend_joint(a: Piece, b: Piece, tolerance_mm: float) -> tuple[Piece, Piece, Piece] | None:
-    """(a trimmed, PH blend, b trimmed) with deviation <= tolerance, or None to stop there."""
+def _u_at(p: Piece, s_path_mm: float) -> float:
+    if p.kind == PieceKind.LINE:
+        return _line_u(p, s_path_mm)
+    return float(p.u_at(np.array([s_path_mm]))[0])
+
+
+def _trimmed(p: Piece, u0: float, u1: float) -> Piece:
+    """make_piece of the part [u0, u1] of p's curve (a line's length as LineCurve.s_of_u)."""
+    if p.kind == PieceKind.LINE:
+        length = p.curve.length_mm
+        return Piece(p.kind, p.curve, u0, u1, 0.0, u1 * length - u0 * length, p.feed_mm_s,
+                     p.line, p.corner)
+    return make_piece(p.kind, p.curve, u0, u1, 0.0, p.feed_mm_s, p.line, p.corner)
+
+
+def blend_joint(a: Piece, b: Piece, tolerance_mm: float,
+                precision: float = 0.0) -> tuple[Piece, Piece, Piece] | None:
+    """(a trimmed, PH blend, b trimmed) with deviation <= tolerance, or None to stop there.
+
+    The cut is bisected BISECTIONS times, or, with a precision, until the bracket is within
+    that share of the cut that fits (the windows of a long program: generator/repeats.py)."""
     if a.kind == PieceKind.PH or b.kind == PieceKind.PH or tolerance_mm <= 0:
         return None
     _, t0 = _point(a, a.length_mm)
@@ -67,11 +146,14 @@ def blend_joint(a: Piece, b: Piece, tolerance_mm: float) -> tuple[Piece, Piece, 
     if abs(math.atan2((t1 / t0).imag, (t1 / t0).real)) > MAX_BLEND_ANGLE_RAD:
         return None
     hi = MAX_SHARE * min(a.length_mm, b.length_mm)
-    best = _fits(a, b, hi, tolerance_mm)
+    side_a, side_b = _Side(a, True), _Side(b, False)
+    best = _fits(side_a, side_b, hi, tolerance_mm)
     lo = 0.0
     for _ in range(BISECTIONS if best is None else 0):
+        if precision and best is not None and hi - lo <= precision * lo:
+            break
         mid = 0.5 * (lo + hi)
-        trial = _fits(a, b, mid, tolerance_mm)
+        trial = _fits(side_a, side_b, mid, tolerance_mm)
         if trial is None:
             hi = mid
         else:
@@ -79,9 +161,7 @@ def blend_joint(a: Piece, b: Piece, tolerance_mm: float) -> tuple[Piece, Piece, 
     if best is None or best[0] < MIN_CUT_MM:
         return None
     cut, ph = best
-    u_a = float(a.u_at(np.array([a.length_mm - cut]))[0])
-    u_b = float(b.u_at(np.array([cut]))[0])
-    a_cut = make_piece(a.kind, a.curve, a.u0, u_a, 0.0, a.feed_mm_s, a.line, a.corner)
-    b_cut = make_piece(b.kind, b.curve, u_b, b.u1, 0.0, b.feed_mm_s, b.line, b.corner)
+    a_cut = _trimmed(a, a.u0, _u_at(a, a.s0_mm + a.length_mm - cut))
+    b_cut = _trimmed(b, _u_at(b, b.s0_mm + cut), b.u1)
     blend = Piece(PieceKind.PH, ph, 0.0, 1.0, 0.0, ph.length_mm, b.feed_mm_s, b.line)
     return a_cut, blend, b_cut

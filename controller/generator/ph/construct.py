@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -182,15 +183,44 @@ def _tangent(piece: Piece, at_end: bool) -> np.ndarray:
     return d / max(float(np.hypot(d[0], d[1])), 1e-300)
 
 
+# A joint's blend by what it depends on: both pieces (curve, parameters, offset, length) and the
+# tolerance. The dynamics rounds rebuild the path, mostly with the same joints: a round then
+# reuses the blends (the same objects, so the same numbers) instead of fitting them again.
+Blended = tuple[Piece, Piece, Piece] | None
+BlendCache = dict[tuple, Blended]
+
+
+def _piece_key(p: Piece) -> tuple:
+    return (p.kind, p.curve, p.u0, p.u1, p.s0_mm, p.length_mm, p.feed_mm_s, p.line, p.corner)
+
+
+def _blend(a: Piece, b: Piece, tol: float, cache: BlendCache | None,
+           repeats: Any = None) -> Blended:
+    """blend_joint, remembered by the run (cache) and, for a long program's windows, by the
+    geometry of the joint across windows (repeats: generator/repeats.py)."""
+    if cache is None:
+        return blend_joint(a, b, tol)
+    key = (_piece_key(a), _piece_key(b), tol)
+    if key not in cache:
+        if repeats is None:
+            cache[key] = blend_joint(a, b, tol)
+        else:
+            cache[key] = repeats.blend(a, b, tol,
+                                       lambda: blend_joint(a, b, tol, repeats.precision))
+    return cache[key]
+
+
 def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
                error_limit_mm: float, use_ph: bool = True,
                cache: FitCache | None = None, prefix: tuple[Piece, ...] = (),
-               prefix_tolerance_mm: float | None = None) -> Geometry:
+               prefix_tolerance_mm: float | None = None,
+               blend_cache: BlendCache | None = None, repeats: Any = None) -> Geometry:
     """Module 2: the run's path, corner zones replaced by PH quintics within error_limit_mm.
 
     Joints between blocks whose tangents turn by more than SMOOTH_JOINT_RAD are G1 corners: a
     PH quintic blend within the block's tolerance (gen_blend), else an exact stop (feed zero).
     A prefix is geometry already decided by the previous look-ahead window; the blocks follow it.
+    repeats, for the windows of a long program, shares blends across them (repeats.py).
     """
     cache = {} if cache is None else cache
     pieces: list[Piece] = list(prefix)
@@ -209,7 +239,7 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
         if pieces and joint_angle_rad(_tangent(pieces[-1], True), _tangent(ps[0], False)) \
                 > SMOOTH_JOINT_RAD:
             tol = curves[i - 1].blend_tolerance_mm if i > 0 else prefix_tolerance_mm
-            blended = blend_joint(pieces[-1], ps[0], tol) if tol else None
+            blended = _blend(pieces[-1], ps[0], tol, blend_cache, repeats) if tol else None
             if blended is None:
                 stops.append(len(pieces))
             else:
