@@ -243,7 +243,7 @@ class MotionController:
         before = self._before_send()
         out, used = self.retimer.take(self.held, limit, max(want, 0),
                                       land=pause is not None or final)
-        consumed, self.held = self.held[:used], self.held[used:]
+        consumed, self.held = self.held[:used].copy(), self.held[used:]  # (journal: a copy)
         whole = self.retimer.frac == 0.0
         at_pause = pause is not None and used == pause + 1 and whole
         at_hold = self.retimer.at_rest and not at_pause

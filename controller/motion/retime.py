@@ -172,7 +172,8 @@ class Retimer:
         whole = int(math.floor(end + 1e-12))
         passed = max(0, whole - (len(self.back) - 1))
         self.frac = max(0.0, end - whole) if end - whole > 1e-12 else 0.0
-        self.back = base[max(0, whole - SERVO_MEMORY + 1): whole + 1]
+        self.back = base[max(0, whole - SERVO_MEMORY + 1): whole + 1].copy()  # not a view:
+        # the journal of sends keeps it, and a view would keep all of `base` alive
         self.rows_passed += passed
         return out, passed
 
