@@ -111,6 +111,15 @@ class Drive(ABC):
         self._require_open()
         return self._read_position()
 
+    def commanded_xyz_mm(self) -> tuple[float, float, float]:
+        """Where the step counters say the machine stands, as (x, y, z) in mm (0 for an axis
+        the machine lacks): where the next program starts."""
+        cmd, _ = self.position_counts()
+        xyz = dict.fromkeys("xyz", 0.0)
+        for axis, counts in zip(self.config.axes, cmd, strict=True):
+            xyz[axis.name] = float(counts) * axis.pulse_mm
+        return xyz["x"], xyz["y"], xyz["z"]
+
     def status(self) -> CardStatus:
         self._require_open()
         return self._read_status()

@@ -66,7 +66,7 @@ def run_from_line(args: argparse.Namespace, config: MachineConfig, offsets: Offs
     try:
         if getattr(args, "home", False):
             home_all(drive, config)
-        start = _position(drive, config)
+        start = drive.commanded_xyz_mm()
         if args.from_line is None:
             check_program(args.program, config, start_mm=start, offsets=offsets)
             return _run(seq, args.program, config, replace(
@@ -99,14 +99,6 @@ def home_all(drive: Drive, config: MachineConfig) -> None:
         names = ", ".join(config.axes[i].name.upper() for i in group)
         print(f"cncctl: homing {names}", file=sys.stderr, flush=True)
         drive.home(group)
-
-
-def _position(drive: Drive, config: MachineConfig) -> tuple[float, float, float]:
-    cmd, _ = drive.position_counts()
-    here = [0.0, 0.0, 0.0]
-    for axis, counts in zip(config.axes, cmd, strict=True):
-        here["xyz".index(axis.name)] = float(counts) * axis.pulse_mm
-    return here[0], here[1], here[2]
 
 
 def _run(seq: Sequence, path: str, config: MachineConfig, options: RuntimeOptions) -> Any:

@@ -220,11 +220,7 @@ class Machine(OperatorCommands):
 
     def _start_mm(self) -> tuple[float, float, float]:
         """Where the machine stands (its step counters): the next program starts there."""
-        cmd, _ = self.drive.position_counts()
-        xyz = dict.fromkeys("xyz", 0.0)
-        for axis, counts in zip(self.config.axes, cmd, strict=True):
-            xyz[axis.name] = float(counts) * axis.pulse_mm
-        return xyz["x"], xyz["y"], xyz["z"]
+        return self.drive.commanded_xyz_mm()
 
     def _position_mm(self) -> dict[str, float] | None:
         try:
