@@ -18,6 +18,7 @@ from controller.operator.client import (
     DaemonUnavailable,
     default_socket_path,
 )
+from controller.operator.run_remote import RemoteOperator
 
 EXIT_REFUSED = 2
 EXIT_NO_DAEMON = 3
@@ -162,18 +163,10 @@ def _stop_on_enter(socket_path: str) -> None:
         try:
             fd = sys.stdin.fileno()
             if os.read(fd, 1):
-                _abort(socket_path)
+                RemoteOperator(socket_path).request_abort()
         except (OSError, ValueError):
             pass
     threading.Thread(target=wait, daemon=True).start()
-
-
-def _abort(socket_path: str) -> None:
-    try:
-        with DaemonClient(socket_path) as other:
-            other.request("abort")
-    except (DaemonError, DaemonUnavailable):
-        pass
 
 
 def _follow_job(client: DaemonClient) -> int:
@@ -186,7 +179,7 @@ def _follow_job(client: DaemonClient) -> int:
                                            else "") + (f" at {where}" if where else ""))
                 return 0 if kind in ("done", "aborted") else EXIT_REFUSED
     except KeyboardInterrupt:
-        _abort(client.path)
+        RemoteOperator(client.path).request_abort()
         return _follow_job(client)
     return EXIT_REFUSED
 

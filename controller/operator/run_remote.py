@@ -85,15 +85,13 @@ class RemoteOperator:
     def set_feed_override(self, percent: float) -> None:
         self._ask("feed", percent=percent)
 
+    def request_abort(self) -> None:
+        self._ask("abort")
+
 
 def _abort_on(socket_path: str) -> Any:
     def handler(signum: int, frame: Any) -> None:
-        # On a second connection: the first one is busy reading events.
-        try:
-            with DaemonClient(socket_path) as other:
-                other.request("abort")
-        except (DaemonError, DaemonUnavailable):
-            pass
+        RemoteOperator(socket_path).request_abort()
     return handler
 
 
