@@ -5,9 +5,11 @@ The plant's poles are moved by +-10 % and +-20 % (bandwidth off, DC gain kept), 
 feed-forward lags c1, c2 scaled by +-10 % and +-20 % (`mismatched` in
 controller/generator/dynamics/servo.py; the sim card runs the same plant with the drive
 options plant_pole_pct and plant_gain_pct). Each reference is planned once on the nominal model:
-ours by `simulate`, Klipper and grbl at the acceleration tuned for the nominal model at 1 um
-chords (bench/peers.py). Reported: the true contour error (distance of the plant's actual
-position from the programmed path, settling included), which a machine would measure.
+ours by `simulate` (pre-compensated: the frames sent lead the path by the nominal model's lag,
+and the plant is not that model), Klipper and grbl at the acceleration tuned for the nominal
+model at 1 um chords (bench/peers.py). Reported: the true contour error (distance of the
+plant's actual position from the programmed path, settling included), which a machine would
+measure.
 
     python bench/mismatch.py [--programs nc_programs/naca2415.nc nc_programs/butterfly.nc]
 """
@@ -22,7 +24,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import peers  # noqa: E402
 
-from controller.config import load_config  # noqa: E402
+from controller.config import MachineConfig, load_config  # noqa: E402
 from controller.generator.dynamics.prediction import planning_limit_mm  # noqa: E402
 from controller.generator.dynamics.servo import mismatched_config  # noqa: E402
 from controller.interpreter.program import read_program  # noqa: E402
@@ -32,15 +34,21 @@ REPO = HERE.parent
 CASES = [(0, 0), (-20, 0), (-10, 0), (10, 0), (20, 0), (0, -20), (0, -10), (0, 10), (0, 20)]
 
 
-def references(program: str) -> dict[str, tuple]:
-    """name -> (reference (N, 2), start, motion s): ours, and the peers tuned on the model."""
-    config = load_config()
+def references(program: str, config: MachineConfig) -> tuple[dict[str, tuple], object]:
+    """name -> (frames sent (N, 2), start, motion s): ours (as configured and the other way,
+    pre-compensated or not), and the peers tuned on the model."""
     ip = config.interpolator
     limit_um = planning_limit_mm(config) * 1e3
     blocks = list(read_program(program, config))
     path = peers.PathDistance(peers.path_polyline(blocks))
-    traj = simulate(blocks, config, "ph-lookahead")
-    out = {"ours": (traj.ref_mm[:, :2], peers.np.zeros(2), len(traj.t_s) * config.sample_period_s)}
+    out = {}
+    origin = peers.np.zeros(2)
+    for name, cfg in peers.ours_variants(config):
+        traj = simulate(blocks, cfg, "ph-lookahead")
+        frames = (peers.compensated(traj.ref_mm, origin, cfg)
+                  if cfg.interpolator.servo_precompensation else traj.ref_mm[:, :2])
+        out[name.removeprefix("ours: ph-lookahead, ")] = (
+            frames, origin, len(traj.t_s) * cfg.sample_period_s)
     pts = peers.flatten(blocks, 1e-3)
     T = config.sample_period_s  # noqa: N806
     planners = {
@@ -63,10 +71,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--programs", nargs="+", default=[str(REPO / "nc_programs/naca2415.nc"),
                                                       str(REPO / "nc_programs/butterfly.nc")])
+    ap.add_argument("--config", help="machine configuration (default: the built-in one)")
     args = ap.parse_args()
-    nominal = load_config()
+    nominal = load_config(args.config)
     for program in args.programs:
-        refs, path = references(program)
+        refs, path = references(program, nominal)
         names = list(refs)
         print(f"`{Path(program).name}`: true contour error max (um) on a mismatched plant "
               f"(limit {nominal.interpolator.contour_error_limit_mm * 1e3:g} um)\n")

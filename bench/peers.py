@@ -85,7 +85,8 @@ import argparse
 import math
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -103,9 +104,10 @@ from controller.generator.dynamics.path_distance import (  # noqa: E402
     path_polyline,
     sample_curve,
 )
+from controller.generator.dynamics.precompensation import Precompensator  # noqa: E402
 from controller.generator.dynamics.prediction import (  # noqa: E402
-    axis_servos,
     planning_limit_mm,
+    plant_servos,
 )
 from controller.generator.dynamics.servo import contour_error_mm, tracking_error_mm  # noqa: E402
 from controller.generator.feed.time_bound import time_optimal_bound_s  # noqa: E402
@@ -400,25 +402,41 @@ class Measured:
     true_at_s: float  # time of the true max (after motion_s: in the settling)
 
 
-def run_servo(ref_mm: np.ndarray, start_mm: np.ndarray, config: MachineConfig
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Actual positions (with SETTLE_S of held reference), axis errors and the padded reference."""
+def compensated(ref_mm: np.ndarray, start_mm: np.ndarray, config: MachineConfig) -> np.ndarray:
+    """The frames the motion loop sends for a wanted reference with servo_precompensation: led
+    by the model's lag, then the settling of that lead at the end point."""
+    pc = Precompensator([a.servo for a in config.axes[:2]], config.sample_period_s, start_mm[:2])
+    return np.vstack([pc.push(ref_mm[:, :2]), pc.settling_rows()])
+
+
+def run_servo(frames_mm: np.ndarray, start_mm: np.ndarray, config: MachineConfig
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Actual positions of the plant (Table II loops, config's servo) driven by these frames
+    from rest at start_mm, with SETTLE_S of the last frame held after them; and the held
+    frames."""
     T = config.sample_period_s  # noqa: N806
     settle = int(round(SETTLE_S / T))
-    pos = np.vstack([start_mm[None, :2], ref_mm[:, :2], np.repeat(ref_mm[-1:, :2], settle, 0)])
+    pos = np.vstack([start_mm[None, :2], frames_mm[:, :2],
+                     np.repeat(frames_mm[-1:, :2], settle, 0)])
     v = np.diff(pos, axis=0) / T
-    sx, sy = axis_servos(config)
+    sx, sy = plant_servos(config)
     e = np.column_stack([tracking_error_mm(sx, v[:, 0]), tracking_error_mm(sy, v[:, 1])])
-    return pos[1:] - e, e, pos[1:]
+    return pos[1:] - e, pos[1:]
 
 
 def measure(ref_mm: np.ndarray, start_mm: np.ndarray, motion_s: float, path: PathDistance,
-            config: MachineConfig, eq28_mm: np.ndarray | None = None) -> Measured:
-    act, e, pos = run_servo(ref_mm, start_mm, config)
+            config: MachineConfig, eq28_mm: np.ndarray | None = None,
+            frames_mm: np.ndarray | None = None) -> Measured:
+    """The true error of the plant driven by frames_mm (default: the reference itself), and
+    eq. 28 of the wanted reference against that actual position."""
+    frames = ref_mm[:, :2] if frames_mm is None else frames_mm
+    act, _ = run_servo(frames, start_mm, config)
     fp = path.measure(act)
     k = int(np.argmax(fp.distance_mm))
     if eq28_mm is None:
-        eq28_mm = contour_error_mm(e[:, 0], e[:, 1], tangent_angles(pos))
+        wanted = np.vstack([ref_mm[:, :2], np.repeat(ref_mm[-1:, :2], len(act) - len(ref_mm), 0)])
+        e = wanted - act
+        eq28_mm = contour_error_mm(e[:, 0], e[:, 1], tangent_angles(wanted))
     return Measured(motion_s, float(fp.distance_mm[k] * 1e3), float(np.abs(eq28_mm).max() * 1e3),
                     (float(act[k, 0]), float(act[k, 1])), (k + 1) * config.sample_period_s)
 
@@ -483,8 +501,11 @@ class Row:
 
 def bench_program(program: str, config: MachineConfig, tolerances_um: list[float],
                   log: Callable[[str], None], grbl_segments: bool = True,
-                  grbl_buffer: int = GRBL_BLOCK_BUFFER_SIZE - 1) -> tuple[list[Row], float]:
-    """Ours, then Klipper and grbl at their default and tuned accelerations per tolerance."""
+                  grbl_buffer: int = GRBL_BLOCK_BUFFER_SIZE - 1, ablation: bool = True
+                  ) -> tuple[list[Row], float]:
+    """Ours (as configured, and the paper's method without pre-compensation), then Klipper and
+    grbl at their default and tuned accelerations per tolerance; with ablation, each peer also
+    tuned with our servo pre-compensation on its reference (what the feed-forward alone buys)."""
     ip = config.interpolator
     # Equal accuracy: each peer is tuned to the error ours plans for, eps_max less the margin
     # that pulse and encoder quantisation take on a machine (ours and theirs alike).
@@ -493,28 +514,35 @@ def bench_program(program: str, config: MachineConfig, tolerances_um: list[float
     blocks = list(read_program(program, config))
     path = PathDistance(path_polyline(blocks))
     origin = np.zeros(2)
-    traj = simulate(blocks, config, "ph-lookahead")
-    eq28 = traj.contour_mm[traj.contouring]
     # simulate() starts the servo at X0 Y0 at rest, as run_servo does (the programs start there).
-    ours = measure(traj.ref_mm[:, :2], origin, len(traj.t_s) * config.sample_period_s, path,
-                   config, eq28)
-    rows = [Row("ours: ph-lookahead", None, amax, ours)]
-    log(f"{Path(program).name}: ours {ours}")
+    rows = []
+    for name, cfg in ours_variants(config):
+        traj = simulate(blocks, cfg, "ph-lookahead")
+        frames = (compensated(traj.ref_mm, origin, cfg)
+                  if cfg.interpolator.servo_precompensation else None)
+        m = measure(traj.ref_mm[:, :2], origin, len(traj.t_s) * cfg.sample_period_s, path, cfg,
+                    traj.contour_mm[traj.contouring], frames)
+        rows.append(Row(name, None, amax, m))
+        log(f"{Path(program).name}: {name} {m}")
     for tol_um in tolerances_um:
         pts = flatten(blocks, tol_um * 1e-3)
         start = pts[0]
         log(f"  chords at {tol_um} um: {len(pts) - 1} moves")
 
-        def k_eval(a: float, pts: np.ndarray = pts, start: np.ndarray = start) -> Measured:
+        def k_eval(a: float, pts: np.ndarray = pts, start: np.ndarray = start,
+                   comp: bool = False) -> Measured:
             mv = klipper_plan(pts, vmax, vmax, a)
-            return measure(sample_moves(mv, config.sample_period_s), start, mv.duration_s, path,
-                           config)
+            ref = sample_moves(mv, config.sample_period_s)
+            return measure(ref, start, mv.duration_s, path, config,
+                           frames_mm=compensated(ref, start, config) if comp else None)
 
-        def g_eval(a: float, pts: np.ndarray = pts, start: np.ndarray = start) -> Measured:
+        def g_eval(a: float, pts: np.ndarray = pts, start: np.ndarray = start,
+                   comp: bool = False) -> Measured:
             mv = grbl_plan(pts, vmax, vmax, a, buffer_blocks=grbl_buffer)
             sampler = sample_grbl_segments if grbl_segments else sample_moves
-            return measure(sampler(mv, config.sample_period_s), start, mv.duration_s, path,
-                           config)
+            ref = sampler(mv, config.sample_period_s)
+            return measure(ref, start, mv.duration_s, path, config,
+                           frames_mm=compensated(ref, start, config) if comp else None)
 
         for name, ev in (("Klipper", k_eval), ("grbl", g_eval)):
             default = ev(amax)
@@ -522,7 +550,23 @@ def bench_program(program: str, config: MachineConfig, tolerances_um: list[float
             a_t, tuned = tune(ev, limit_um, amax)
             rows.append(Row(f"{name} tuned", tol_um, a_t if tuned else None, tuned))
             log(f"  {name}: default {default}; tuned A {a_t:.0f}: {tuned}")
+            if ablation:
+                a_c, comp = tune(partial(ev, comp=True), limit_um, amax)
+                rows.append(Row(f"{name} + our pre-compensation, tuned", tol_um,
+                                a_c if comp else None, comp))
+                log(f"  {name} + pre-compensation: tuned A {a_c:.0f}: {comp}")
     return rows, bound_s(program, config)
+
+
+def ours_variants(config: MachineConfig) -> list[tuple[str, MachineConfig]]:
+    """Ours as configured first (the row the ratios are taken against), then the other way."""
+    ip = config.interpolator
+    other = replace(config, interpolator=replace(
+        ip, servo_precompensation=not ip.servo_precompensation))
+    label = {True: "ours: ph-lookahead, pre-compensated",
+             False: "ours: ph-lookahead, paper (no pre-compensation)"}
+    return [(label[ip.servo_precompensation], config),
+            (label[not ip.servo_precompensation], other)]
 
 
 def table(program: str, rows: list[Row], bound: float, markdown: bool) -> str:
@@ -601,10 +645,13 @@ def main(argv: list[str] | None = None) -> int:
                     help="sample grbl on its ideal trapezoids, not its 10 ms stepper segments")
     ap.add_argument("--grbl-buffer", type=int, default=GRBL_BLOCK_BUFFER_SIZE - 1,
                     help="blocks grbl plans over (grbl 1.1: 15)")
+    ap.add_argument("--no-ablation", action="store_true",
+                    help="leave out the peers run with our servo pre-compensation")
+    ap.add_argument("--config", help="machine configuration (default: the built-in one)")
     ap.add_argument("--verify-klipper", metavar="TOOLHEAD_PY",
                     help="compare klipper_plan with upstream klippy/toolhead.py and exit")
     args = ap.parse_args(argv)
-    config = load_config()
+    config = load_config(args.config)
     if args.verify_klipper:
         return verify_klipper(Path(args.verify_klipper), args.programs, config)
 
@@ -617,7 +664,7 @@ def main(argv: list[str] | None = None) -> int:
           f"margin); settling {SETTLE_S} s included.\n")
     for program in args.programs:
         rows, bound = bench_program(program, config, args.tolerances_um, log,
-                                    not args.grbl_ideal, args.grbl_buffer)
+                                    not args.grbl_ideal, args.grbl_buffer, not args.no_ablation)
         print(table(program, rows, bound, args.markdown) + "\n")
     return 0
 

@@ -78,6 +78,10 @@ class InterpolatorConfig:
     ph_error_limit_mm: float
     rapid_feed_mm_s: float
     max_dynamics_rounds: int
+    # Send X and Y a reference that leads the path by the servo model's lag, so the model's
+    # actual position follows the path itself (controller/generator/dynamics/precompensation.py).
+    # Off is the paper's method (Table IV); on, the contour limit rarely binds.
+    servo_precompensation: bool = False
 
     @property
     def kappa_threshold_per_mm(self) -> float:
@@ -292,6 +296,7 @@ def _read_interpolator(sec: _Section) -> InterpolatorConfig:
         ph_error_limit_mm=sec.float("ph_error_limit_mm", above=0.0, maxval=1.0),
         rapid_feed_mm_s=sec.float("rapid_feed_mm_min", above=0.0, maxval=600000.0) / 60.0,
         max_dynamics_rounds=sec.int("max_dynamics_rounds", 20, minval=1, maxval=1000),
+        servo_precompensation=sec.bool("servo_precompensation", False),
     )
     sec.finish()
     return cfg
@@ -357,6 +362,12 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         allow_unhomed=top.bool("allow_unhomed", False),
     )
     top.finish()
+    if cfg.interpolator.servo_precompensation:
+        for axis in axes[:2]:
+            if abs(axis.servo.a0 - axis.servo.b0) > 1e-9 * axis.servo.a0:
+                raise ConfigError(path, "interpolator.servo_precompensation",
+                                  f"needs a0 = b0 on axes.{axis.name}.servo (a loop without "
+                                  "steady position error)")
     return cfg
 
 

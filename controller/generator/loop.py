@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from enum import StrEnum
@@ -116,7 +117,10 @@ def _feed_input(config: MachineConfig, settings: RunSettings, reductions: tuple[
                 stop_accels: dict[int, float], geo: Geometry,
                 model: BrakingModel | None) -> FeedInput:
     ip = config.interpolator
-    budget = INITIAL_BUDGET_SHARE * planning_limit_mm(config) / acceleration_gain_s2(config)
+    c2_s2 = acceleration_gain_s2(config)
+    # Pre-compensated, c2 is about zero: the contour limit sets no normal-acceleration budget.
+    budget = (INITIAL_BUDGET_SHARE * planning_limit_mm(config) / c2_s2 if c2_s2 > 1e-12
+              else math.inf)
     # Stops are known by their order: a widened corner zone moves them along the path.
     stops = _stops_mm(geo)
     return FeedInput(ip.max_feed_mm_s, ip.max_accel_mm_s2, config.sample_period_s,

@@ -8,6 +8,7 @@ from collections.abc import Callable
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.generator.dynamics.precompensation import Precompensator
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter
@@ -15,7 +16,7 @@ from controller.motion.recall import SendJournal, Sent, restore_retimer, retimer
 from controller.motion.result import build_result
 from controller.motion.retime import Retimer
 from controller.motion.source import RefSource, SourceState, pause_index, row_lines
-from controller.motion.stopping import stop_along_path
+from controller.motion.stopping import stop_along_path, with_lead_settled
 from controller.motion.types import (
     MotionProgress,
     MotionResult,
@@ -131,6 +132,9 @@ class MotionController:
         self.seq0: int | None = None  # the drive's number of this run's first frame
         self.journal = SendJournal()  # what each send changed (a hold takes frames back)
         self.recalled_frames = 0
+        self.precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
+                                        for a in self.config.axes], self.period_s, self.last_mm)
+                        if self.config.interpolator.servo_precompensation else None)
 
     def _cycle(self) -> None:
         try:
@@ -261,7 +265,8 @@ class MotionController:
 
     def _before_send(self) -> Sent:
         return Sent(0, self.held[:0], retimer_state(self.retimer), self.prev_mm, self.last_mm,
-                    self.pulses.counts, self.hist.count)
+                    self.pulses.counts, self.hist.count,
+                    None if self.precomp is None else self.precomp.state())
 
     def _take_back(self, level: int) -> None:
         """A hold or a lower override: take back the frames queued beyond the low-water mark
@@ -277,6 +282,8 @@ class MotionController:
         self.prev_mm, self.last_mm = oldest.prev_mm, oldest.last_mm
         self.pulses.counts = oldest.counts
         self.hist.count = oldest.hist_count
+        if self.precomp is not None:
+            self.precomp.restore(oldest.precomp)
         self.sent -= total
         self.held = np.vstack([e.consumed for e in reversed(undo)] + [self.held])
         self.journal.drop(len(undo))
@@ -301,7 +308,13 @@ class MotionController:
         return False
 
     def _send(self, rows: np.ndarray, end: bool, pause: bool = False) -> None:
+        """Send wanted rows (position, feed, line): as they are, or pre-compensated, then with
+        the frames at the standstill that let the lead die away before a stream ends."""
         pos = rows[:, : self.n]
+        cmd = pos if self.precomp is None else self.precomp.push(pos)
+        if self.precomp is not None and (end or pause):
+            rows, cmd = with_lead_settled(self.precomp, rows, cmd, self.last_mm, self.line)
+            pos = rows[:, : self.n]
         if len(pos):
             feed = rows[:, self.n] if rows.shape[1] > self.n else np.zeros(len(pos))
             line = row_lines(rows) if rows.shape[1] > self.n + 1 else np.full(len(pos),
@@ -311,7 +324,7 @@ class MotionController:
             self.last_mm = pos[-1].copy()
             self.state = MotionState.RUNNING if self.state is MotionState.WAITING else self.state
         if len(pos) or end or pause:
-            self.drive.write_frames(self.pulses.frames(pos), end_of_stream=end or pause)
+            self.drive.write_frames(self.pulses.frames(cmd), end_of_stream=end or pause)
         self.sent += len(pos)
         self.sent_eos = self.sent_eos or end
         self.pausing = self.pausing or pause

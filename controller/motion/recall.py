@@ -24,6 +24,7 @@ class Sent:
     last_mm: np.ndarray
     counts: np.ndarray  # the pulse counter's
     hist_count: int
+    precomp: Any = None  # the pre-compensator's state (None: not compensated)
 
 
 class SendJournal:

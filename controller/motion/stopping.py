@@ -1,10 +1,13 @@
-"""Controlled stop along the path: quintic deceleration re-timed over buffered reference points."""
+"""Controlled stop along the path: quintic deceleration re-timed over buffered reference points;
+and, pre-compensated, the frames that let the lead die away at a standstill."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+
+from controller.generator.dynamics.precompensation import Precompensator
 
 REST_SPEED_MM_S = 0.05  # the reference is "at rest" below this (5 % of a 1 um pulse per ms)
 
@@ -78,3 +81,19 @@ def stop_along_path(prev_mm: np.ndarray, last_mm: np.ndarray, ahead_mm: np.ndarr
     if s.size == 0:
         return np.zeros((0, last_mm.size))
     return _along_polyline(pts[1:], s, _direction(pts))
+
+
+def with_lead_settled(precomp: Precompensator, rows: np.ndarray, frames: np.ndarray,
+                      last_mm: np.ndarray, line: int) -> tuple[np.ndarray, np.ndarray]:
+    """Wanted rows (position, then feed and line columns if any) and their frames, followed
+    by the compensator's frames at the standstill (rows repeating the wanted end point, feed 0)
+    until its lead has died away: a stream must not end a lead away from the path."""
+    tail = precomp.settling_rows()
+    if not len(tail):
+        return rows, frames
+    n, width = len(last_mm), rows.shape[1]
+    last = rows[-1] if len(rows) else np.r_[last_mm, 0.0, float(line)][:width]
+    still = np.repeat(last[None, :], len(tail), axis=0)
+    if width > n:
+        still[:, n] = 0.0  # at rest (feed column)
+    return np.vstack([rows, still]), np.vstack([frames, tail])

@@ -8,11 +8,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.generator.dynamics.precompensation import residual_servo
 from controller.generator.dynamics.servo import (
     DiscreteServo,
     contour_error_mm,
     discretise,
     filter_block,
+    small_s_gains,
 )
 
 SETTLE_S = 0.06  # simulate this long at rest after the run so the tail error is seen too
@@ -47,16 +49,30 @@ def planning_limit_mm(config: MachineConfig) -> float:
     return config.interpolator.contour_error_limit_mm - math.sqrt(2.0) * pulse_mm
 
 
-def axis_servos(config: MachineConfig) -> tuple[DiscreteServo, DiscreteServo]:
+def plant_servos(config: MachineConfig) -> tuple[DiscreteServo, DiscreteServo]:
+    """E/V of the X and Y loops themselves: reference sent -> tracking error."""
     T = config.sample_period_s  # noqa: N806
     return discretise(config.axis("x").servo, T), discretise(config.axis("y").servo, T)
+
+
+def axis_servos(config: MachineConfig) -> tuple[DiscreteServo, DiscreteServo]:
+    """What the generator predicts with: wanted path -> its distance from the model's actual
+    position, per axis. The plain loops, or with servo_precompensation the residual of the
+    compensated loops (the reference sent then leads the wanted path)."""
+    if not config.interpolator.servo_precompensation:
+        return plant_servos(config)
+    T = config.sample_period_s  # noqa: N806
+    return residual_servo(config.axis("x").servo, T), residual_servo(config.axis("y").servo, T)
 
 
 def acceleration_gain_s2(config: MachineConfig) -> float:
     """c2 of the small-s expansion e ~ c1 v + c2 a (ALGORITHMS.md 3): the worse of X and Y.
 
     The contour error on a curve is about c2 * kappa * v^2, so eps_max / c2 is the normal
-    acceleration the servo loop can follow within the contour limit."""
+    acceleration the servo loop can follow within the contour limit. Pre-compensated, c2 is
+    that of the residual (zero by construction, see precompensation.compensation_filter)."""
+    if config.interpolator.servo_precompensation:
+        return max(abs(small_s_gains(s)[1]) for s in axis_servos(config))
     gains = []
     for name in ("x", "y"):
         p = config.axis(name).servo

@@ -138,6 +138,15 @@ def filter_block(servo: DiscreteServo, u: np.ndarray, state: np.ndarray) -> tupl
     return out, x
 
 
+def small_s_gains(servo: DiscreteServo) -> tuple[float, float]:
+    """(c1, c2) of the filter's small-s expansion e ~ c1 v + c2 dv/dt (z^-1 = exp(-sT))."""
+    b, a = servo.b, servo.a
+    b_1, a_1 = float(b.sum()), float(a.sum())
+    db = float(np.arange(len(b)) @ b)
+    da = float(np.arange(len(a)) @ a)
+    return b_1 / a_1, -servo.sample_period_s * (db * a_1 - b_1 * da) / a_1**2
+
+
 @lru_cache(maxsize=64)
 def discretise(p: ServoParams, sample_period_s: float) -> DiscreteServo:
     """Zero-order-hold discretisation of E/V at T (cached: the generator asks every round)."""
