@@ -5,13 +5,16 @@ The bound comes from bench/time_bound.py (independent B-spline evaluation, forwa
 the real-time factor is trajectory seconds per CPU second of planning (all four modules), from
 cold (the planner's memo emptied) each time; this shared machine's speed varies by up to 1.5x from
 minute to minute, so the ph-lookahead planning is repeated (--repeats) and the median and the
-best are printed.
+best are printed. Table IV is the paper's method, so it runs without servo pre-compensation
+whatever the config says; the pre-compensated ph-lookahead (the shipped default) is printed after
+each table with its own ratio to the bound and errors.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -75,7 +78,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--markdown", action="store_true")
     ap.add_argument("--repeats", type=int, default=9, help="cold ph-lookahead plans timed")
     args = ap.parse_args(argv)
-    config = load_config()
+    configured = load_config()
+    config = replace(configured, interpolator=replace(configured.interpolator,
+                                                      servo_precompensation=False))
+    compensated = replace(config, interpolator=replace(config.interpolator,
+                                                       servo_precompensation=True))
     for program in args.programs:
         results = [_cold_report(program, config, a.value) for a in Algorithm]
         if args.markdown:
@@ -95,7 +102,13 @@ def main(argv: list[str] | None = None) -> int:
               f"dynamics rounds {ph['dynamics_rounds']}; planning CPU over {len(cpu)} cold runs: "
               f"median {median * 1e3:.1f} ms (real-time factor "
               f"{ph['motion_time_s'] / median:.0f}), best {cpu[0] * 1e3:.1f} ms (real-time "
-              f"factor {ph['motion_time_s'] / cpu[0]:.0f})\n")
+              f"factor {ph['motion_time_s'] / cpu[0]:.0f})")
+        pc = _cold_report(program, compensated, "ph-lookahead")
+        print(f"ph-lookahead pre-compensated: {pc['motion_time_s']:.4f} s, ratio "
+              f"{pc['motion_time_s'] / bound:.4f}; contour max eq. 28 "
+              f"{pc['contour_error_um']['max']:.2f} um, true "
+              f"{pc['contour_error_true_um']['max']:.2f} um; dynamics rounds "
+              f"{pc['dynamics_rounds']}; planning CPU {pc['planning_cpu_s'] * 1e3:.1f} ms\n")
     return 0
 
 

@@ -12,7 +12,7 @@ from controller.generator.dynamics.precompensation import Precompensator
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter
-from controller.motion.recall import SendJournal, Sent, restore_retimer, retimer_state
+from controller.motion.recall import SendJournal, Sent, retimer_state, take_back
 from controller.motion.result import build_result
 from controller.motion.retime import Retimer
 from controller.motion.source import RefSource, SourceState, pause_index, row_lines
@@ -132,6 +132,7 @@ class MotionController:
         self.seq0: int | None = None  # the drive's number of this run's first frame
         self.journal = SendJournal()  # what each send changed (a hold takes frames back)
         self.recalled_frames = 0
+        self.pending_tail: tuple[np.ndarray, np.ndarray, bool, bool] | None = None
         self.precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
                                         for a in self.config.axes], self.period_s, self.last_mm)
                         if self.config.interpolator.servo_precompensation else None)
@@ -151,7 +152,9 @@ class MotionController:
             return
         self._supervise(fb)
         self._operator_requests(level)
-        if self.pausing and self.outcome is None:
+        if self.pending_tail is not None:
+            self._send_tail(level)  # a stream's last frames, the lead settling: nothing first
+        elif self.pausing and self.outcome is None:
             self._pause_step(level)
         elif self.state in (MotionState.WAITING, MotionState.RUNNING) and not self.sent_eos:
             self._refill(level)
@@ -211,7 +214,7 @@ class MotionController:
                                          if self._override_allowed() else 1.0)
         if rate < before and self.state is MotionState.RUNNING and not self.pausing \
                 and self.outcome is None:
-            self._take_back(level)
+            take_back(self, level)
         self.retimer.set_target(rate)
 
     # -- streaming ------------------------------------------------------------------------
@@ -268,27 +271,6 @@ class MotionController:
                     self.pulses.counts, self.hist.count,
                     None if self.precomp is None else self.precomp.state())
 
-    def _take_back(self, level: int) -> None:
-        """A hold or a lower override: take back the frames queued beyond the low-water mark
-        (where the drive can), undoing their sends, so the new ramp starts there instead of
-        behind the whole FIFO. The ramp is planned from the state restored."""
-        keep = self._frames(self.settings.low_water_ms)
-        undo = self.journal.newest_within(level - keep)
-        total = sum(e.frames for e in undo)
-        if not undo or self.drive.recall_frames(total, keep) != total:
-            return
-        oldest = undo[-1]
-        restore_retimer(self.retimer, oldest.retimer)
-        self.prev_mm, self.last_mm = oldest.prev_mm, oldest.last_mm
-        self.pulses.counts = oldest.counts
-        self.hist.count = oldest.hist_count
-        if self.precomp is not None:
-            self.precomp.restore(oldest.precomp)
-        self.sent -= total
-        self.held = np.vstack([e.consumed for e in reversed(undo)] + [self.held])
-        self.journal.drop(len(undo))
-        self.recalled_frames += total
-
     def _read_ahead(self, max_rows: int = 4096) -> None:
         """More held rows while re-timing: a ramp looks at the rows it will cross."""
         if len(self.held) < max_rows:
@@ -308,13 +290,31 @@ class MotionController:
         return False
 
     def _send(self, rows: np.ndarray, end: bool, pause: bool = False) -> None:
-        """Send wanted rows (position, feed, line): as they are, or pre-compensated, then with
-        the frames at the standstill that let the lead die away before a stream ends."""
+        """Wanted rows (position, feed, line) out as they are or pre-compensated, a stream's end
+        with the lead's settling (what exceeds the high-water mark goes out in later cycles)."""
         pos = rows[:, : self.n]
         cmd = pos if self.precomp is None else self.precomp.push(pos)
         if self.precomp is not None and (end or pause):
             rows, cmd = with_lead_settled(self.precomp, rows, cmd, self.last_mm, self.line)
-            pos = rows[:, : self.n]
+            room = max(0, self._tail_room() - self.drive.fifo_level())
+            if len(cmd) > room:
+                self.pending_tail = (rows[room:], cmd[room:], end, pause)
+                rows, cmd, end, pause = rows[:room], cmd[:room], False, False
+        self._write(rows, cmd, end, pause)
+
+    def _send_tail(self, level: int) -> None:
+        assert self.pending_tail is not None
+        rows, cmd, end, pause = self.pending_tail
+        room = max(0, self._tail_room() - level)
+        last = len(cmd) <= room
+        self.pending_tail = None if last else (rows[room:], cmd[room:], end, pause)
+        self._write(rows[:room], cmd[:room], end and last, pause and last)
+
+    def _tail_room(self) -> int:  # a tail keeps the high-water mark, as refills do
+        return min(self._frames(self.settings.high_water_ms), self.drive.fifo_capacity() - 1)
+
+    def _write(self, rows: np.ndarray, cmd: np.ndarray, end: bool, pause: bool) -> None:
+        pos = rows[:, : self.n]
         if len(pos):
             feed = rows[:, self.n] if rows.shape[1] > self.n else np.zeros(len(pos))
             line = row_lines(rows) if rows.shape[1] > self.n + 1 else np.full(len(pos),

@@ -70,3 +70,25 @@ def retimer_state(retimer: Any) -> dict[str, Any]:
 def restore_retimer(retimer: Any, state: dict[str, Any]) -> None:
     for name, value in state.items():
         setattr(retimer, name, value)
+
+
+def take_back(loop: Any, level: int) -> None:
+    """A hold or a lower override on a MotionController: take back the frames queued beyond
+    the low-water mark (where the drive can), undoing their sends, so the new ramp starts
+    there instead of behind the whole FIFO. The ramp is planned from the state restored."""
+    keep = loop._frames(loop.settings.low_water_ms)
+    undo = loop.journal.newest_within(level - keep)
+    total = sum(e.frames for e in undo)
+    if not undo or loop.drive.recall_frames(total, keep) != total:
+        return
+    oldest = undo[-1]
+    restore_retimer(loop.retimer, oldest.retimer)
+    loop.prev_mm, loop.last_mm = oldest.prev_mm, oldest.last_mm
+    loop.pulses.counts = oldest.counts
+    loop.hist.count = oldest.hist_count
+    if loop.precomp is not None:
+        loop.precomp.restore(oldest.precomp)
+    loop.sent -= total
+    loop.held = np.vstack([e.consumed for e in reversed(undo)] + [loop.held])
+    loop.journal.drop(len(undo))
+    loop.recalled_frames += total

@@ -35,13 +35,16 @@ def path() -> PathDistance:
     return PathDistance(path_polyline(list(read_program(str(BUTTERFLY), ON))))
 
 
-def run(hold_at_s: float | None = None, abort_at_s: float | None = None
+def run(hold_at_s: float | None = None, abort_at_s: float | None = None,
+        high_water_ms: float | None = None
         ) -> tuple[object, np.ndarray, np.ndarray, list[MotionProgress]]:
     """Run in virtual time; returns the result, the commanded and encoder positions of every
     executed frame (mm) and the progress reports."""
     card = virtual_card(ON)
     rec = Recorder(card)
     settings = MotionSettings.from_config(ON, progress_every_s=0.002)
+    if high_water_ms is not None:
+        settings = replace(settings, high_water_ms=high_water_ms, low_water_ms=10.0)
     pacer = VirtualPacer(settings.cycle_frames, T, card.advance)
     seen: list[MotionProgress] = []
     asked = {"hold": False, "abort": False}
@@ -98,3 +101,14 @@ def test_abort_stops_along_the_path_with_the_lead_gone() -> None:
     assert path().measure(enc).distance_mm.max() * 1e3 <= LIMIT_UM
     assert np.abs(cmd[-1] - enc[-1]).max() <= 1e-3  # settled where it was sent
     assert path().measure(cmd[-1:]).distance_mm.max() <= 2e-3
+
+
+def test_the_settling_frames_keep_the_high_water_mark() -> None:
+    """The lead's settling at the end (80 frames on Table II) goes out as the card drains,
+    not at once past the high-water mark (a small FIFO would overflow)."""
+    result, cmd, enc, seen = run(high_water_ms=30.0)
+    assert result.outcome is Outcome.DONE and result.underruns == 0, result.message
+    assert max(p.fifo_ms for p in seen) <= 30.0
+    end = chunks()[-1].pos_mm[-1, :2]
+    assert np.allclose(cmd[-1], end, atol=1.5e-3)
+    assert result.contour_error_um["max"] <= LIMIT_UM
