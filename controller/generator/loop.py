@@ -102,7 +102,7 @@ _MODELS: dict[tuple, BrakingModel] = {}  # per machine: the model memoises speed
 def _braking_model(config: MachineConfig) -> BrakingModel:
     ip = config.interpolator
     key = (config.sample_period_s, ip.max_accel_mm_s2, planning_limit_mm(config),
-           tuple(a.servo for a in config.axes))
+           tuple(a.servo for a in config.axes), ip.servo_precompensation)
     if key not in _MODELS:
         _MODELS[key] = BrakingModel(config, TARGET_FRACTION * planning_limit_mm(config))
     return _MODELS[key]

@@ -145,3 +145,16 @@ def test_config_key_is_read_and_refused_where_the_loop_has_position_error() -> N
     data["axes"]["y"]["servo"]["b0"] = 1.5e9
     with pytest.raises(ConfigError, match="servo_precompensation"):
         parse_config(data, "m.yaml")
+
+
+def test_the_braking_model_is_not_shared_between_compensated_and_plain_plans() -> None:
+    """Both kinds of plan in one process (a bench, cncd with two configs): each stop is braked
+    on its own loop's model, whichever was planned first."""
+    from controller.generator import loop
+
+    blocks = list(read_program(str(REPO / "nc_programs" / "naca2415.nc"), ON))
+    loop._MODELS.clear()
+    alone = len(simulate(blocks, ON, "ph-lookahead").t_s)
+    loop._MODELS.clear()
+    simulate(blocks, CFG, "ph-lookahead")
+    assert len(simulate(blocks, ON, "ph-lookahead").t_s) == alone
