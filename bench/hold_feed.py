@@ -6,6 +6,10 @@ planned reference of a program, asks for a hold at points spread over it (or an 
 step), and reads the reference rows actually sent to the card:
 
     python bench/hold_feed.py [--program nc_programs/butterfly.nc] [--points 10] [--markdown]
+                              [--config xy_table_precomp]
+
+With servo pre-compensation the rows read are the wanted ones (before the lead is added); the
+frames the loop adds at a standstill for the lead to die away hold the wanted point.
 
 The physical minimum from feed v is a stop at constant deceleration Amax: v / Amax seconds over
 v^2 / (2 Amax) mm. Ours adds the card FIFO already filled (frames queued cannot be recalled:
@@ -70,11 +74,14 @@ def run(chunks: tuple, at_s: float, action: str, value: float = 0.0) -> dict:
     ctrl._send = record  # type: ignore[method-assign]
     ctrl.run()
     card.close()
-    # The rows the card ran: frames taken back for a hold are replaced by later sends.
-    xy = np.zeros((ctrl.sent, 2))
+    # The rows the card ran: frames taken back for a hold are replaced by later sends; frames
+    # no send recorded (a pre-compensated standstill's settling) hold the row before them.
+    xy = np.full((ctrl.sent, 2), np.nan)
     for start, rows in sent:
         n = max(0, min(len(rows), ctrl.sent - start))
         xy[start: start + n] = rows[:n]
+    for k in np.flatnonzero(np.isnan(xy[:, 0])):
+        xy[k] = xy[k - 1]
     info["xy"] = xy
     info["recalled"] = ctrl.recalled_frames
     return info
@@ -123,7 +130,10 @@ def main() -> None:
     ap.add_argument("--program", default=str(REPO / "nc_programs/butterfly.nc"))
     ap.add_argument("--points", type=int, default=10)
     ap.add_argument("--markdown", action="store_true")
+    ap.add_argument("--config", help="machine configuration (default: xy_table)")
     args = ap.parse_args()
+    global CFG
+    CFG = load_config(args.config or "xy_table")
     chunks = tuple(generate_reference(read_program(args.program, CFG), CFG))
     total_s = sum(len(c) for c in chunks) * T
     times = np.linspace(0.1, total_s - 0.4, args.points)
