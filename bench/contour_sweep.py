@@ -1,6 +1,6 @@
 """True contour error of ph-lookahead over many programs: the limit kept everywhere, or where not.
 
-Usage: python bench/contour_sweep.py [--config xy_table_precomp] [--corpus DIR ...] [--markdown]
+Usage: python bench/contour_sweep.py [--config xy_table_paper] [--corpus DIR ...] [--markdown]
 
 Programs: the repository's nc_programs, generated sections and lobed NURBS (tests/gen_programs.py,
 as bench/table4_generated.py makes them), stop programs written here (a G61 square, an M0 in a

@@ -6,7 +6,7 @@ planned reference of a program, asks for a hold at points spread over it (or an 
 step), and reads the reference rows actually sent to the card:
 
     python bench/hold_feed.py [--program nc_programs/butterfly.nc] [--points 10] [--markdown]
-                              [--config xy_table_precomp]
+                              [--config xy_table_paper]
 
 With servo pre-compensation the rows read are the wanted ones (before the lead is added); the
 frames the loop adds at a standstill for the lead to die away hold the wanted point.

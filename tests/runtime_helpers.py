@@ -10,7 +10,7 @@ from drivers.sim.card import SimCard
 
 
 def xy_config() -> MachineConfig:
-    return load_config("xy_table")
+    return load_config("xy_table_paper")
 
 
 def virtual_card(config: MachineConfig, **options: object) -> SimCard:

@@ -34,13 +34,13 @@ def programs() -> list[Path]:
 def _simulate_json(program: Path) -> dict:
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        code = main(["simulate", str(program), "--compare", "--json"])
+        code = main(["simulate", str(program), "--compare", "--json", "--config", "xy_table_paper"])
     assert code == 0, f"cncctl simulate {program.name} exited {code}"
     return json.loads(out.getvalue())
 
 
 def _trajectory_sha256(program: Path, algorithm: str) -> str:
-    config = load_config(None)
+    config = load_config("xy_table_paper")
     traj = simulate(read_program(str(program), config), config, algorithm)
     digest = hashlib.sha256()
     for name in ("t_s", "ref_mm", "act_mm", "feed_mm_s", "line", "ex_mm", "ey_mm", "contour_mm",

@@ -132,7 +132,7 @@ class MotionController:
         self.seq0: int | None = None  # the drive's number of this run's first frame
         self.journal = SendJournal()  # what each send changed (a hold takes frames back)
         self.recalled_frames = 0
-        self.pending_tail: tuple[np.ndarray, np.ndarray, bool, bool] | None = None
+        self.pending_tail: tuple | None = None  # a stream's end at rest still to go out
         self.precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
                                         for a in self.config.axes], self.period_s, self.last_mm)
                         if self.config.interpolator.servo_precompensation else None)
@@ -303,15 +303,15 @@ class MotionController:
         self._write(rows, cmd, end, pause)
 
     def _send_tail(self, level: int) -> None:
-        assert self.pending_tail is not None
-        rows, cmd, end, pause = self.pending_tail
+        rows, cmd, end, pause = self.pending_tail  # type: ignore[misc]
         room = max(0, self._tail_room() - level)
         last = len(cmd) <= room
         self.pending_tail = None if last else (rows[room:], cmd[room:], end, pause)
         self._write(rows[:room], cmd[:room], end and last, pause and last)
 
-    def _tail_room(self) -> int:  # a tail keeps the high-water mark, as refills do
-        return min(self._frames(self.settings.high_water_ms), self.drive.fifo_capacity() - 1)
+    def _tail_room(self) -> int:  # the high-water mark, as refills; a stop fills the card
+        cap = self.drive.fifo_capacity() - 1
+        return cap if self.outcome else min(self._frames(self.settings.high_water_ms), cap)
 
     def _write(self, rows: np.ndarray, cmd: np.ndarray, end: bool, pause: bool) -> None:
         pos = rows[:, : self.n]
@@ -352,7 +352,7 @@ class MotionController:
         if self.outcome is not None:
             return  # the first reason is the one reported
         self.outcome, self.message = outcome, message
-        if self.sent_eos or self.pausing or not self.sent:
+        if self.sent_eos or self.pausing or not self.sent or self.pending_tail is not None:
             self.state = MotionState.SETTLING if self.sent else MotionState.FINISHED
             return
         self.pending_stop = stop_along_path(self.prev_mm, self.last_mm, self.held[:, : self.n],
@@ -374,7 +374,7 @@ class MotionController:
                 and level == 0:
             self.state = MotionState.SETTLING
             self.settle_deadline_s = self.pacer.elapsed_s() + self.settings.settle_s
-        if self.state is not MotionState.SETTLING:
+        if self.state is not MotionState.SETTLING or self.pending_tail is not None:
             return
         cmd, enc = self.drive.position_counts()
         now_s = self.pacer.elapsed_s()

@@ -22,7 +22,7 @@ REPO = Path(__file__).resolve().parents[2]
 NACA = str(REPO / "nc_programs/naca2415.nc")
 BUTTERFLY = str(REPO / "nc_programs/butterfly.nc")
 NACA_LOOP = str(REPO / "nc_programs/naca2415_loop.nc")  # the paper's airfoil: bench/naca_loop.py
-CFG = load_config()
+CFG = load_config("xy_table_paper")
 IP = CFG.interpolator
 LIMIT_UM = IP.contour_error_limit_mm * 1000.0
 

@@ -33,7 +33,7 @@ from controller.interpreter.program import read_program
 from controller.runtime.simulation import simulate
 
 REPO = Path(__file__).resolve().parents[2]
-CFG = load_config("xy_table")
+CFG = load_config("xy_table_paper")
 ON = replace(CFG, interpolator=replace(CFG.interpolator, servo_precompensation=True))
 T = CFG.sample_period_s
 SERVO = CFG.axis("x").servo

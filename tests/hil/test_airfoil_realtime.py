@@ -39,7 +39,7 @@ def predicted_contour_um(pos_mm: np.ndarray, config: object) -> tuple[float, flo
 
 
 def test_airfoil_runs_in_real_time_on_the_sim_card() -> None:
-    config = load_config("xy_table")
+    config = load_config("xy_table_paper")
     ref = planned_reference(config)
     planned_s = len(ref) * config.sample_period_s
     assert planned_s < 8.0, "the HIL run must stay under 10 s"

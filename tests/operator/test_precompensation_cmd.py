@@ -18,8 +18,8 @@ def cncctl(*args: str) -> subprocess.CompletedProcess[str]:
 
 def test_simulate_reports_the_compensated_plan_within_the_limit_and_faster() -> None:
     prog = str(REPO / "nc_programs" / "naca2415_loop.nc")
-    on = cncctl("simulate", prog, "--config", "xy_table_precomp", "--json")
-    off = cncctl("simulate", prog, "--config", "xy_table", "--json")
+    on = cncctl("simulate", prog, "--config", "xy_table", "--json")
+    off = cncctl("simulate", prog, "--config", "xy_table_paper", "--json")
     assert on.returncode == 0 and off.returncode == 0, on.stderr + off.stderr
     a, b = json.loads(on.stdout), json.loads(off.stdout)
     assert a["contour_limit_met"] and a["contour_error_true_um"]["max"] <= LIMIT_UM
@@ -28,12 +28,12 @@ def test_simulate_reports_the_compensated_plan_within_the_limit_and_faster() -> 
 
 def test_run_through_the_processes_measures_the_tool_on_the_path() -> None:
     prog = str(REPO / "nc_programs" / "butterfly.nc")
-    out = cncctl("run", prog, "--config", "xy_table_precomp", "--virtual-time", "--json")
+    out = cncctl("run", prog, "--config", "xy_table", "--virtual-time", "--json")
     assert out.returncode == 0, out.stderr
     final = json.loads(out.stdout.splitlines()[-1])
     assert final["event"] == "done" and final["underruns"] == 0
     assert final["contour_error_um"]["max"] <= LIMIT_UM
-    plain = cncctl("run", prog, "--config", "xy_table", "--virtual-time", "--json")
+    plain = cncctl("run", prog, "--config", "xy_table_paper", "--virtual-time", "--json")
     assert final["final_position_mm"] == json.loads(plain.stdout.splitlines()[-1])[
         "final_position_mm"]  # the same end point, to the pulse
     assert all(p["commanded"] == p["executed"] for p in final["pulses"].values())
