@@ -38,8 +38,9 @@ def stop_load(procs: list[subprocess.Popen]) -> None:
         p.wait(timeout=5)
 
 
-def one_run(program: str) -> dict[str, Any]:
+def one_run(program: str, config: str | None = None) -> dict[str, Any]:
     cmd = [sys.executable, "-m", "controller.operator.cli", "run", program, "--json"]
+    cmd += ["--config", config] if config else []
     launched = time.time()
     out = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
     events = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
@@ -76,12 +77,13 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=20)
     ap.add_argument("--program", default="nc_programs/naca2415.nc")
     ap.add_argument("--no-load", action="store_true", help="do not load the cores")
+    ap.add_argument("--config", help="machine configuration (default: the built-in one)")
     args = ap.parse_args()
     load = [] if args.no_load else start_load(os.cpu_count() or 2)
     runs: list[dict[str, Any]] = []
     try:
         for i in range(args.runs):
-            r = one_run(args.program)
+            r = one_run(args.program, args.config)
             runs.append(r)
             print(f"run {i + 1:2d}: {r.get('event')} exit {r['exit_code']} underruns "
                   f"{r.get('underruns')} late {r.get('late_cycles')} min_fifo "
