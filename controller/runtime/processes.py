@@ -13,6 +13,7 @@ from typing import Any
 
 from controller.config import MachineConfig
 from controller.errors import DriveError
+from controller.generator.dynamics.prediction import axis_servos
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.realtime import back_to_normal, try_realtime
@@ -209,6 +210,8 @@ class Runtime:
     def _motion(self, drive: Drive, ring: RefRing, messages: _Messages) -> MotionResult:
         source = RingSource(ring, self.procs["generator"], messages)
         period_s = self.config.sample_period_s
+        axis_servos(self.config)  # built (cached) before the pacer's clock starts: ~10 ms when
+        # pre-compensated (model inverse and residual), which made the first cycle late
         watch = self._watch(messages)
         if self.options.virtual_time:
             need = round((self.settings.high_water_ms + self.settings.holdback_ms) * 1e-3
