@@ -132,8 +132,9 @@ def main() -> None:
     ap.add_argument("--markdown", action="store_true")
     ap.add_argument("--config", help="machine configuration (default: xy_table)")
     args = ap.parse_args()
-    global CFG
+    global CFG, T, AMAX
     CFG = load_config(args.config or "xy_table")
+    T, AMAX = CFG.sample_period_s, CFG.interpolator.max_accel_mm_s2
     chunks = tuple(generate_reference(read_program(args.program, CFG), CFG))
     total_s = sum(len(c) for c in chunks) * T
     times = np.linspace(0.1, total_s - 0.4, args.points)

@@ -406,7 +406,7 @@ def compensated(ref_mm: np.ndarray, start_mm: np.ndarray, config: MachineConfig)
     """The frames the motion loop sends for a wanted reference with servo_precompensation: led
     by the model's lag, then the settling of that lead at the end point."""
     pc = Precompensator([a.servo for a in config.axes[:2]], config.sample_period_s, start_mm[:2])
-    return np.vstack([pc.push(ref_mm[:, :2]), pc.settling_rows()])
+    return pc.to_rest(ref_mm[:, :2])
 
 
 def run_servo(frames_mm: np.ndarray, start_mm: np.ndarray, config: MachineConfig

@@ -63,7 +63,7 @@ def plant_actual(frames_mm: np.ndarray) -> np.ndarray:
 def test_residual_filter_is_the_plant_driven_by_the_compensated_reference(seed: int) -> None:
     wanted = smooth_path(seed)
     pc = Precompensator([SERVO], T, np.zeros(1))
-    frames = np.r_[pc.push(wanted[:, None])[:, 0], pc.settling_rows()[:, 0]]
+    frames = pc.to_rest(wanted[:, None])[:, 0]
     held = np.r_[wanted, np.full(len(frames) - len(wanted), wanted[-1])]
     v = np.diff(np.r_[0.0, held]) / T
     residual = tracking_error_mm(residual_servo(SERVO, T), v)
@@ -125,7 +125,7 @@ def test_compensated_plan_keeps_the_true_error_with_the_plant_run_on_its_frames(
     traj = simulate(blocks, ON, "ph-lookahead")
     wanted = traj.ref_mm[:, :2]
     pc = Precompensator([SERVO, CFG.axis("y").servo], T, np.zeros(2))
-    frames = np.vstack([pc.push(wanted), pc.settling_rows()])
+    frames = pc.to_rest(wanted)
     frames = np.vstack([frames, np.repeat(frames[-1:], 60, axis=0)])
     v = np.diff(np.vstack([np.zeros((1, 2)), frames]), axis=0) / T
     act = frames - np.column_stack([tracking_error_mm(s, v[:, i])

@@ -150,6 +150,11 @@ class Precompensator:
             rows.append(self.push(still))
         return np.vstack(rows) if rows else np.zeros((0, len(self.last_mm)))
 
+    def to_rest(self, wanted_mm: np.ndarray) -> np.ndarray:
+        """Every frame a stream of wanted rows ending at rest is sent as: push, then the
+        settling (what the motion loop sends for a whole program)."""
+        return np.vstack([self.push(wanted_mm), self.settling_rows()])
+
     def state(self) -> tuple:
         return (self.last_mm.copy(), [None if s is None else s.copy() for s in self.states],
                 self.lead_mm.copy())
