@@ -2,17 +2,27 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from controller.blocks import NurbsBlock
 from controller.config import load_config
+from controller.generator.ph import blend
+from controller.generator.ph.blend import blend_joint
+from controller.geometry.curves import LineCurve
+from controller.geometry.nurbs import Nurbs
+from controller.geometry.path import Piece, PieceKind, make_piece
 from controller.interpreter.program import read_program
 from controller.runtime.simulation import report, simulate
 
 CFG = load_config()
 IP = CFG.interpolator
+NACA = str(Path(__file__).resolve().parents[2] / "nc_programs/naca2415.nc")
 CORNERS = [(0, 0), (50, 0), (50, 30), (80, 30), (80, -30), (20, -40), (0, 0)]
 
 
@@ -103,4 +113,94 @@ def _distance_to_points_polyline(pts: np.ndarray, poly: np.ndarray) -> np.ndarra
         t = np.clip(np.einsum("pij,ij->pi", rel, ab) / np.einsum("ij,ij->i", ab, ab), 0.0, 1.0)
         near = a[None] + t[..., None] * ab[None]
         out[i0:i0 + 2000] = np.linalg.norm(p[:, None, :] - near, axis=2).min(axis=1)
+    return out
+
+
+# --- a long program's windows: the cut searched to 1 % (generator/repeats.py) ----------------
+
+def _counted(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    trials = [0]
+    original = blend._trial
+
+    def counting(*args):  # noqa: ANN002, ANN202
+        trials[0] += 1
+        return original(*args)
+
+    monkeypatch.setattr(blend, "_trial", counting)
+    return trials
+
+
+def _line(p0: tuple[float, float], p1: tuple[float, float]) -> Piece:
+    return make_piece(PieceKind.LINE, LineCurve(p0, p1), 0.0, 1.0, 0.0, 50.0, 1)
+
+
+def _cut_mm(found: tuple[Piece, Piece, Piece], a: Piece) -> float:
+    return a.length_mm - found[0].length_mm
+
+
+@settings(max_examples=60, deadline=None)
+@given(turn_deg=st.floats(5.0, 170.0), la=st.floats(0.05, 20.0), lb=st.floats(0.05, 20.0),
+       tol_mm=st.floats(1e-4, 0.05), heading=st.floats(-math.pi, math.pi))
+def test_a_windowed_line_blend_fits_within_a_percent_of_the_bisected_cut(
+        turn_deg: float, la: float, lb: float, tol_mm: float, heading: float) -> None:
+    """The search (power-law aim, then a step past a cut that fits) ends within 1 % of the
+    largest cut that fits (the single run's 30 halvings find it to 1e-9), always within the
+    tolerance, and in at most 4 trials: a line joint's deviation grows exactly as its cut."""
+    corner = (3.0, -2.0)
+    start = (corner[0] - la * math.cos(heading), corner[1] - la * math.sin(heading))
+    out = heading + math.radians(turn_deg)
+    end = (corner[0] + lb * math.cos(out), corner[1] + lb * math.sin(out))
+    a, b = _line(start, corner), _line(corner, end)
+    single = blend_joint(a, b, tol_mm)
+    with pytest.MonkeyPatch.context() as mp:
+        trials = _counted(mp)
+        windowed = blend_joint(a, b, tol_mm, precision=0.01)
+    assert (single is None) == (windowed is None)
+    if single is None:
+        return
+    assert trials[0] <= 4
+    cut, best = _cut_mm(windowed, a), _cut_mm(single, a)
+    assert best / 1.01 * (1 - 1e-9) <= cut <= best * (1 + 1e-9)
+    poly = np.array([start, corner, end])
+    pts = windowed[1].curve.evaluate(np.linspace(0.0, 1.0, 2001), 0)[0]
+    assert _distance_to(poly, pts).max() <= tol_mm * (1 + 1e-6)
+
+
+def test_a_windowed_airfoil_joint_is_blended_in_a_third_of_the_trials(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The trailing edge between two airfoils (NURBS to NURBS): the windowed blend samples
+    its path in u (no arc-length inverse), fits within the tolerance, and finds a cut within
+    2 % of the bisected one in at most 6 trials where bisection takes 31."""
+    curve = Nurbs.from_block(next(b for b in read_program(NACA, CFG)
+                                  if isinstance(b, NurbsBlock)))
+    a = make_piece(PieceKind.NURBS, curve, 0.5 * curve.u_end, curve.u_end, 0.0, 50.0, 1)
+    b = make_piece(PieceKind.NURBS, curve, curve.u_start, 0.5 * curve.u_end, 0.0, 50.0, 2)
+    tol = IP.contour_error_limit_mm
+    trials = _counted(monkeypatch)
+    single = blend_joint(a, b, tol)
+    single_trials, trials[0] = trials[0], 0
+    windowed = blend_joint(a, b, tol, precision=0.01)
+    assert single is not None and windowed is not None
+    assert single_trials == 31 and trials[0] <= 6
+    assert _cut_mm(windowed, a) == pytest.approx(_cut_mm(single, a), rel=0.02)
+    pts = windowed[1].curve.evaluate(np.linspace(0.0, 1.0, 2001), 0)[0]
+    dense = curve.evaluate(np.linspace(curve.u_start, curve.u_end, 200_001), 0)[0]
+    assert _distance_to(dense, pts).max() <= tol * (1 + 1e-3)
+    # the trimmed pieces end where the blend starts and start where it ends
+    ends = curve.evaluate(np.array([windowed[0].u1, windowed[2].u0]), 0)[0]
+    assert np.abs(ends[0] - windowed[1].curve.evaluate(np.array([0.0]), 0)[0, 0]).max() < 1e-12
+    assert np.abs(ends[1] - windowed[1].curve.evaluate(np.array([1.0]), 0)[0, 0]).max() < 1e-9
+
+
+def _distance_to(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    a, b = poly[:-1], poly[1:]
+    ab = b - a
+    out = np.full(len(pts), np.inf)
+    for k in range(0, len(pts), 200):  # chunks: a dense polyline is 200k segments
+        p = pts[k:k + 200]
+        rel = p[:, None, :] - a[None]
+        t = np.clip(np.einsum("pij,ij->pi", rel, ab) / np.maximum(
+            np.einsum("ij,ij->i", ab, ab), 1e-300), 0.0, 1.0)
+        near = a[None] + t[..., None] * ab[None]
+        out[k:k + 200] = np.linalg.norm(p[:, None, :] - near, axis=2).min(axis=1)
     return out

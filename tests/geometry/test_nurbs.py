@@ -109,6 +109,19 @@ def test_arc_length_and_inverse(c: Nurbs) -> None:
     assert np.abs(c.s_of_u(c.u_of_s(s)) - s).max() < 1e-9 * c.length_mm
 
 
+@settings(max_examples=15, deadline=None)
+@given(random_nurbs(), st.floats(0.0, 1.0))
+def test_scalar_inverse_without_the_inverse_table(c: Nurbs, share: float) -> None:
+    """u_of_s_scalar (a windowed blend's cut): the arc length it lands on is the one asked
+    for, and no inverse table is built for it."""
+    table = c.arc_length_table
+    s = share * c.length_mm
+    u = table.u_of_s_scalar(s, c.u_start, c.u_end, 1e-10)
+    assert c.u_start <= u <= c.u_end
+    assert abs(float(c.s_of_u(np.array([u]))[0]) - s) <= 1e-10 + 1e-12 * c.length_mm
+    assert "_inverse" not in vars(table)
+
+
 def quarter_circle(radius: float) -> Nurbs:
     """Exact rational quadratic quarter circle: kappa = 1/R everywhere."""
     pts = np.array([[radius, 0.0], [radius, radius], [0.0, radius]])

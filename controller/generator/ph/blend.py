@@ -14,6 +14,10 @@ MAX_BLEND_ANGLE_RAD = math.radians(175.0)  # sharper reversals stop instead of l
 MAX_SHARE = 0.45  # a blend takes at most this share of each neighbouring piece
 BISECTIONS = 30
 MIN_CUT_MM = 1e-4
+# Where a windowed run's NURBS cut lands along the piece: the blend starts at the curve's point
+# at that parameter and the trimmed piece ends there, whatever the tolerance; it only moves the
+# cut by as much, far below the 1 % to which the cut is searched.
+CUT_TOL_MM = 1e-9
 
 
 def _line_u(piece: Piece, s_path_mm: float) -> float:
@@ -51,10 +55,17 @@ class _Side:
     the cut and the programmed path between the cut and the joint (n points, or the two ends
     of a line). Piece.u_at with the curve's offset computed once, and point, tangent and path
     from one arc-length inversion and one evaluation (both are per element: the numbers are
-    those of separate calls)."""
+    those of separate calls).
 
-    def __init__(self, piece: Piece, at_end: bool, n: int = 64) -> None:
+    by_parameter (a long program's windows): a NURBS side's cut is found by Newton on s(u) and
+    its path sampled evenly in u, so that trials build no arc-length inverse (the inverse,
+    built by intervals over 45 % of the piece for the first trial, was a quarter of the
+    planning of distinct airfoils)."""
+
+    def __init__(self, piece: Piece, at_end: bool, n: int = 64, by_parameter: bool = False
+                 ) -> None:
         self.p, self.at_end, self.n = piece, at_end, n
+        self.by_parameter = by_parameter and hasattr(piece.curve, "arc_length_table")
         if piece.kind != PieceKind.LINE:
             self.curve_s0 = piece.curve_s0_mm
             self.lo, self.hi = min(piece.u0, piece.u1), max(piece.u0, piece.u1)
@@ -76,6 +87,14 @@ class _Side:
         local = clamp(s_path_mm - p.s0_mm, 0.0, p.length_mm)
         return clamp(p.curve.u_of_s(local + self.curve_s0), self.lo, self.hi)
 
+    def u_by_newton(self, s_local_mm: float) -> float:
+        """The parameter at an arc length inside the piece, by Newton on the curve's s(u)."""
+        table = self.p.curve.arc_length_table  # type: ignore[attr-defined]
+        return table.u_of_s_scalar(self.curve_s0 + s_local_mm, self.lo, self.hi, CUT_TOL_MM)
+
+    def _edge_u(self) -> float:
+        return self.p.u1 if self.at_end else self.p.u0
+
     def trial(self, cut_mm: float) -> tuple[complex, complex, np.ndarray]:
         """(point, unit tangent) at the cut, and the path from the cut to the joint (for the
         end of a piece) or from the joint to the cut (for its start)."""
@@ -86,15 +105,37 @@ class _Side:
             ends = (p.length_mm - cut_mm, p.length_mm) if self.at_end else (0.0, cut_mm)
             pts = np.array([_line_xy(p, _line_u(p, p.s0_mm + s))[:2] for s in ends])
             return pt, t, pts
-        span = np.linspace(s_cut, p.length_mm, self.n) if self.at_end else \
-            np.linspace(0.0, cut_mm, self.n)
-        self._prime(p.s0_mm + s_cut)
+        if self.by_parameter:
+            u_cut = self.u_by_newton(s_cut)
+            u = np.linspace(u_cut, self._edge_u(), self.n) if self.at_end else \
+                np.linspace(self._edge_u(), u_cut, self.n)
+        else:
+            span = np.linspace(s_cut, p.length_mm, self.n) if self.at_end else \
+                np.linspace(0.0, cut_mm, self.n)
+            self._prime(p.s0_mm + s_cut)
+            u = self.u_at(p.s0_mm + span)
         # The cut is the first point of the end's span and the last of the start's (linspace
         # returns its ends exactly).
-        d = p.curve.evaluate(self.u_at(p.s0_mm + span), 1)
+        d = p.curve.evaluate(u, 1)
         k = 0 if self.at_end else -1
         t = complex(d[1, k, 0], d[1, k, 1])
         return complex(d[0, k, 0], d[0, k, 1]), t / abs(t), d[0]
+
+    def tangent_at_joint(self) -> complex:
+        """The unit tangent where the piece meets the other (at its end parameter when
+        by_parameter, else at its end arc length, as the single run always did)."""
+        if not self.by_parameter:
+            return _point(self.p, self.p.length_mm if self.at_end else 0.0)[1]
+        d = self.p.curve.evaluate(np.array([self._edge_u()]), 1)[1, 0]
+        t = complex(d[0], d[1])
+        return t / abs(t)
+
+    def cut_u(self, cut_mm: float) -> float:
+        """The parameter where the trimmed piece ends (at_end) or starts."""
+        p = self.p
+        if self.by_parameter:
+            return self.u_by_newton(p.length_mm - cut_mm if self.at_end else cut_mm)
+        return _u_at(p, p.s0_mm + p.length_mm - cut_mm if self.at_end else p.s0_mm + cut_mm)
 
 
 def deviation_mm(ph: PhQuintic, poly: np.ndarray, n: int = 65) -> float:
@@ -110,12 +151,65 @@ def deviation_mm(ph: PhQuintic, poly: np.ndarray, n: int = 65) -> float:
     return float(np.min(np.linalg.norm(pts[:, None, :] - nearest, axis=2), axis=1).max())
 
 
-def _fits(a: _Side, b: _Side, cut_mm: float, tol_mm: float) -> tuple[float, PhQuintic] | None:
+def _trial(a: _Side, b: _Side, cut_mm: float) -> tuple[PhQuintic, float]:
+    """The blend with this cut on both sides and its deviation from the path it replaces."""
     p0, t0, pa = a.trial(cut_mm)
     p5, t1, pb = b.trial(cut_mm)
     chord = abs(p5 - p0)
     ph = PhQuintic.hermite(p0, p5, t0 * chord, t1 * chord)
-    return (cut_mm, ph) if deviation_mm(ph, np.vstack([pa, pb])) <= tol_mm else None
+    return ph, deviation_mm(ph, np.vstack([pa, pb]))
+
+
+def _fits(a: _Side, b: _Side, cut_mm: float, tol_mm: float) -> tuple[float, PhQuintic] | None:
+    ph, deviation = _trial(a, b, cut_mm)
+    return (cut_mm, ph) if deviation <= tol_mm else None
+
+
+def _bisected(a: _Side, b: _Side, hi: float, tol_mm: float) -> tuple[float, PhQuintic] | None:
+    """The largest cut below hi that fits, to BISECTIONS halvings (a single run's blends)."""
+    best, lo = None, 0.0
+    for _ in range(BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        trial = _fits(a, b, mid, tol_mm)
+        if trial is None:
+            hi = mid
+        else:
+            best, lo = trial, mid
+    return best
+
+
+def _power_guess(lo: float, dev_lo: float, hi: float, dev_hi: float, target: float) -> float:
+    """The cut where the deviation reaches target, the deviation taken as c cut^p through the
+    bracket's ends (p = 1 through zero while no cut has fitted: a corner's blend grows with
+    its cut, a line's exactly so)."""
+    if lo <= 0.0 or dev_lo <= 0.0:
+        return hi * target / dev_hi
+    p = math.log(dev_hi / dev_lo) / math.log(hi / lo)
+    return lo * (target / dev_lo) ** (1.0 / p) if p > 0.2 else 0.5 * (lo + hi)
+
+
+def _searched(a: _Side, b: _Side, hi: float, dev_hi: float, tol_mm: float,
+              precision: float) -> tuple[float, PhQuintic] | None:
+    """The largest cut below hi that fits, to `precision` of itself (a long program's
+    windows): aim just under the tolerance by the deviation's power law, then, from a cut that
+    fits, step just past it, which closes the bracket when the aim was good; a guess outside
+    the bracket halves it. Usually 2-3 trials where halving takes about 8 at 1 %."""
+    best, lo, dev_lo, stepped = None, 0.0, 0.0, False
+    for _ in range(BISECTIONS):
+        if best is not None and hi - lo <= precision * lo:
+            break
+        if best is not None and not stepped:
+            guess, stepped = lo * (1.0 + precision), True
+        else:
+            guess = _power_guess(lo, dev_lo, hi, dev_hi, tol_mm * (1.0 - 0.5 * precision))
+        if not lo < guess < hi:
+            guess = 0.5 * (lo + hi)
+        ph, deviation = _trial(a, b, guess)
+        if deviation <= tol_mm:
+            best, lo, dev_lo, stepped = (guess, ph), guess, deviation, False
+        else:
+            hi, dev_hi = guess, deviation
+    return best
 
 
 def _u_at(p: Piece, s_path_mm: float) -> float:
@@ -137,31 +231,27 @@ def blend_joint(a: Piece, b: Piece, tolerance_mm: float,
                 precision: float = 0.0) -> tuple[Piece, Piece, Piece] | None:
     """(a trimmed, PH blend, b trimmed) with deviation <= tolerance, or None to stop there.
 
-    The cut is bisected BISECTIONS times, or, with a precision, until the bracket is within
-    that share of the cut that fits (the windows of a long program: generator/repeats.py)."""
+    The cut is bisected BISECTIONS times, or, with a precision, searched until the bracket is
+    within that share of the cut that fits (the windows of a long program: repeats.py)."""
     if a.kind == PieceKind.PH or b.kind == PieceKind.PH or tolerance_mm <= 0:
         return None
-    _, t0 = _point(a, a.length_mm)
-    _, t1 = _point(b, 0.0)
+    by_parameter = bool(precision)
+    side_a, side_b = _Side(a, True, by_parameter=by_parameter), \
+        _Side(b, False, by_parameter=by_parameter)
+    t0, t1 = side_a.tangent_at_joint(), side_b.tangent_at_joint()
     if abs(math.atan2((t1 / t0).imag, (t1 / t0).real)) > MAX_BLEND_ANGLE_RAD:
         return None
     hi = MAX_SHARE * min(a.length_mm, b.length_mm)
-    side_a, side_b = _Side(a, True), _Side(b, False)
-    best = _fits(side_a, side_b, hi, tolerance_mm)
-    lo = 0.0
-    for _ in range(BISECTIONS if best is None else 0):
-        if precision and best is not None and hi - lo <= precision * lo:
-            break
-        mid = 0.5 * (lo + hi)
-        trial = _fits(side_a, side_b, mid, tolerance_mm)
-        if trial is None:
-            hi = mid
-        else:
-            best, lo = trial, mid
+    ph, dev_hi = _trial(side_a, side_b, hi)
+    best: tuple[float, PhQuintic] | None = (hi, ph) if dev_hi <= tolerance_mm else None
+    if best is None and precision:
+        best = _searched(side_a, side_b, hi, dev_hi, tolerance_mm, precision)
+    elif best is None:
+        best = _bisected(side_a, side_b, hi, tolerance_mm)
     if best is None or best[0] < MIN_CUT_MM:
         return None
     cut, ph = best
-    a_cut = _trimmed(a, a.u0, _u_at(a, a.s0_mm + a.length_mm - cut))
-    b_cut = _trimmed(b, _u_at(b, b.s0_mm + cut), b.u1)
+    a_cut = _trimmed(a, a.u0, side_a.cut_u(cut))
+    b_cut = _trimmed(b, side_b.cut_u(cut), b.u1)
     blend = Piece(PieceKind.PH, ph, 0.0, 1.0, 0.0, ph.length_mm, b.feed_mm_s, b.line)
     return a_cut, blend, b_cut
