@@ -77,20 +77,18 @@ class ArcLengthTable:
         idx = self._interval(uu)
         return self.s_nodes[idx] + _gauss_integrals(self.speed, self.u_nodes[idx], uu)
 
-    def u_of_s_scalar(self, s_mm: float, lo: float, hi: float,
-                      tol_mm: float = _NEWTON_TOL_MM) -> float:
-        """One parameter in [lo, hi] at arc length s_mm without the inverse table: from the
-        nodes (linear in between, ~1e-4 of a sub-interval), safeguarded Newton, each step
-        one speed call for s(u) and s'(u) together. For the few points of a blend's trials,
-        where building the inverse table over the span cost more than the trials."""
+    def u_of_s_scalar(self, s_mm: float, lo: float, hi: float, tol_mm: float) -> float:
+        """One parameter in [lo, hi] at arc length s_mm without the inverse table: linear
+        between the nodes, then safeguarded Newton, each step one speed call for s(u) and
+        s'(u) together. For the few points of a windowed blend's trials, where building the
+        inverse over the span cost more than the trials themselves."""
         u = min(max(float(np.interp(s_mm, self.s_nodes, self.u_nodes)), lo), hi)
         a, b = lo, hi
         for _ in range(_NEWTON_SWEEPS):
             idx = int(self._interval(np.array([u]))[0])
             u_node = self.u_nodes[idx]
             half = 0.5 * (u - u_node)
-            nodes = 0.5 * (u_node + u) + half * _GL_X
-            values = self.speed(np.append(nodes, u))
+            values = self.speed(np.append(0.5 * (u_node + u) + half * _GL_X, u))
             err = float(self.s_nodes[idx] + half * (values[:-1] @ _GL_W)) - s_mm
             if abs(err) <= tol_mm:
                 break

@@ -14,10 +14,7 @@ MAX_BLEND_ANGLE_RAD = math.radians(175.0)  # sharper reversals stop instead of l
 MAX_SHARE = 0.45  # a blend takes at most this share of each neighbouring piece
 BISECTIONS = 30
 MIN_CUT_MM = 1e-4
-# Where a windowed run's NURBS cut lands along the piece: the blend starts at the curve's point
-# at that parameter and the trimmed piece ends there, whatever the tolerance; it only moves the
-# cut by as much, far below the 1 % to which the cut is searched.
-CUT_TOL_MM = 1e-9
+CUT_TOL_MM = 1e-6  # a windowed NURBS cut's length, against a cut searched to 1 %
 
 
 def _line_u(piece: Piece, s_path_mm: float) -> float:
@@ -87,8 +84,10 @@ class _Side:
         local = clamp(s_path_mm - p.s0_mm, 0.0, p.length_mm)
         return clamp(p.curve.u_of_s(local + self.curve_s0), self.lo, self.hi)
 
-    def u_by_newton(self, s_local_mm: float) -> float:
-        """The parameter at an arc length inside the piece, by Newton on the curve's s(u)."""
+    def u_near(self, s_local_mm: float) -> float:
+        """The parameter at an arc length inside the piece to CUT_TOL_MM (Newton on s(u),
+        no inverse table): the blend starts wherever the trimmed piece ends, both at this
+        parameter, so the cut's length need not be exact."""
         table = self.p.curve.arc_length_table  # type: ignore[attr-defined]
         return table.u_of_s_scalar(self.curve_s0 + s_local_mm, self.lo, self.hi, CUT_TOL_MM)
 
@@ -106,7 +105,7 @@ class _Side:
             pts = np.array([_line_xy(p, _line_u(p, p.s0_mm + s))[:2] for s in ends])
             return pt, t, pts
         if self.by_parameter:
-            u_cut = self.u_by_newton(s_cut)
+            u_cut = self.u_near(s_cut)
             u = np.linspace(u_cut, self._edge_u(), self.n) if self.at_end else \
                 np.linspace(self._edge_u(), u_cut, self.n)
         else:
@@ -134,7 +133,7 @@ class _Side:
         """The parameter where the trimmed piece ends (at_end) or starts."""
         p = self.p
         if self.by_parameter:
-            return self.u_by_newton(p.length_mm - cut_mm if self.at_end else cut_mm)
+            return self.u_near(p.length_mm - cut_mm if self.at_end else cut_mm)
         return _u_at(p, p.s0_mm + p.length_mm - cut_mm if self.at_end else p.s0_mm + cut_mm)
 
 
