@@ -61,6 +61,14 @@ def nurbs_length_and_box(block: NurbsBlock) -> tuple[float, Box]:
     return length, ((float(lo[0]), float(lo[1]), z), (float(hi[0]), float(hi[1]), z))
 
 
+def nurbs_hull_box(block: NurbsBlock) -> Box:
+    """The box of a NURBS's control points, which holds the curve (its weights are positive:
+    the curve lies in the points' convex hull); no sampling."""
+    lo, hi = block.control_points.min(axis=0), block.control_points.max(axis=0)
+    z = block.z_mm
+    return (float(lo[0]), float(lo[1]), z), (float(hi[0]), float(hi[1]), z)
+
+
 def line_length_and_box(block: LineBlock) -> tuple[float, Box]:
     s, e = block.start, block.end
     length = math.dist(s, e)
@@ -114,6 +122,11 @@ class TravelLimits:
     def __init__(self, config: MachineConfig) -> None:
         self.axes = [(i, name, *config.axis(name).travel_mm)
                      for i, name in enumerate(("x", "y", "z")) if config.has_axis(name)]
+
+    def holds(self, box: Box) -> bool:
+        """Whether the box lies inside the travel of every axis."""
+        lo, hi = box
+        return all(tlo <= lo[i] and hi[i] <= thi for i, _, tlo, thi in self.axes)
 
     def check(self, path: str, block: NcBlock, box: Box,
               offsets: OffsetTable | None = None) -> None:

@@ -16,6 +16,7 @@ from controller.interpreter.extent import (
     TravelLimits,
     arc_length_and_box,
     line_length_and_box,
+    nurbs_hull_box,
     nurbs_length_and_box,
 )
 from controller.interpreter.program import read_program
@@ -72,11 +73,16 @@ def check_program(path: str, config: MachineConfig,
                   on_block: Callable[[int], None] | None = None,
                   start_mm: tuple[float, float, float] | None = None,
                   offsets: OffsetTable | None = None, from_line: int | None = None,
-                  track: ProgramOffsets | None = None) -> CheckSummary:
+                  track: ProgramOffsets | None = None, summary: bool = True
+                  ) -> CheckSummary | None:
     """Parse and check the whole program (from from_line, if given) with the work offsets in
     force; raise NcError at the first problem, travel in machine coordinates. on_block(n), if
     given, is called every CHECK_BEAT_BLOCKS blocks (the daemon's watchdog sees the check
-    alive on a program of millions of lines); track.table is the offset table it leaves."""
+    alive on a program of millions of lines); track.table is the offset table it leaves.
+
+    summary=False (a check before motion, nothing printed): the same errors, but a NURBS whose
+    control points lie inside the travel is not sampled for its length and extent (it lies in
+    their hull), which was a tenth of simulating a program of distinct NURBS; returns None."""
     kinds: Counter[type] = Counter()
     start = start_mm if start_mm is not None else (0.0, 0.0, 0.0)
     lo, hi = list(start), list(start)  # where the machine stands (X0 Y0 Z0 by default)
@@ -95,8 +101,12 @@ def check_program(path: str, config: MachineConfig,
         geometry = _GEOMETRY.get(kind)
         if geometry is None:
             continue
+        if not summary and kind is NurbsBlock and travel.holds(nurbs_hull_box(block)):
+            continue
         length, (blo, bhi) = geometry(block)
         travel.check(path, block, (blo, bhi), track.table)
+        if not summary:
+            continue
         for i, _, _, _ in limits:
             if blo[i] < lo[i]:
                 lo[i] = blo[i]
@@ -109,6 +119,8 @@ def check_program(path: str, config: MachineConfig,
             feed_mm += length
         if kind is NurbsBlock:
             nurbs_points += block.control_points.shape[0]  # type: ignore[union-attr]
+    if not summary:
+        return None
     return CheckSummary(
         program=path, config=config.name,
         blocks=dict(sorted((k.__name__, v) for k, v in kinds.items())),
@@ -146,6 +158,7 @@ def run(args: argparse.Namespace) -> int:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
         offsets = load_offsets(args.offsets) if args.offsets else None
         summary = check_program(args.program, config, offsets=offsets)
+        assert summary is not None  # summary=True
         probe_drive(config)
     except (ConfigError, OffsetsError) as exc:
         print(f"cncctl: config error: {exc}", file=sys.stderr)

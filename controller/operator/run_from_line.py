@@ -68,7 +68,8 @@ def run_from_line(args: argparse.Namespace, config: MachineConfig, offsets: Offs
             home_all(drive, config)
         start = drive.commanded_xyz_mm()
         if args.from_line is None:
-            check_program(args.program, config, start_mm=start, offsets=offsets)
+            check_program(args.program, config, start_mm=start, offsets=offsets,
+                          summary=False)
             return _run(seq, args.program, config, replace(
                 options, drive=drive, keep_drive_open=True, start_mm=start))
         at = position_at_line(args.program, config, args.from_line, start, offsets)

@@ -49,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _check_whole_program(path: str, config: MachineConfig) -> None:
     """`cncctl check` first (syntax, travel limits, feeds): no planning on a program with an
     error."""
-    check_program(path, config)
+    check_program(path, config, summary=False)
 
 
 def _one(path: str, config: MachineConfig, algorithm: str, trajectory: str | None = None,

@@ -7,6 +7,11 @@ from pathlib import Path
 
 import pytest
 
+from controller.blocks import NurbsBlock
+from controller.config import load_config
+from controller.errors import NcError
+from controller.operator import check_cmd
+from controller.operator.check_cmd import check_program
 from controller.operator.cli import main
 
 REPO = Path(__file__).resolve().parents[2]
@@ -75,3 +80,41 @@ def test_check_opens_the_configured_drive_before_any_motion(
     assert "drive 'sim' cannot be opened" in err and "'fifo_frame'" in err
     assert main(["check", program, "--drive-option", "noequals"]) == 2
     assert "expected KEY=VALUE" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("control_x", "inside"), [(190, True), (220, False), (140, True)])
+def test_the_check_before_motion_refuses_exactly_the_nurbs_cncctl_check_refuses(
+        tmp_path: Path, control_x: int, inside: bool) -> None:
+    """Before motion a NURBS inside its control points' box is not sampled (summary=False):
+    a curve whose control point leaves the travel but which does not (X190: it reaches 145)
+    is still sampled and passes; one that leaves it (X220: 160) is refused with the same
+    error as by `cncctl check`."""
+    program = tmp_path / "nurbs.nc"
+    program.write_text(f"F100\nG0 X100 Y0\nG5.2 P1 L3\nX{control_x} Y10 P1\nX100 Y20 P1\nG5.3\n"
+                       "M2\n", encoding="utf-8")
+    config = load_config(None)
+    errors = []
+    for summary in (True, False):
+        try:
+            result = check_program(str(program), config, summary=summary)
+            assert (result is None) == (not summary)
+            errors.append(None)
+        except NcError as exc:
+            errors.append(exc.format())
+    assert errors[0] == errors[1]
+    assert (errors[0] is None) == inside
+    if not inside:
+        assert "X travel limit exceeded: the path reaches 160.0000 mm" in errors[0]
+
+
+def test_the_check_before_motion_samples_no_nurbs_inside_the_travel(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    sampled = []
+    original = check_cmd._GEOMETRY[NurbsBlock]  # noqa: SLF001
+    monkeypatch.setitem(check_cmd._GEOMETRY, NurbsBlock,  # noqa: SLF001
+                        lambda block: sampled.append(block) or original(block))
+    naca = str(REPO / "nc_programs/naca2415.nc")
+    assert check_program(naca, load_config(None), summary=False) is None
+    assert sampled == []
+    summary = check_program(naca, load_config(None))
+    assert len(sampled) == 1 and summary is not None and summary.path_length_mm > 60.0

@@ -281,7 +281,8 @@ class Machine(OperatorCommands):
                 at = position_at_line(path, self.config, job.from_line, start_mm, offsets)
                 job.approach_mm = at.position_mm
             check_program(path, self.config, on_block=self._beat, offsets=offsets,
-                          start_mm=start_mm, from_line=job.from_line, track=track)
+                          start_mm=start_mm, from_line=job.from_line, track=track,
+                          summary=False)
         except NcError as exc:
             message = NcError(job.name, exc.line, exc.col, exc.word, exc.message).format()
             self.log.log(NOTICE, f"job {job.number} rejected: {message}")
