@@ -17,6 +17,7 @@ from controller.generator.corners.detection import (
 )
 from controller.generator.ph.blend import blend_joint
 from controller.generator.ph.fit import PhSegment, fit_zones
+from controller.generator.ph.line_blends import LineJoints, blend_lines, fits, line_joints
 from controller.geometry.curves import ArcCurve, Curve, LineCurve
 from controller.geometry.nurbs import Nurbs
 from controller.geometry.path import Path, Piece, PieceKind, chain, make_piece
@@ -195,19 +196,28 @@ def _piece_key(p: Piece) -> tuple:
 
 
 def _blend(a: Piece, b: Piece, tol: float, cache: BlendCache | None,
-           repeats: Any = None) -> Blended:
+           repeats: Any = None, line_row: tuple[LineJoints, int] | None = None) -> Blended:
     """blend_joint, remembered by the run (cache) and, for a long program's windows, by the
-    geometry of the joint across windows (repeats: generator/repeats.py)."""
+    geometry of the joint across windows (repeats: generator/repeats.py); a window's joint of
+    two lines by its unit blend (line_row: line_blends.py)."""
     if cache is None:
         return blend_joint(a, b, tol)
     key = (_piece_key(a), _piece_key(b), tol)
     if key not in cache:
-        if repeats is None:
+        if line_row is not None:
+            cache[key] = blend_lines(a, b, tol, *line_row)
+        elif repeats is None:
             cache[key] = blend_joint(a, b, tol)
         else:
             cache[key] = repeats.blend(a, b, tol,
                                        lambda: blend_joint(a, b, tol, repeats.precision))
     return cache[key]
+
+
+def _joint_angle_rad(a: Piece, b: Piece, line_row: tuple[LineJoints, int] | None) -> float:
+    if line_row is not None:
+        return float(line_row[0].angle_rad[line_row[1]])
+    return joint_angle_rad(_tangent(a, True), _tangent(b, False))
 
 
 def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
@@ -228,6 +238,7 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
     infos: list[CornerInfo] = []
     stops: list[int] = []
     blends = 0
+    joints = line_joints(curves) if repeats is not None else None
     for i, bc in enumerate(curves):
         if bc.nurbs:
             ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph,
@@ -236,10 +247,13 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
         else:
             kind = PieceKind.ARC if isinstance(bc.curve, ArcCurve) else PieceKind.LINE
             ps = [make_piece(kind, bc.curve, 0.0, 1.0, 0.0, bc.feed_mm_s, bc.line)]
-        if pieces and joint_angle_rad(_tangent(pieces[-1], True), _tangent(ps[0], False)) \
-                > SMOOTH_JOINT_RAD:
+        row = None if joints is None or not pieces else joints.row.get(i)
+        line_row = None if row is None or not fits(pieces[-1], ps[0], joints, row) \
+            else (joints, row)
+        if pieces and _joint_angle_rad(pieces[-1], ps[0], line_row) > SMOOTH_JOINT_RAD:
             tol = curves[i - 1].blend_tolerance_mm if i > 0 else prefix_tolerance_mm
-            blended = _blend(pieces[-1], ps[0], tol, blend_cache, repeats) if tol else None
+            blended = _blend(pieces[-1], ps[0], tol, blend_cache, repeats, line_row) \
+                if tol else None
             if blended is None:
                 stops.append(len(pieces))
             else:
