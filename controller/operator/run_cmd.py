@@ -7,7 +7,6 @@ import os
 import signal
 import sys
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 from controller.config import load_config
@@ -20,7 +19,7 @@ from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
 from controller.operator.run_from_line import Sequence, run_from_line
 from controller.operator.run_keys import KeyControl, read_keys, stdin_fd
 from controller.operator.run_remote import run_on_daemon
-from controller.operator.run_view import JsonView, PlainView, RichView
+from controller.operator.run_view import JsonView, PlainView, ProgramLines, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.errors import DriveUnavailableError
 
@@ -56,17 +55,13 @@ def check_program(path: str, config: Any, **kw: Any) -> None:
     check_whole_program(path, config, **kw)
 
 
-def _view(args: argparse.Namespace, lines: list[str]) -> Any:
+def _view(args: argparse.Namespace, path: str) -> Any:
     if args.json:
         return JsonView()
+    # The status line's text is read from the file as shown, not held for the whole program
+    # (this process is the motion process: see ProgramLines).
+    lines = ProgramLines(path)
     return RichView(lines) if sys.stdout.isatty() else PlainView(lines)
-
-
-def _program_lines(path: str) -> list[str]:
-    try:
-        return Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
-    except OSError:
-        return []
 
 
 class _Announcer:
@@ -100,7 +95,7 @@ def _daemon_socket(args: argparse.Namespace) -> str | None:
 def run(args: argparse.Namespace) -> int:
     socket_path = _daemon_socket(args)
     if socket_path is not None:
-        view = _view(args, _program_lines(args.program))
+        view = _view(args, args.program)
         try:
             return run_on_daemon(args, socket_path, view)
         except DaemonUnavailable as exc:
@@ -112,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
         offsets = load_offsets(args.offsets) if args.offsets else None
         track = ProgramOffsets()
         check_program(args.program, config, offsets=offsets, from_line=args.from_line,
-                      track=track)
+                      track=track, summary=False)
     except (NcError, ConfigError, OffsetsError) as exc:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
@@ -122,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
               "through cncd after `cncctl home`); the config's allow_unhomed permits it",
               file=sys.stderr)
         return EXIT_REJECTED
-    view = _view(args, _program_lines(args.program))
+    view = _view(args, args.program)
     options = RuntimeOptions(virtual_time=args.virtual_time, optional_stop=args.optional_stop,
                              offsets=offsets, override_off_lines=track.override_off_lines)
     runtime: Any = Runtime(args.program, config, options)
