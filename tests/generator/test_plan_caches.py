@@ -5,12 +5,16 @@ from __future__ import annotations
 from pathlib import Path as FsPath
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from controller.config import load_config
+from controller.generator.feed import path_plan
 from controller.generator.feed.path_plan import limit_samples
 from controller.generator.feed.planner import clear_memo
 from controller.geometry.curves import ArcCurve, LineCurve
 from controller.geometry.path import Path, PieceKind, chain, make_piece
+from controller.geometry.ph_quintic import PhQuintic
 from controller.interpreter.program import read_program
 from controller.runtime.simulation import simulate
 
@@ -67,3 +71,31 @@ def test_repeated_plans_of_a_blended_program_are_identical_and_within_limits(
         assert a_t.max() <= CFG.interpolator.max_accel_mm_s2 * (1 + 1e-6)
     for r in refs[1:]:
         np.testing.assert_array_equal(r, refs[0])
+
+
+@settings(max_examples=40, deadline=None)
+@given(data=st.lists(st.tuples(st.complex_numbers(max_magnitude=3.0, allow_nan=False,
+                                                  allow_infinity=False),
+                               st.floats(0.0, 0.45), st.floats(0.55, 1.0)),
+                     min_size=1, max_size=12),
+       n=st.integers(2, 40))
+def test_pieces_sampled_together_are_sampled_as_one_by_one(
+        data: list[tuple[complex, float, float]], n: int) -> None:
+    """PH blends (a G1 program has one at every joint) and lines are sampled a batch at a
+    time; the numbers are those of _piece_samples, bit for bit, cut pieces included."""
+    pieces, cache = [], {}
+    for k, (turn, u0, u1) in enumerate(data):
+        d1 = complex(1.0, 0.0) + turn
+        if abs(d1) < 1e-3:
+            continue
+        ph = PhQuintic.hermite(0j, complex(1.0, 0.2 * k), 1 + 0j, d1)
+        pieces.append(make_piece(PieceKind.PH, ph, u0, u1, 0.0, 50.0, 1))
+        pieces.append(make_piece(PieceKind.LINE, LineCurve((0.0, k), (1.0 + u1, k)), u0, u1,
+                                 0.0, 50.0, 1))
+    path_plan._ph_samples([(p, n) for p in pieces if p.kind == PieceKind.PH], cache)
+    path_plan._line_samples([(p, n) for p in pieces if p.kind == PieceKind.LINE], cache)
+    for p in pieces:
+        s, kappa = cache[(p.curve, p.u0, p.u1, n)]
+        one_s, one_kappa = path_plan._piece_samples(p, n)
+        np.testing.assert_array_equal(s, one_s)
+        np.testing.assert_array_equal(kappa, one_kappa)

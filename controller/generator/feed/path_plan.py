@@ -115,6 +115,43 @@ def _line_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
             cache[(p.curve, p.u0, p.u1, n)] = (row, kappa)
 
 
+def _ph_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
+    """_piece_samples of many PH pieces at once, into the cache: PhQuintic.evaluate's
+    operations (w, w^2, 2 w w') on an array of pieces with the same count, then the same
+    speed, curvature and trapezoids, so the same numbers (tests/generator/test_feed_limits.py
+    compares them bit for bit); a G1 program has a PH blend at every joint."""
+    by_count: dict[int, list[Piece]] = {}
+    for p, n in todo:
+        by_count.setdefault(n, []).append(p)
+    for n, ps in by_count.items():
+        u0, u1 = np.array([p.u0 for p in ps]), np.array([p.u1 for p in ps])
+        if np.any(u1 == u0):  # linspace treats a zero step apart: piece by piece
+            for p in ps:
+                cache[(p.curve, p.u0, p.u1, n)] = _piece_samples(p, n)
+            continue
+        x = np.linspace(u0, u1, n, axis=1)
+        w0, w1, w2 = (np.array([getattr(p.curve, k) for p in ps])[:, None]
+                      for k in ("w0", "w1", "w2"))
+        w = w0 * (1 - x) ** 2 + 2 * w1 * (1 - x) * x + w2 * x * x
+        d1 = w ** 2
+        d2 = 2 * w * (2 * ((w1 - w0) * (1 - x) + (w2 - w1) * x))
+        dx, dy, ddx, ddy = d1.real, d1.imag, d2.real, d2.imag
+        speed2 = dx * dx + dy * dy
+        speed = np.sqrt(speed2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            kappa = np.abs(dx * ddy - dy * ddx) / (speed2 * speed)
+        kappa = np.where(np.isfinite(kappa), kappa, 0.0)
+        s = np.zeros((len(ps), n))
+        np.cumsum(0.5 * (speed[:, 1:] + speed[:, :-1]) * np.diff(x, axis=1), axis=1,
+                  out=s[:, 1:])
+        length = np.array([p.length_mm for p in ps])
+        last = s[:, -1].copy()
+        scale = length / np.where(last > 0, last, 1.0)
+        s[last > 0] *= scale[last > 0, None]
+        for p, row_s, row_k in zip(ps, s, kappa, strict=True):
+            cache[(p.curve, p.u0, p.u1, n)] = (row_s, row_k)
+
+
 def grid_step_mm(path: Path) -> float:
     """Target spacing of the feed-limit grid (each piece's own step is at most this)."""
     return float(np.clip(path.length_mm / GRID_POINTS, MIN_SPACING_MM, MAX_SPACING_MM))
@@ -128,8 +165,9 @@ def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.nda
     cache = {} if cache is None else cache
     s_parts, k_parts = [], []
     counts = [max(int(np.ceil(p.length_mm / spacing)), 8) + 1 for p in path.pieces]
-    _line_samples([(p, n) for p, n in zip(path.pieces, counts, strict=True)
-                   if p.kind == PieceKind.LINE and (p.curve, p.u0, p.u1, n) not in cache], cache)
+    for kind, batch in ((PieceKind.LINE, _line_samples), (PieceKind.PH, _ph_samples)):
+        batch([(p, n) for p, n in zip(path.pieces, counts, strict=True)
+               if p.kind == kind and (p.curve, p.u0, p.u1, n) not in cache], cache)
     for p, n in zip(path.pieces, counts, strict=True):
         key = (p.curve, p.u0, p.u1, n)
         if key not in cache:
