@@ -2,9 +2,19 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from controller.geometry.ph_quintic import MAX_EXTRA_SWEEPS, NEWTON_SWEEPS, NEWTON_TOL_MM, PhQuintic
+from controller.geometry.ph_quintic import (
+    MAX_EXTRA_SWEEPS,
+    NEWTON_SWEEPS,
+    NEWTON_TOL_MM,
+    PhQuintic,
+    _bernstein_to_power_matrix,
+)
+
+_TABLE_XI = np.linspace(0.0, 1.0, 33)  # PhQuintic.arc_length_table's nodes
 
 
 def _horner_rows(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -15,18 +25,57 @@ def _horner_rows(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
     return acc
 
 
+def _power(bernstein: np.ndarray) -> np.ndarray:
+    """bernstein_to_power of every row: one matrix-vector product per power (a row of the
+    conversion matrix), the BLAS kernel PhQuintic's own conversion uses, so each quintic's
+    numbers bit for bit (tested), where a matrix product sums in another order. A single row
+    is doubled: numpy takes a 1-row product for a dot product, which sums in another order."""
+    rows = bernstein if len(bernstein) > 1 else np.repeat(bernstein, 2, axis=0)
+    m = _bernstein_to_power_matrix(bernstein.shape[1] - 1)
+    return np.stack([rows @ row for row in m], axis=1)[:len(bernstein)]
+
+
+@dataclass(frozen=True)
+class PowerForms:
+    """What the Newton iteration needs of each quintic, computed for all of them at once with
+    PhQuintic's own operations (its cached properties, one object at a time, were most of the
+    interpolation of a G1 program with a blend at every joint)."""
+
+    s_power: np.ndarray  # (m, 6) arc length
+    sigma_power: np.ndarray  # (m, 5) parametric speed
+    r_power: np.ndarray  # (m, 6) complex points
+    w: np.ndarray  # (m, 3) complex
+    table_s: np.ndarray  # (m, 33) arc length at _TABLE_XI
+
+
+def power_forms(phs: list[PhQuintic]) -> PowerForms:
+    """PowerForms from each quintic's Bernstein data (its own, already computed for its
+    length; control points in Python as PhQuintic does, numpy's complex products differing
+    in the last bit)."""
+    sigma = np.array([ph.sigma_bernstein for ph in phs])
+    arc = np.array([ph.arc_length_bernstein for ph in phs])
+    control = np.array([ph.control_points() for ph in phs])
+    w = np.array([(ph.w0, ph.w1, ph.w2) for ph in phs], complex).reshape(-1, 3)
+    s_power = _power(arc)
+    table_s = s_power[:, 5:] * _TABLE_XI + s_power[:, 4:5]  # Horner, row by row
+    for j in range(3, -1, -1):
+        table_s = table_s * _TABLE_XI + s_power[:, j:j + 1]
+    return PowerForms(s_power, _power(sigma), _power(control), w, table_s)
+
+
 def ph_interpolate_many(phs: list[PhQuintic], which: np.ndarray,
                         s_targets_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """ph_interpolate for samples on many PH quintics at once: sample k lies on phs[which[k]]
     at arc length s_targets_mm[k]. Returns (points (N, 2), tangent angles) from the same
     Newton iteration, every polynomial evaluated with per-sample coefficients."""
+    forms = power_forms(phs)
     length = np.array([ph.length_mm for ph in phs])[which]
     s = np.clip(s_targets_mm, 0.0, length)
-    s_pow = np.array([ph._s_power for ph in phs])[which]
-    sigma_pow = np.array([ph._sigma_power for ph in phs])[which]
+    s_pow = forms.s_power[which]
+    sigma_pow = forms.sigma_power[which]
     # Start: each quintic's own 33-node table, searched at once (tables offset per quintic).
-    tab_xi = phs[0].arc_length_table[0]
-    tab_s = np.array([ph.arc_length_table[1] for ph in phs])
+    tab_xi = _TABLE_XI
+    tab_s = forms.table_s
     big = 2.0 * float(tab_s.max()) + 1.0
     flat = (tab_s + big * np.arange(len(phs))[:, None]).ravel()
     j = np.clip(np.searchsorted(flat, s + big * which, side="right") - 1 - which * tab_xi.size,
@@ -41,8 +90,8 @@ def ph_interpolate_many(phs: list[PhQuintic], which: np.ndarray,
         sigma = _horner_rows(sigma_pow, xi)
         step = np.divide(err, sigma, out=np.zeros_like(xi), where=sigma > 0)
         xi = np.clip(xi - step, 0.0, 1.0)
-    r = _horner_rows(np.array([ph._r_power for ph in phs])[which], xi)
-    w = np.array([[ph.w0, ph.w1, ph.w2] for ph in phs])[which]
+    r = _horner_rows(forms.r_power[which], xi)
+    w = forms.w[which]
     m = 1.0 - xi
     hodograph = (w[:, 0] * m * m + 2.0 * w[:, 1] * m * xi + w[:, 2] * xi * xi) ** 2
     return np.column_stack((r.real, r.imag)), np.arctan2(hodograph.imag, hodograph.real)

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from nc_helpers import read_program_nurbs
 
 from controller.geometry.curves import ArcCurve, LineCurve
-from controller.geometry.ph_interpolate import ph_interpolate_many
+from controller.geometry.ph_interpolate import ph_interpolate_many, power_forms
 from controller.geometry.ph_quintic import NEWTON_TOL_MM, PhQuintic, ph_interpolate
 from controller.geometry.taylor import feed_fluctuation, taylor_interpolate, taylor_step
 
@@ -49,6 +49,19 @@ def test_ph_interpolate_many_matches_one_at_a_time(data: list, seed: int) -> Non
         assert np.all(np.abs(dphi) < 1e-9)
         np.testing.assert_allclose(ph.arc_length(ph_interpolate(ph, s[rows])[0]), s[rows],
                                    atol=NEWTON_TOL_MM)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(cplx, cplx, cplx, cplx), min_size=1, max_size=40))
+def test_power_forms_of_many_quintics_are_each_quintics_own(data: list) -> None:
+    """The Newton iteration's coefficients, computed for all quintics at once, are each
+    quintic's own cached ones bit for bit (so a run's samples are as before)."""
+    phs = [PhQuintic.hermite(p0, p0 + dp, d0, d1) for p0, dp, d0, d1 in data]
+    forms = power_forms(phs)
+    np.testing.assert_array_equal(forms.s_power, [ph._s_power for ph in phs])
+    np.testing.assert_array_equal(forms.sigma_power, [ph._sigma_power for ph in phs])
+    np.testing.assert_array_equal(forms.r_power, [ph._r_power for ph in phs])
+    np.testing.assert_array_equal(forms.table_s, [ph.arc_length_table[1] for ph in phs])
 
 
 def test_ph_calgo_quintic_feed_ticks() -> None:
