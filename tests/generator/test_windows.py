@@ -40,10 +40,10 @@ def _runs(program: Path) -> tuple[list, np.ndarray, np.ndarray]:
 
 def test_a_long_g1_run_is_continued_from_window_to_window_without_stopping(
         tmp_path: Path) -> None:
-    """700 short G1 lines: the only cruises are through the PH blends, where the windows are
+    """1750 short G1 lines: the only cruises are through the PH blends, where the windows are
     now cut (they stopped every 200 lines before); the reference stays within Vmax and Amax
     across every cut, and the tool within the contour limit."""
-    program = walk(tmp_path, 700)
+    program = walk(tmp_path, 1750)
     runs, ref, feed = _runs(program)
     assert len(runs) >= 4 and all(r.status == RunStatus.OK for r in runs)
     moving = feed[int(0.05 / T):-int(0.05 / T)]
@@ -58,14 +58,20 @@ def test_a_long_g1_run_is_continued_from_window_to_window_without_stopping(
 def test_planned_samples_per_line_do_not_grow_with_the_length_of_the_run(
         tmp_path: Path) -> None:
     """What each dynamics round of a window plans (its new blocks and the overlap planned
-    again) per line is the same on 400 and on 1600 lines: nothing is carried over and grows.
+    again) per line is the same on 1000 and on 4000 lines: nothing is carried over and grows.
     (The rounds themselves vary from window to window, 1.9 a window on average either way.)"""
     per_line = {}
-    for lines in (400, 1600):
+    for lines in (1000, 4000):
         runs, _, _ = _runs(walk(tmp_path, lines, seed=7))
         per_line[lines] = sum(len(r.samples.s_mm) for r in runs) / lines
         assert max(len(r.geometry.path.pieces) for r in runs) < 3 * plan_module.WINDOW_BLOCKS
-    assert per_line[1600] == pytest.approx(per_line[400], rel=0.05)
+    assert per_line[4000] == pytest.approx(per_line[1000], rel=0.05)
+
+
+def test_a_window_closes_before_a_run_is_flushed() -> None:
+    """A run of MAX_RUN_BLOCKS is flushed to rest; a look-ahead window must close first, or a
+    long G1 program would stop every MAX_RUN_BLOCKS lines."""
+    assert plan_module.WINDOW_BLOCKS <= plan_module.MAX_RUN_BLOCKS
 
 
 def test_nurbs_windows_are_bounded_by_nominal_motion_time(tmp_path: Path) -> None:

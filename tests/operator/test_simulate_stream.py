@@ -61,7 +61,7 @@ def test_a_failed_run_leaves_no_trajectory(tmp_path: Path, monkeypatch: pytest.M
 
 def test_stats_tell_windows_and_rounds_and_leave_the_report_alone(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    program = str(walk(tmp_path, 450))
+    program = str(walk(tmp_path, 1150))
     assert main(["simulate", program, "--json"]) == 0
     plain = json.loads(capsys.readouterr().out)
     assert main(["simulate", program, "--json", "--stats"]) == 0

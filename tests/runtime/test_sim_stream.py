@@ -76,7 +76,7 @@ M2
 def test_streamed_arrays_are_the_whole_arrays_bit_for_bit(name: str, tmp_path: Path) -> None:
     config = MILL if name == "mill" else XY
     if name == "walk":  # two look-ahead windows, continued mid-cruise
-        program = str(walk(tmp_path, 260))
+        program = str(walk(tmp_path, 650))
     elif name == "mill":
         (tmp_path / "mill.nc").write_text(MILL_PROGRAM, encoding="utf-8")
         program = str(tmp_path / "mill.nc")

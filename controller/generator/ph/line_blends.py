@@ -1,12 +1,9 @@
 """G1 line-to-line corners of a long program's windows, every joint of a window at once.
 
-A blend between two lines is symmetric about the joint (the same cut on both sides) and the
-PH Hermite construction commutes with similarity, so the blend with cut c is the blend with
-cut 1 mm scaled by c about the joint, and its deviation from the two lines is c times that of
-the unit blend. One vectorised pass over a window's joints gives each joint's unit blend and
-deviation; a joint then takes the largest cut the tolerance and MAX_SHARE of each line allow,
-exactly (blend.py bisects for it, one trial at a time, ~0.1 ms per joint: a quarter of the
-planning of a G1 program). A single run's plans keep blend.py (bit for bit as before).
+A joint's blend is its unit blend (unit_blend.py) scaled by the largest cut the tolerance and
+MAX_SHARE of each line allow, exactly; blend.py bisects for it one trial at a time (~0.1 ms a
+joint: a quarter of the planning of a G1 program). A single run's plans keep blend.py (bit
+for bit as before).
 """
 
 from __future__ import annotations
@@ -17,14 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.generator.ph.blend import MAX_BLEND_ANGLE_RAD, MAX_SHARE, MIN_CUT_MM
+from controller.generator.ph.unit_blend import unit_blends
 from controller.geometry.curves import LineCurve
 from controller.geometry.path import Piece, PieceKind
-from controller.geometry.ph_quintic import TAME_ANGLE_RAD, PhQuintic
+from controller.geometry.ph_quintic import PhQuintic
 
-_DEVIATION_POINTS = 65  # as blend.deviation_mm measures a trial
 _SAFETY = 1.0 - 1e-9  # c D rounds: stay a hair inside the tolerance
-_BERNSTEIN5 = np.array([[math.comb(5, k) * x ** k * (1 - x) ** (5 - k) for k in range(6)]
-                        for x in np.linspace(0.0, 1.0, _DEVIATION_POINTS)])
 
 
 @dataclass(frozen=True)
@@ -54,43 +49,9 @@ def line_joints(curves: list[object]) -> LineJoints:
              and isinstance(curves[i].curve, LineCurve)]  # type: ignore[attr-defined]
     t0 = np.array([_unit_tangent(curves[i - 1].curve) for i in index], complex)  # type: ignore[attr-defined]
     t1 = np.array([_unit_tangent(curves[i].curve) for i in index], complex)  # type: ignore[attr-defined]
-    turn = t1 * np.conj(t0)
-    angle = np.abs(np.angle(turn))
-    chord = t0 + t1  # p5 - p0 of the unit blend (zero for a reversal)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d0c, d1c = t0 * np.abs(chord) / chord, t1 * np.abs(chord) / chord
-    canonical = _tame(d0c) & _tame(d1c) & (angle <= MAX_BLEND_ANGLE_RAD)
-    w0, w2 = np.sqrt(d0c), np.sqrt(d1c)
-    w1 = -0.75 * (w0 + w2) + 0.25 * np.sqrt(120 - 15 * (w0 * w0 + w2 * w2) + 10 * w0 * w2)
-    w = np.column_stack((w0, w1, w2)) * np.sqrt(chord)[:, None]
-    w = np.where(canonical[:, None], w, 0.0)
-    return LineJoints({i: k for k, i in enumerate(index)}, angle,
-                      _deviations(w, -t0, t0, t1), w, canonical)
-
-
-def _tame(d: np.ndarray) -> np.ndarray:
-    """ph_quintic._tame on arrays."""
-    return (np.abs(d) >= 0.5) & (np.abs(d) <= 2.0) & (np.abs(np.angle(d)) <= TAME_ANGLE_RAD)
-
-
-def _deviations(w: np.ndarray, p0: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
-    """Largest distance of each unit blend (from p0, the joint at 0) to its two lines."""
-    w0, w1, w2 = w[:, 0], w[:, 1], w[:, 2]
-    steps = np.column_stack((w0 * w0 / 5, w0 * w1 / 5, (2 * w1 * w1 + w0 * w2) / 15,
-                             w1 * w2 / 5, w2 * w2 / 5))
-    control = p0[:, None] + np.concatenate((np.zeros((len(w), 1)), np.cumsum(steps, axis=1)),
-                                           axis=1)
-    pts = np.einsum("mk,pk->mp", control, _BERNSTEIN5)  # (m, points); no BLAS threads
-    return np.max(np.minimum(_to_segment(pts, p0, -p0), _to_segment(pts, 0 * t1, t1)), axis=1) \
-        if len(w) else np.zeros(0)
-
-
-def _to_segment(pts: np.ndarray, a: np.ndarray, ab: np.ndarray) -> np.ndarray:
-    """Distance of points (m, n) to the segments a + [0, 1] ab (m,), complex coordinates."""
-    rel = pts - a[:, None]
-    t = np.clip((rel * np.conj(ab)[:, None]).real / np.maximum(np.abs(ab) ** 2, 1e-300)[:, None],
-                0.0, 1.0)
-    return np.abs(rel - t * ab[:, None])
+    w, deviation, canonical = unit_blends(t0, t1, MAX_BLEND_ANGLE_RAD)
+    return LineJoints({i: k for k, i in enumerate(index)}, np.abs(np.angle(t1 * np.conj(t0))),
+                      deviation, w, canonical)
 
 
 def blend_lines(a: Piece, b: Piece, tolerance_mm: float, joints: LineJoints,
