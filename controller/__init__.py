@@ -10,6 +10,7 @@ The base layer is the files in this folder: errors, the machine config, numpy he
 two things that flow between the processes (NC blocks, reference-point chunks).
 """
 
+import ctypes
 import os
 
 # One BLAS thread in every process of the controller (set before numpy is first imported, and
@@ -20,5 +21,29 @@ import os
 # from threads. A value set by the user is kept.
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters
+KEEP_FREED_BYTES = 64 << 20
+MMAP_ABOVE_BYTES = 32 << 20
+
+
+def _keep_freed_memory() -> None:
+    """glibc returns a freed block of a few MB to the kernel at once (above its mmap threshold,
+    or trimmed off the heap's top) and faults it back in page by page on the next allocation:
+    planning allocates numpy arrays of that size all the time, and on a 100k-line program
+    that was 3 s of kernel time in 16 s (0.04 s with these). Freed memory up to
+    KEEP_FREED_BYTES stays with the process (peak RSS unchanged); fewer page faults also
+    suit the motion process. Not on other C libraries, or where the user set MALLOC_*_."""
+    if any(k in os.environ for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_")):
+        return
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return
+    mallopt(M_MMAP_THRESHOLD, MMAP_ABOVE_BYTES)
+    mallopt(M_TRIM_THRESHOLD, KEEP_FREED_BYTES)
+
+
+_keep_freed_memory()
 
 __version__ = "0.1.0"
