@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from controller.blocks import ArcBlock, PathControl, Source
-from controller.interpreter.arcs import arc_box, center_ijk, center_r
+from controller.interpreter.arcs import RADIUS_TOLERANCE_MM, arc_box, center_ijk, center_r
 from controller.interpreter.codes import WordError
 
 coord = st.floats(-100, 100, allow_nan=False)
@@ -22,7 +22,7 @@ PROPS = settings(max_examples=150, deadline=None)
 def test_r_form_centre(sx: float, sy: float, ex: float, ey: float, factor: float,
                        clockwise: bool, long_way: bool) -> None:
     half = math.hypot(ex - sx, ey - sy) / 2
-    if half < 1e-3:
+    if half < RADIUS_TOLERANCE_MM:  # refused as a zero-radius arc (hypothesis found 1 um)
         return
     radius = half * factor * (-1 if long_way else 1)
     cx, cy = center_r(sx, sy, ex, ey, radius, clockwise, inch=False)
