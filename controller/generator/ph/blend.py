@@ -63,6 +63,7 @@ class _Side:
                  ) -> None:
         self.p, self.at_end, self.n = piece, at_end, n
         self.by_parameter = by_parameter and hasattr(piece.curve, "arc_length_table")
+        self._u_near: dict[float, float] = {}
         if piece.kind != PieceKind.LINE:
             self.curve_s0 = piece.curve_s0_mm
             self.lo, self.hi = min(piece.u0, piece.u1), max(piece.u0, piece.u1)
@@ -88,8 +89,11 @@ class _Side:
         """The parameter at an arc length inside the piece to CUT_TOL_MM (Newton on s(u),
         no inverse table): the blend starts wherever the trimmed piece ends, both at this
         parameter, so the cut's length need not be exact."""
-        table = self.p.curve.arc_length_table  # type: ignore[attr-defined]
-        return table.u_of_s_scalar(self.curve_s0 + s_local_mm, self.lo, self.hi, CUT_TOL_MM)
+        if s_local_mm not in self._u_near:  # the cut that fits was tried: trim there
+            table = self.p.curve.arc_length_table  # type: ignore[attr-defined]
+            self._u_near[s_local_mm] = table.u_of_s_scalar(self.curve_s0 + s_local_mm, self.lo,
+                                                           self.hi, CUT_TOL_MM)
+        return self._u_near[s_local_mm]
 
     def _edge_u(self) -> float:
         return self.p.u1 if self.at_end else self.p.u0
@@ -203,12 +207,14 @@ def _searched(a: _Side, b: _Side, hi: float, tol_mm: float, precision: float,
               aim_mm: float) -> tuple[float, PhQuintic] | None:
     """The largest cut up to hi that fits, to `precision` of itself (a long program's
     windows). The first trial is at the cut that would fit were both sides lines (aim_mm),
-    just under the tolerance; from a cut that fits the next steps just past it, which closes
-    the bracket when the aim was good; after a cut that does not, the deviation's power law
-    aims again, and a guess outside the bracket halves it. 2-3 trials where halving took 11
-    at 1 % (the airfoil's trailing edge: the lines' aim was 2 % over, its power-law correction
-    fitted, the step past it did not; hi, the share of the pieces, stays untried while
-    nothing fails)."""
+    just under the tolerance; after a cut that does not fit, the deviation's power law aims
+    again, and a guess outside the bracket halves it. A cut that fits is taken once its
+    deviation is within `precision` of the tolerance: the deviation grows at least as fast
+    as the cut at a corner (a line's exactly as fast), so the cut is then within `precision`
+    of the largest. Otherwise the next trial steps just past it, which closes the bracket
+    when it fails. 1 trial at a joint of lines, 2 at the airfoil's trailing edge (the lines'
+    aim 2 % over, its power-law correction fitted) where halving took 11; hi, the share of
+    the pieces, stays untried while nothing fails."""
     target = tol_mm * (1.0 - 0.5 * precision)
     best, lo, dev_lo, dev_hi = None, 0.0, 0.0, math.nan  # dev_hi nan: hi not tried
     guess, stepped = min(hi, aim_mm * (1.0 - 0.5 * precision)), False
@@ -216,6 +222,8 @@ def _searched(a: _Side, b: _Side, hi: float, tol_mm: float, precision: float,
         ph, deviation = _trial(a, b, guess)
         if deviation <= tol_mm:
             best, lo, dev_lo, stepped = (guess, ph), guess, deviation, False
+            if deviation >= tol_mm * (1.0 - precision):
+                break
         else:
             hi, dev_hi = guess, deviation
         if best is not None and (lo >= hi or hi - lo <= precision * lo and dev_hi == dev_hi):
