@@ -131,9 +131,13 @@ def test_silent_drive_is_lost_with_the_last_known_position() -> None:
 
 
 def test_peer_killed_mid_program_is_lost_communication() -> None:
+    """The butterfly (6.8 s), not the airfoil (1.1 s): on a loaded machine the airfoil was
+    done before the peer was killed, and its last line, read ahead by wait_running's
+    iteration, never reached communicate()."""
     with peer() as (proc, path):
-        runner = subprocess.Popen([*CLI, "run", PROGRAM, "--config", "canopen",
-                                   "--drive-option", f"channel={path}", "--json"],
+        runner = subprocess.Popen([*CLI, "run", str(ROOT / "nc_programs" / "butterfly.nc"),
+                                   "--config", "canopen", "--drive-option", f"channel={path}",
+                                   "--json"],
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                   cwd=ROOT)
         try:
@@ -141,6 +145,7 @@ def test_peer_killed_mid_program_is_lost_communication() -> None:
             proc.kill()  # the peer dies mid-program (the adapter is unplugged)
             t_kill = time.monotonic()
             out, err = runner.communicate(timeout=20)
+            assert out.strip(), err
             last = json.loads(out.splitlines()[-1])
             assert runner.returncode == 3 and last["event"] == "fault", err
             assert "lost communication with the CAN adapter" in last["message"]
