@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -86,50 +86,55 @@ def _piece_samples(p: Piece, n: int) -> tuple[np.ndarray, np.ndarray]:
     return s, kappa
 
 
+def _batches(todo: list[tuple[Piece, int]], cache: PieceSamples
+             ) -> Iterator[tuple[int, list[Piece], np.ndarray]]:
+    """The pieces to sample grouped by sample count, each group with its parameters (one row
+    per piece); a group with a zero parameter step is sampled piece by piece into the cache
+    instead (linspace treats a zero step apart)."""
+    by_count: dict[int, list[Piece]] = {}
+    for p, n in todo:
+        by_count.setdefault(n, []).append(p)
+    for n, ps in by_count.items():
+        u0, u1 = np.array([p.u0 for p in ps]), np.array([p.u1 for p in ps])
+        if np.any(u1 == u0):
+            for p in ps:
+                cache[(p.curve, p.u0, p.u1, n)] = _piece_samples(p, n)
+            continue
+        yield n, ps, np.linspace(u0, u1, n, axis=1)
+
+
+def _store(ps: list[Piece], n: int, u: np.ndarray, speed: np.ndarray, kappa: np.ndarray,
+           cache: PieceSamples) -> None:
+    """_piece_samples' trapezoids of |C'| on each row, rescaled to its piece's length, into
+    the cache with the row's curvature."""
+    s = np.zeros(u.shape)
+    np.cumsum(0.5 * (speed[:, 1:] + speed[:, :-1]) * np.diff(u, axis=1), axis=1, out=s[:, 1:])
+    length = np.array([p.length_mm for p in ps])
+    last = s[:, -1].copy()
+    scale = length / np.where(last > 0, last, 1.0)
+    s[last > 0] *= scale[last > 0, None]
+    for p, row_s, row_k in zip(ps, s, np.broadcast_to(kappa, u.shape), strict=True):
+        cache[(p.curve, p.u0, p.u1, n)] = (row_s, row_k)
+
+
 def _line_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
     """_piece_samples of many LINE pieces at once, into the cache: the same operations on
     arrays of pieces with the same count (curvature 0; the trapezoids of a constant speed,
     then rescaled to the piece length), so the same numbers, without numpy's cost per call
     on every line of a G1 program."""
-    by_count: dict[int, list[Piece]] = {}
-    for p, n in todo:
-        by_count.setdefault(n, []).append(p)
-    for n, ps in by_count.items():
-        u0, u1 = np.array([p.u0 for p in ps]), np.array([p.u1 for p in ps])
-        if np.any(u1 == u0):  # linspace treats a zero step apart: piece by piece
-            for p in ps:
-                cache[(p.curve, p.u0, p.u1, n)] = _piece_samples(p, n)
-            continue
-        u = np.linspace(u0, u1, n, axis=1)
+    for n, ps, u in _batches(todo, cache):
         dx = np.array([p.curve.p1[0] - p.curve.p0[0] for p in ps])  # type: ignore[attr-defined]
         dy = np.array([p.curve.p1[1] - p.curve.p0[1] for p in ps])  # type: ignore[attr-defined]
-        speed = np.sqrt(dx * dx + dy * dy)[:, None]
-        s = np.zeros((len(ps), n))
-        np.cumsum(0.5 * (speed + speed) * np.diff(u, axis=1), axis=1, out=s[:, 1:])
-        length = np.array([p.length_mm for p in ps])
-        last = s[:, -1].copy()
-        scale = length / np.where(last > 0, last, 1.0)
-        s[last > 0] *= scale[last > 0, None]
-        kappa = np.zeros(n)
-        for p, row in zip(ps, s, strict=True):
-            cache[(p.curve, p.u0, p.u1, n)] = (row, kappa)
+        speed = np.broadcast_to(np.sqrt(dx * dx + dy * dy)[:, None], u.shape)
+        _store(ps, n, u, speed, np.zeros(n), cache)
 
 
 def _ph_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
     """_piece_samples of many PH pieces at once, into the cache: PhQuintic.evaluate's
     operations (w, w^2, 2 w w') on an array of pieces with the same count, then the same
-    speed, curvature and trapezoids, so the same numbers (tests/generator/test_feed_limits.py
+    speed, curvature and trapezoids, so the same numbers (tests/generator/test_plan_caches.py
     compares them bit for bit); a G1 program has a PH blend at every joint."""
-    by_count: dict[int, list[Piece]] = {}
-    for p, n in todo:
-        by_count.setdefault(n, []).append(p)
-    for n, ps in by_count.items():
-        u0, u1 = np.array([p.u0 for p in ps]), np.array([p.u1 for p in ps])
-        if np.any(u1 == u0):  # linspace treats a zero step apart: piece by piece
-            for p in ps:
-                cache[(p.curve, p.u0, p.u1, n)] = _piece_samples(p, n)
-            continue
-        x = np.linspace(u0, u1, n, axis=1)
+    for n, ps, x in _batches(todo, cache):
         w0, w1, w2 = (np.array([getattr(p.curve, k) for p in ps])[:, None]
                       for k in ("w0", "w1", "w2"))
         w = w0 * (1 - x) ** 2 + 2 * w1 * (1 - x) * x + w2 * x * x
@@ -140,16 +145,7 @@ def _ph_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
         speed = np.sqrt(speed2)
         with np.errstate(divide="ignore", invalid="ignore"):
             kappa = np.abs(dx * ddy - dy * ddx) / (speed2 * speed)
-        kappa = np.where(np.isfinite(kappa), kappa, 0.0)
-        s = np.zeros((len(ps), n))
-        np.cumsum(0.5 * (speed[:, 1:] + speed[:, :-1]) * np.diff(x, axis=1), axis=1,
-                  out=s[:, 1:])
-        length = np.array([p.length_mm for p in ps])
-        last = s[:, -1].copy()
-        scale = length / np.where(last > 0, last, 1.0)
-        s[last > 0] *= scale[last > 0, None]
-        for p, row_s, row_k in zip(ps, s, kappa, strict=True):
-            cache[(p.curve, p.u0, p.u1, n)] = (row_s, row_k)
+        _store(ps, n, x, speed, np.where(np.isfinite(kappa), kappa, 0.0), cache)
 
 
 def grid_step_mm(path: Path) -> float:
