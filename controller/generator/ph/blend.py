@@ -216,7 +216,8 @@ def _searched(a: _Side, b: _Side, hi: float, tol_mm: float, precision: float,
     aim 2 % over, its power-law correction fitted) where halving took 11; hi, the share of
     the pieces, stays untried while nothing fails."""
     target = tol_mm * (1.0 - 0.5 * precision)
-    best, lo, dev_lo, dev_hi = None, 0.0, 0.0, math.nan  # dev_hi nan: hi not tried
+    best, lo, dev_lo, dev_hi = None, 0.0, 0.0, math.inf
+    hi_failed = False  # hi is only the share of the pieces until a cut there does not fit
     guess, stepped = min(hi, aim_mm * (1.0 - 0.5 * precision)), False
     for _ in range(BISECTIONS):
         ph, deviation = _trial(a, b, guess)
@@ -225,13 +226,13 @@ def _searched(a: _Side, b: _Side, hi: float, tol_mm: float, precision: float,
             if deviation >= tol_mm * (1.0 - precision):
                 break
         else:
-            hi, dev_hi = guess, deviation
-        if best is not None and (lo >= hi or hi - lo <= precision * lo and dev_hi == dev_hi):
+            hi, dev_hi, hi_failed = guess, deviation, True
+        if best is not None and (lo >= hi or hi_failed and hi - lo <= precision * lo):
             break
         if best is not None and not stepped:
             # just inside the precision, so that the bracket surely closes if it fails
             guess, stepped = min(lo * (1.0 + 0.999 * precision), hi), True
-        elif dev_hi != dev_hi:  # only fits so far: aim on from the last one, at least a step
+        elif not hi_failed:  # only fits so far: aim on from the last one, at least a step
             guess = min(hi, max(lo * target / dev_lo if dev_lo > 0 else hi,
                                 lo * (1.0 + precision)))
         else:
@@ -260,8 +261,8 @@ def blend_joint(a: Piece, b: Piece, tolerance_mm: float,
                 precision: float = 0.0) -> tuple[Piece, Piece, Piece] | None:
     """(a trimmed, PH blend, b trimmed) with deviation <= tolerance, or None to stop there.
 
-    The cut is bisected BISECTIONS times, or, with a precision, searched until the bracket is
-    within that share of the cut that fits (the windows of a long program: repeats.py)."""
+    The cut is bisected BISECTIONS times, or, with a precision, searched until it is within
+    that share of the largest that fits (the windows of a long program: repeats.py)."""
     if a.kind == PieceKind.PH or b.kind == PieceKind.PH or tolerance_mm <= 0:
         return None
     by_parameter = bool(precision)
