@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from controller.generator.ph.blend import blend_joint
 from controller.generator.ph.construct import BlockCurve
-from controller.generator.ph.line_blends import blend_lines, fits, line_joints
+from controller.generator.ph.line_blends import applies, blend_lines, line_joints
 from controller.geometry.curves import LineCurve
 from controller.geometry.path import Piece, PieceKind, make_piece
 
@@ -46,7 +46,7 @@ def test_the_unit_blend_scaled_is_the_bisected_blend(turn_deg: float, la: float,
                           BlockCurve(b.curve, 50.0, 2, False, tol_mm)])
     assert joints.row == {1: 0}
     assert joints.angle_rad[0] == pytest.approx(math.radians(turn_deg), abs=1e-9)
-    assert fits(a, b, joints, 0)
+    assert applies(a, b, joints, 0)
     single, fast = blend_joint(a, b, tol_mm), blend_lines(a, b, tol_mm, joints, 0)
     assert (single is None) == (fast is None)
     if fast is None:
@@ -70,10 +70,10 @@ def test_sharp_turns_and_cut_pieces_go_the_general_way() -> None:
     a, b, _ = _joint(170.0, 2.0, 2.0, 0.3)
     joints = line_joints([BlockCurve(a.curve, 50.0, 1, False, 0.03),
                           BlockCurve(b.curve, 50.0, 2, False, 0.03)])
-    assert not fits(a, b, joints, 0)
+    assert not applies(a, b, joints, 0)
     a, b, _ = _joint(90.0, 2.0, 2.0, 0.3)
     joints = line_joints([BlockCurve(a.curve, 50.0, 1, False, 0.03),
                           BlockCurve(b.curve, 50.0, 2, False, 0.03)])
-    assert fits(a, b, joints, 0)
+    assert applies(a, b, joints, 0)
     cut = make_piece(PieceKind.LINE, a.curve, 0.0, 0.9, 0.0, 50.0, 1)
-    assert not fits(cut, b, joints, 0)
+    assert not applies(cut, b, joints, 0)

@@ -17,7 +17,7 @@ from controller.generator.corners.detection import (
 )
 from controller.generator.ph.blend import blend_joint
 from controller.generator.ph.fit import PhSegment, fit_zones
-from controller.generator.ph.line_blends import LineJoints, blend_lines, fits, line_joints
+from controller.generator.ph.line_blends import LineJoints, applies, blend_lines, line_joints
 from controller.geometry.curves import ArcCurve, Curve, LineCurve
 from controller.geometry.nurbs import Nurbs
 from controller.geometry.path import Path, Piece, PieceKind, chain, make_piece
@@ -248,7 +248,7 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
             kind = PieceKind.ARC if isinstance(bc.curve, ArcCurve) else PieceKind.LINE
             ps = [make_piece(kind, bc.curve, 0.0, 1.0, 0.0, bc.feed_mm_s, bc.line)]
         row = None if joints is None or not pieces else joints.row.get(i)
-        line_row = None if row is None or not fits(pieces[-1], ps[0], joints, row) \
+        line_row = None if row is None or not applies(pieces[-1], ps[0], joints, row) \
             else (joints, row)
         if pieces and _joint_angle_rad(pieces[-1], ps[0], line_row) > SMOOTH_JOINT_RAD:
             tol = curves[i - 1].blend_tolerance_mm if i > 0 else prefix_tolerance_mm

@@ -78,7 +78,7 @@ def blend_lines(a: Piece, b: Piece, tolerance_mm: float, joints: LineJoints,
                   b.corner))
 
 
-def fits(a: Piece, b: Piece, joints: LineJoints, row: int) -> bool:
+def applies(a: Piece, b: Piece, joints: LineJoints, row: int) -> bool:
     """Whether blend_lines applies: both pieces whole at the joint (a ends at its line's end,
     b starts at its line's start) and the canonical interpolant is the right one."""
     return (bool(joints.canonical[row]) and a.kind == PieceKind.LINE and b.kind == PieceKind.LINE
