@@ -182,7 +182,9 @@ def _plan_round(nodes: _Nodes, v: np.ndarray, curve: LimitCurve, accel: float, t
     keys = _segment_keys(win, vi, vj, nodes.flat)
     known = np.array([key in memo.rows for key in keys], bool)
     new = np.flatnonzero(~known)
-    out = np.empty((len(keys), 6))
+    # zeros, not empty: the += below runs over every row, and np.empty's recycled memory held
+    # a NaN now and then (a RuntimeWarning; the new rows are overwritten further down).
+    out = np.zeros((len(keys), 6))
     if new.size < len(keys):
         out[known] = [memo.rows[key] for key, kn in zip(keys, known.tolist(), strict=True) if kn]
     # Rows hold positions relative to their segment's start: a segment that moved along the
