@@ -82,7 +82,8 @@ class FerrorCheck:
 NEAR_FRAMES = 40  # reference frames searched each side of a frame for the nearest path point
 # Encoder rows measured together: one cycle brings 2, and 15 numpy calls on 2 rows were a
 # quarter of the motion process's CPU. The frames they are measured against stay in the
-# history ring (2 FIFOs + 1024 frames) far longer than BATCH_ROWS + NEAR_FRAMES cycles.
+# history ring (2 FIFOs + 1024 frames), far more than the BATCH_ROWS + NEAR_FRAMES frames a
+# batch reaches back.
 BATCH_ROWS = 128
 
 
