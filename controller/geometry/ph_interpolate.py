@@ -48,14 +48,42 @@ class PowerForms:
     table_s: np.ndarray  # (m, 33) arc length at _TABLE_XI
 
 
+def _product(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(real, imaginary) of a * b as CPython multiplies two complex numbers (numpy's complex
+    product may differ in the last bit)."""
+    return a.real * b.real - a.imag * b.imag, a.real * b.imag + a.imag * b.real
+
+
+def _over(re: np.ndarray, im: np.ndarray, d: float) -> np.ndarray:
+    """(re + i im) / d as CPython divides a complex by a (real) int: Smith's method with a
+    zero imaginary part, the same bits (signed zeros included) as PhQuintic's own."""
+    return (re + im * 0.0) / d + 1j * ((im - re * 0.0) / d)
+
+
+def control_rows(p0: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """PhQuintic.control_points of every row (p0 (m,), w (m, 3) complex) at once, with the
+    same operations, so the same numbers bit for bit (tested)."""
+    w0, w1, w2 = w[:, 0], w[:, 1], w[:, 2]
+    two_w1 = (2.0 * w1.real - 0.0 * w1.imag) + 1j * (2.0 * w1.imag + 0.0 * w1.real)
+    mid_re, mid_im = _product(two_w1, w1)
+    cross_re, cross_im = _product(w0, w2)
+    steps = np.column_stack((_over(*_product(w0, w0), 5.0), _over(*_product(w0, w1), 5.0),
+                             _over(mid_re + cross_re, mid_im + cross_im, 15.0),
+                             _over(*_product(w1, w2), 5.0), _over(*_product(w2, w2), 5.0)))
+    out = np.zeros((len(p0), 6), complex)
+    np.cumsum(steps, axis=1, out=out[:, 1:])
+    return p0[:, None] + out
+
+
 def power_forms(phs: list[PhQuintic]) -> PowerForms:
-    """PowerForms from each quintic's Bernstein data (its own, already computed for its
-    length; control points in Python as PhQuintic does, numpy's complex products differing
-    in the last bit)."""
-    sigma = np.array([ph.sigma_bernstein for ph in phs])
-    arc = np.array([ph.arc_length_bernstein for ph in phs])
-    control = np.array([ph.control_points() for ph in phs])
-    w = np.array([(ph.w0, ph.w1, ph.w2) for ph in phs], complex).reshape(-1, 3)
+    """PowerForms from each quintic's Bernstein data, for all rows at once with PhQuintic's own
+    operations (its sigma values are already computed for its length)."""
+    sigma = np.array([ph.sigma_values for ph in phs]).reshape(-1, 5)
+    arc = np.zeros((len(phs), 6))
+    arc[:, 1:] = np.cumsum(sigma, axis=1) / 5.0
+    coeffs = np.array([(ph.p0, ph.w0, ph.w1, ph.w2) for ph in phs], complex).reshape(-1, 4)
+    w = coeffs[:, 1:]
+    control = control_rows(coeffs[:, 0], w)
     s_power = _power(arc)
     table_s = s_power[:, 5:] * _TABLE_XI + s_power[:, 4:5]  # Horner, row by row
     for j in range(3, -1, -1):

@@ -82,13 +82,18 @@ class PhQuintic:
         return self.p0 + np.concatenate(([0j], np.cumsum(steps)))
 
     @cached_property
+    def sigma_values(self) -> tuple[float, float, float, float, float]:
+        """sigma_bernstein as Python floats: a blend's length from them costs no numpy call
+        (a G1 program has a blend at every joint)."""
+        w0, w1, w2 = self.w0, self.w1, self.w2
+        return (abs(w0) ** 2, (w0 * w1.conjugate()).real,
+                (2 * abs(w1) ** 2 + (w0 * w2.conjugate()).real) / 3,
+                (w1 * w2.conjugate()).real, abs(w2) ** 2)
+
+    @cached_property
     def sigma_bernstein(self) -> np.ndarray:
         """Bernstein coefficients of the parametric speed sigma = |w|^2 (quartic)."""
-        w0, w1, w2 = self.w0, self.w1, self.w2
-        re = lambda z: z.real  # noqa: E731
-        return np.array([abs(w0) ** 2, re(w0 * w1.conjugate()),
-                         (2 * abs(w1) ** 2 + re(w0 * w2.conjugate())) / 3,
-                         re(w1 * w2.conjugate()), abs(w2) ** 2])
+        return np.array(self.sigma_values)
 
     @cached_property
     def arc_length_bernstein(self) -> np.ndarray:
@@ -111,7 +116,9 @@ class PhQuintic:
 
     @cached_property
     def length_mm(self) -> float:
-        return float(self.sigma_bernstein.sum() / 5.0)
+        # sigma_bernstein.sum() / 5, in numpy's order for five values (one after the other).
+        s0, s1, s2, s3, s4 = self.sigma_values
+        return ((((s0 + s1) + s2) + s3) + s4) / 5.0
 
     @cached_property
     def arc_length_table(self) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from nc_helpers import read_program_nurbs
 
 from controller.geometry.curves import ArcCurve, LineCurve
-from controller.geometry.ph_interpolate import ph_interpolate_many, power_forms
+from controller.geometry.ph_interpolate import control_rows, ph_interpolate_many, power_forms
 from controller.geometry.ph_quintic import NEWTON_TOL_MM, PhQuintic, ph_interpolate
 from controller.geometry.taylor import feed_fluctuation, taylor_interpolate, taylor_step
 
@@ -49,6 +49,27 @@ def test_ph_interpolate_many_matches_one_at_a_time(data: list, seed: int) -> Non
         assert np.all(np.abs(dphi) < 1e-9)
         np.testing.assert_allclose(ph.arc_length(ph_interpolate(ph, s[rows])[0]), s[rows],
                                    atol=NEWTON_TOL_MM)
+
+
+coefficient = st.one_of(st.sampled_from([0j, complex(-0.0, 1.0), complex(1.0, -0.0)]),
+                        st.complex_numbers(max_magnitude=1e4, allow_nan=False,
+                                           allow_infinity=False))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(coefficient, coefficient, coefficient, coefficient), min_size=1,
+                max_size=30))
+def test_control_rows_and_length_are_the_quintics_own_bit_for_bit(data: list) -> None:
+    """control_rows (all quintics at once) gives each PhQuintic.control_points, and length_mm
+    (Python floats) gives sigma_bernstein.sum() / 5, to the bit, signed zeros included."""
+    z = np.array(data, complex).reshape(-1, 4)
+    phs = [PhQuintic(*(complex(c) for c in row)) for row in z]
+    rows = control_rows(z[:, 0], z[:, 1:])
+    own = np.array([ph.control_points() for ph in phs])
+    assert rows.view(np.uint64).tolist() == own.view(np.uint64).tolist()
+    numpy_sum = np.array([ph.sigma_bernstein.sum() / 5.0 for ph in phs])
+    lengths = np.array([ph.length_mm for ph in phs])
+    assert lengths.view(np.uint64).tolist() == numpy_sum.view(np.uint64).tolist()
 
 
 @settings(max_examples=30, deadline=None)

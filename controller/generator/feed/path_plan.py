@@ -10,7 +10,7 @@ import numpy as np
 
 from controller.generator.feed.limits import chord_error_feed_mm_s, corner_feed_mm_s
 from controller.generator.feed.planner import PlanResult, plan_feed
-from controller.generator.feed.profile import FeedPhase, FeedProfile
+from controller.generator.feed.profile import FeedProfile
 from controller.generator.feed.stops import approach_split, model_stop_accel, stop_accel_at
 from controller.geometry.curves import Curve
 from controller.geometry.path import Path, Piece, PieceKind
@@ -219,18 +219,19 @@ def feed_limit_mm_s(path: Path, s: np.ndarray, kappa: np.ndarray, inp: FeedInput
 def _concat(profiles: list[FeedProfile]) -> FeedProfile:
     """Chain section profiles end to end in time and arc length."""
     if len(profiles) == 1 and profiles[0].t0_s == 0.0 and \
-            (not profiles[0].phases or profiles[0].phases[0].s0_mm == 0.0):
+            (not len(profiles[0]) or profiles[0].rows[0, 2] == 0.0):
         return profiles[0]  # one section (no stops): already chained
-    phases: list[FeedPhase] = []
+    parts: list[np.ndarray] = []
     t0 = s0 = 0.0
     for prof in profiles:
-        for ph in prof.phases:
-            phases.append(FeedPhase(t0 + ph.t0_s - prof.t0_s, ph.duration_s,
-                                    s0 + ph.s0_mm - prof.phases[0].s0_mm,
-                                    ph.v_start_mm_s, ph.v_end_mm_s))
+        rows = prof.rows.copy()
+        if len(rows):
+            rows[:, 0] = t0 + rows[:, 0] - prof.t0_s
+            rows[:, 2] = s0 + rows[:, 2] - rows[0, 2]
+        parts.append(rows)
         t0 += prof.duration_s
         s0 += prof.length_mm
-    return FeedProfile(tuple(phases))
+    return FeedProfile.from_rows(np.concatenate(parts) if parts else np.empty((0, 5)))
 
 
 def _section(s: np.ndarray, vlim: np.ndarray, a: float,

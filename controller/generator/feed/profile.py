@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Iterable
 from functools import cached_property
 from typing import NamedTuple
 
@@ -81,10 +81,8 @@ def quintic_accel(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray,
 
 
 class FeedPhase(NamedTuple):
-    """One phase of a feed profile: a quintic transition, or a cruise when the speeds are equal.
-
-    A named tuple, not a dataclass: a plan has thousands of phases, made by the tuple's cheap
-    constructor, and the profile's array is built from the tuples in one call."""
+    """One phase of a feed profile: a quintic transition, or a cruise when the speeds are equal
+    (a row of FeedProfile, as a tuple for code that walks the phases one by one)."""
 
     t0_s: float
     duration_s: float
@@ -97,16 +95,22 @@ class FeedPhase(NamedTuple):
         return 0.5 * self.duration_s * (self.v_start_mm_s + self.v_end_mm_s)
 
 
-@dataclass(frozen=True)
 class FeedProfile:
-    """A chain of feed phases, contiguous in time and arc length, C2 at the joints."""
+    """A chain of feed phases, contiguous in time and arc length, C2 at the joints.
 
-    phases: tuple[FeedPhase, ...]
+    Held as rows (t0, duration, s0, vs, ve), what evaluation works on: a long program's window
+    has tens of thousands of phases, and a Python tuple for each was a twentieth of planning a
+    G1 walk. The tuples (phases) are made only when asked for."""
 
-    @cached_property
-    def _arr(self) -> np.ndarray:
-        """The phases as rows (t0, duration, s0, vs, ve): what evaluation works on."""
-        return np.array(self.phases, dtype=float).reshape(-1, 5)
+    def __init__(self, phases: Iterable[FeedPhase] = ()) -> None:
+        self._arr = np.array(list(phases), dtype=float).reshape(-1, 5)
+
+    @classmethod
+    def from_rows(cls, rows: np.ndarray) -> FeedProfile:
+        """A profile of (n, 5) rows (t0, duration, s0, vs, ve), kept as they are."""
+        profile = cls.__new__(cls)
+        profile._arr = np.asarray(rows, float).reshape(-1, 5)
+        return profile
 
     @classmethod
     def from_arrays(cls, duration_s: np.ndarray, s0_mm: np.ndarray, v_start_mm_s: np.ndarray,
@@ -114,24 +118,43 @@ class FeedProfile:
         """Build from per-phase arrays; start times are the running sum of durations."""
         dur = np.asarray(duration_s, float)
         t0 = t0_s + np.concatenate(([0.0], np.cumsum(dur)[:-1])) if dur.size else dur
-        arr = np.column_stack((t0, dur, s0_mm, v_start_mm_s, v_end_mm_s)).astype(float, copy=False)
-        profile = cls(tuple(map(FeedPhase._make, arr.tolist())))
-        profile.__dict__["_arr"] = arr  # the rows _arr would build from the tuples, as they are
-        return profile
+        return cls.from_rows(np.column_stack((t0, dur, s0_mm, v_start_mm_s, v_end_mm_s)))
+
+    @cached_property
+    def phases(self) -> tuple[FeedPhase, ...]:
+        return tuple(map(FeedPhase._make, self._arr.tolist()))
+
+    @property
+    def rows(self) -> np.ndarray:
+        """The phases as (n, 5) rows (t0, duration, s0, vs, ve); not to be written to."""
+        return self._arr
+
+    def __len__(self) -> int:
+        return len(self._arr)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, FeedProfile):
+            return NotImplemented
+        return bool(np.array_equal(self._arr, other._arr))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __repr__(self) -> str:
+        return f"FeedProfile({len(self._arr)} phases, {self.duration_s:.6g} s)"
 
     @property
     def t0_s(self) -> float:
-        return float(self._arr[0, 0]) if len(self.phases) else 0.0
+        return float(self._arr[0, 0]) if len(self._arr) else 0.0
 
     @property
     def duration_s(self) -> float:
-        if not self.phases:
+        if not len(self._arr):
             return 0.0
         return float(self._arr[-1, 0] + self._arr[-1, 1] - self._arr[0, 0])
 
     @property
     def length_mm(self) -> float:
-        if not self.phases:
+        if not len(self._arr):
             return 0.0
         last = self._arr[-1]
         return float(last[2] + 0.5 * last[1] * (last[3] + last[4]) - self._arr[0, 2])
@@ -139,7 +162,7 @@ class FeedProfile:
     def evaluate(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(s_mm, v_mm_s, a_mm_s2) at the given times; times outside the profile are clamped."""
         t = np.asarray(t_s, dtype=float)
-        if not self.phases:
+        if not len(self._arr):
             z = np.zeros_like(t)
             return z, z.copy(), z.copy()
         arr = self._arr
