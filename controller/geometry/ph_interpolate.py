@@ -54,17 +54,24 @@ def _product(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a.real * b.real - a.imag * b.imag, a.real * b.imag + a.imag * b.real
 
 
+def _complex(re: np.ndarray, im: np.ndarray) -> np.ndarray:
+    """re + i im with signed zeros kept (re + 1j * im would turn an imaginary -0 into +0)."""
+    z = np.empty(re.shape, complex)
+    z.real, z.imag = re, im
+    return z
+
+
 def _over(re: np.ndarray, im: np.ndarray, d: float) -> np.ndarray:
     """(re + i im) / d as CPython divides a complex by a (real) int: Smith's method with a
     zero imaginary part, the same bits (signed zeros included) as PhQuintic's own."""
-    return (re + im * 0.0) / d + 1j * ((im - re * 0.0) / d)
+    return _complex((re + im * 0.0) / d, (im - re * 0.0) / d)
 
 
 def control_rows(p0: np.ndarray, w: np.ndarray) -> np.ndarray:
     """PhQuintic.control_points of every row (p0 (m,), w (m, 3) complex) at once, with the
     same operations, so the same numbers bit for bit (tested)."""
     w0, w1, w2 = w[:, 0], w[:, 1], w[:, 2]
-    two_w1 = (2.0 * w1.real - 0.0 * w1.imag) + 1j * (2.0 * w1.imag + 0.0 * w1.real)
+    two_w1 = _complex(2.0 * w1.real - 0.0 * w1.imag, 2.0 * w1.imag + 0.0 * w1.real)
     mid_re, mid_im = _product(two_w1, w1)
     cross_re, cross_im = _product(w0, w2)
     steps = np.column_stack((_over(*_product(w0, w0), 5.0), _over(*_product(w0, w1), 5.0),
