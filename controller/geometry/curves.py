@@ -67,7 +67,7 @@ def _as_u(u: ArrayLike) -> np.ndarray:
     return np.atleast_1d(np.asarray(u, dtype=float))
 
 
-class _ConstantSpeed:
+class ConstantSpeedCurve:
     """Curves of constant parametric speed on u in [0, 1]: s = u * length, curvature constant."""
 
     u_start = 0.0
@@ -88,7 +88,7 @@ class _ConstantSpeed:
 
 
 @dataclass(frozen=True)
-class LineCurve(_ConstantSpeed):
+class LineCurve(ConstantSpeedCurve):
     """Straight segment p0 -> p1 with u in [0, 1] (arc length is exactly u * length)."""
 
     p0: tuple[float, float]
@@ -113,7 +113,7 @@ class LineCurve(_ConstantSpeed):
 
 
 @dataclass(frozen=True)
-class ArcCurve(_ConstantSpeed):
+class ArcCurve(ConstantSpeedCurve):
     """Circular arc: centre, radius, start angle and signed sweep (ccw > 0); u in [0, 1]."""
 
     center: tuple[float, float]

@@ -7,7 +7,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from controller.geometry.curves import Curve
+from controller.geometry.curves import ConstantSpeedCurve, Curve
 from controller.numeric import clamp, sorted_unique
 
 
@@ -94,6 +94,10 @@ class Path:
 def make_piece(kind: PieceKind, curve: Curve, u0: float, u1: float, s0_mm: float,
                feed_mm_s: float, line: int, corner: int = -1) -> Piece:
     """A piece with its length measured on the curve."""
+    if isinstance(curve, ConstantSpeedCurve):  # s = u * length: s_of_u's numbers, in Python
+        length = curve.length_mm
+        return Piece(kind, curve, u0, u1, s0_mm, u1 * length - u0 * length, feed_mm_s, line,
+                     corner)
     s = curve.s_of_u(np.array([u0, u1]))
     return Piece(kind, curve, u0, u1, s0_mm, float(s[1] - s[0]), feed_mm_s, line, corner)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -159,22 +160,22 @@ def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.nda
     At a joint both sides are sampled and the larger curvature is kept (curvature may jump)."""
     spacing = grid_step_mm(path)
     cache = {} if cache is None else cache
-    s_parts, k_parts = [], []
-    counts = [max(int(np.ceil(p.length_mm / spacing)), 8) + 1 for p in path.pieces]
+    pieces = path.pieces
+    counts = [max(math.ceil(p.length_mm / spacing), 8) + 1 for p in pieces]
+    keys = [(p.curve, p.u0, p.u1, n) for p, n in zip(pieces, counts, strict=True)]
+    missing = [i for i, key in enumerate(keys) if key not in cache]
     for kind, batch in ((PieceKind.LINE, _line_samples), (PieceKind.PH, _ph_samples)):
-        batch([(p, n) for p, n in zip(path.pieces, counts, strict=True)
-               if p.kind == kind and (p.curve, p.u0, p.u1, n) not in cache], cache)
-    for p, n in zip(path.pieces, counts, strict=True):
-        key = (p.curve, p.u0, p.u1, n)
-        if key not in cache:
-            cache[key] = _piece_samples(p, n)
-        s_local, kappa = cache[key]
-        s_parts.append(p.s0_mm + s_local)
-        k_parts.append(kappa)
-    s, kappa = np.concatenate(s_parts), np.concatenate(k_parts)
+        batch([(pieces[i], counts[i]) for i in missing if pieces[i].kind == kind], cache)
+    for i in missing:
+        if keys[i] not in cache:
+            cache[keys[i]] = _piece_samples(pieces[i], counts[i])
+    rows = [cache[key] for key in keys]
+    # Each piece's samples moved to where it starts on the path, all at once (p.s0_mm + s).
+    s = np.repeat([p.s0_mm for p in pieces], counts) + np.concatenate([r[0] for r in rows])
+    kappa = np.concatenate([r[1] for r in rows])
     # The pieces follow each other: each one's first sample is the previous one's last point.
     # Keep the larger curvature there, drop the duplicate, then anything not strictly ahead.
-    first = np.cumsum([len(part) for part in s_parts])[:-1]
+    first = np.cumsum(counts)[:-1]
     kappa[first - 1] = np.maximum(kappa[first - 1], kappa[first])
     s, kappa = np.delete(s, first), np.delete(kappa, first)
     if np.all(np.diff(s) > 1e-12):

@@ -249,11 +249,7 @@ def _u_at(p: Piece, s_path_mm: float) -> float:
 
 
 def _trimmed(p: Piece, u0: float, u1: float) -> Piece:
-    """make_piece of the part [u0, u1] of p's curve (a line's length as LineCurve.s_of_u)."""
-    if p.kind == PieceKind.LINE:
-        length = p.curve.length_mm
-        return Piece(p.kind, p.curve, u0, u1, 0.0, u1 * length - u0 * length, p.feed_mm_s,
-                     p.line, p.corner)
+    """make_piece of the part [u0, u1] of p's curve."""
     return make_piece(p.kind, p.curve, u0, u1, 0.0, p.feed_mm_s, p.line, p.corner)
 
 

@@ -200,13 +200,13 @@ def _blend(a: Piece, b: Piece, tol: float, cache: BlendCache | None,
     """blend_joint, remembered by the run (cache) and, for a long program's windows, by the
     geometry of the joint across windows (repeats: generator/repeats.py); a window's joint of
     two lines by its unit blend (line_row: line_blends.py)."""
+    if line_row is not None:  # a few microseconds: not worth a key of both pieces
+        return blend_lines(a, b, tol, *line_row)
     if cache is None:
         return blend_joint(a, b, tol)
     key = (_piece_key(a), _piece_key(b), tol)
     if key not in cache:
-        if line_row is not None:
-            cache[key] = blend_lines(a, b, tol, *line_row)
-        elif repeats is None:
+        if repeats is None:
             cache[key] = blend_joint(a, b, tol)
         else:
             cache[key] = repeats.blend(a, b, tol,
@@ -216,7 +216,7 @@ def _blend(a: Piece, b: Piece, tol: float, cache: BlendCache | None,
 
 def _joint_angle_rad(a: Piece, b: Piece, line_row: tuple[LineJoints, int] | None) -> float:
     if line_row is not None:
-        return float(line_row[0].angle_rad[line_row[1]])
+        return line_row[0].angle_rad[line_row[1]]
     return joint_angle_rad(_tangent(a, True), _tangent(b, False))
 
 

@@ -27,13 +27,14 @@ class LineJoints:
     """The joints between consecutive line blocks of a window, by the index of the block after
     the joint: turn angle, deviation of the unit blend (mm per mm of cut), its w coefficients
     (a PH quintic with cut c has w sqrt(c)) and whether the canonical interpolant is the one
-    PhQuintic.hermite would choose (both end derivatives tame: turns up to ~160 degrees)."""
+    PhQuintic.hermite would choose (both end derivatives tame: turns up to ~160 degrees).
+    Lists of Python numbers: they are read one joint at a time."""
 
     row: dict[int, int]
-    angle_rad: np.ndarray
-    unit_deviation: np.ndarray
-    w_unit: np.ndarray  # (m, 3) complex
-    canonical: np.ndarray  # bool
+    angle_rad: list[float]
+    unit_deviation: list[float]
+    w_unit: list[tuple[complex, complex, complex]]
+    canonical: list[bool]
 
 
 def _unit_tangent(curve: LineCurve) -> complex:
@@ -50,8 +51,9 @@ def line_joints(curves: list[object]) -> LineJoints:
     t0 = np.array([_unit_tangent(curves[i - 1].curve) for i in index], complex)  # type: ignore[attr-defined]
     t1 = np.array([_unit_tangent(curves[i].curve) for i in index], complex)  # type: ignore[attr-defined]
     w, deviation, canonical = unit_blends(t0, t1, MAX_BLEND_ANGLE_RAD)
-    return LineJoints({i: k for k, i in enumerate(index)}, np.abs(np.angle(t1 * np.conj(t0))),
-                      deviation, w, canonical)
+    return LineJoints({i: k for k, i in enumerate(index)},
+                      np.abs(np.angle(t1 * np.conj(t0))).tolist(), deviation.tolist(),
+                      [tuple(r) for r in w.reshape(-1, 3).tolist()], canonical.tolist())
 
 
 def blend_lines(a: Piece, b: Piece, tolerance_mm: float, joints: LineJoints,
@@ -59,7 +61,7 @@ def blend_lines(a: Piece, b: Piece, tolerance_mm: float, joints: LineJoints,
     """(a trimmed, PH blend, b trimmed) at the joint's largest cut within tolerance_mm and
     MAX_SHARE of each line, or None to stop there (as blend.blend_joint)."""
     cut = MAX_SHARE * min(a.length_mm, b.length_mm)
-    deviation = float(joints.unit_deviation[row])
+    deviation = joints.unit_deviation[row]
     if deviation * cut > tolerance_mm:
         cut = tolerance_mm / deviation * _SAFETY
     if cut < MIN_CUT_MM:
@@ -69,8 +71,9 @@ def blend_lines(a: Piece, b: Piece, tolerance_mm: float, joints: LineJoints,
     u_b = cut / lb
     (x0, y0), (x1, y1) = a.curve.p0, a.curve.p1  # type: ignore[attr-defined]
     p0 = complex(x0 + u_a * (x1 - x0), y0 + u_a * (y1 - y0))
-    w0, w1, w2 = joints.w_unit[row] * math.sqrt(cut)
-    ph = PhQuintic(p0, complex(w0), complex(w1), complex(w2))
+    w0, w1, w2 = joints.w_unit[row]
+    root = math.sqrt(cut)
+    ph = PhQuintic(p0, w0 * root, w1 * root, w2 * root)
     return (Piece(a.kind, a.curve, a.u0, u_a, 0.0, u_a * la - a.u0 * la, a.feed_mm_s, a.line,
                   a.corner),
             Piece(PieceKind.PH, ph, 0.0, 1.0, 0.0, ph.length_mm, b.feed_mm_s, b.line),
@@ -81,5 +84,5 @@ def blend_lines(a: Piece, b: Piece, tolerance_mm: float, joints: LineJoints,
 def applies(a: Piece, b: Piece, joints: LineJoints, row: int) -> bool:
     """Whether blend_lines applies: both pieces whole at the joint (a ends at its line's end,
     b starts at its line's start) and the canonical interpolant is the right one."""
-    return (bool(joints.canonical[row]) and a.kind == PieceKind.LINE and b.kind == PieceKind.LINE
+    return (joints.canonical[row] and a.kind == PieceKind.LINE and b.kind == PieceKind.LINE
             and a.u1 == 1.0 and b.u0 == 0.0 and a.u0 < 1.0 and b.u1 > 0.0)
