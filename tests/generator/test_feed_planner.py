@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import controller.generator.feed.planner as fp
+from controller.generator.feed.check import LimitCurve
 from controller.generator.feed.planner import PlanResult, plan_feed
 from controller.generator.feed.profile import FeedProfile, transition_length_mm
 from controller.generator.feed.segments import SegmentPlan, SegmentWindows
@@ -161,3 +162,20 @@ def test_repair_rounds_alone_keep_limits(case: tuple) -> None:
         fp.plan_segments = original
     assert plan.result is PlanResult.OK
     assert_profile_valid(s, vlim, accel, v0, v1, plan.profile)
+
+
+@settings(max_examples=40, deadline=None)
+@given(limit_curves(), st.lists(st.floats(-0.1, 1.1), min_size=2, max_size=60),
+       st.booleans())
+def test_chained_min_is_span_min_of_each_span(case: tuple, fractions: list, on_grid: bool) -> None:
+    """The check's chunk minimum (each bound looked up once) is span_min of every span, bit for
+    bit, with bounds on grid samples, off them, repeated, and past the ends."""
+    s, vlim, *_ = case
+    curve = LimitCurve(s, vlim)
+    bounds = np.sort(np.array(fractions)) * s[-1]
+    if on_grid:  # bounds exactly on samples: where searchsorted's sides differ
+        bounds = s[np.clip(np.searchsorted(s, bounds), 0, len(s) - 1)]
+    start = np.arange(len(bounds) - 1)
+    chained = curve.chained_min(bounds, start)
+    each = curve.span_min(bounds[:-1], bounds[1:])
+    assert chained.tolist() == each.tolist()

@@ -42,6 +42,17 @@ class LimitCurve:
         inner = _range_reduce(np.maximum, self.vlim_mm_s, -np.inf, *self._inside(a_mm, b_mm))
         return np.maximum(inner, np.maximum(self.at(a_mm), self.at(b_mm)))
 
+    def chained_min(self, s_mm: np.ndarray, start: np.ndarray) -> np.ndarray:
+        """span_min(s[start], s[start + 1]) for spans that share their ends (a transition's
+        chunks): each position is looked up once, not once per span it bounds."""
+        after = np.searchsorted(self.s_mm, s_mm, side="right")
+        before = np.searchsorted(self.s_mm, s_mm, side="left")
+        lo = after[start]
+        inner = _range_reduce(np.minimum, self.vlim_mm_s, np.inf, lo,
+                              np.maximum(before[start + 1], lo))
+        v = self.at(s_mm)
+        return np.minimum(inner, np.minimum(v[start], v[start + 1]))
+
     def _inside(self, a_mm: np.ndarray, b_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lo = np.searchsorted(self.s_mm, a_mm, side="right")
         hi = np.searchsorted(self.s_mm, b_mm, side="left")
@@ -220,7 +231,7 @@ class _Chunks:
         last[np.cumsum(m + 1) - 1] = True
         i0 = np.flatnonzero(~last)  # a chunk runs from boundary i0 to i0 + 1
         vmax = np.maximum(vb[i0], vb[i0 + 1])
-        keep = vmax - curve.span_min(sb[i0], sb[i0 + 1]) > 0.25 * tol
+        keep = vmax - curve.chained_min(sb, i0) > 0.25 * tol
         k = kb[i0]
         keep_next = np.append(keep[1:], False) & (np.append(k[1:], -1) == k)
         return cls(k, jb[i0], jb[i0 + 1], first, sb[i0], keep, keep_next)
