@@ -195,7 +195,8 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     vp = np.where(ok, high, safe)
     vp[todo] = lo_v
     e0[todo], d0[todo] = lo_e0, lo_d0
-    _prefer_no_wait(win, vi, vj, safe, vp, e0, d0, accel, flat, reach)
+    _prefer_no_wait(win, vi, vj, safe, vp, e0, d0, accel, flat, reach,
+                    (e_both[n:], d_both[n:]))
     # Flat segments, and those whose window stays empty: accelerate at once, brake at the end
     # (safe when the node speeds are below the segment's minimum; otherwise the check splits or
     # flattens the segment).
@@ -250,19 +251,32 @@ def _peak_search(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, k: np.ndar
 
 def _prefer_no_wait(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, safe: np.ndarray,
                     vp: np.ndarray, e0: np.ndarray, d0: np.ndarray, accel: float,
-                    flat: np.ndarray, reach: tuple[np.ndarray, np.ndarray]) -> None:
+                    flat: np.ndarray, reach: tuple[np.ndarray, np.ndarray],
+                    at_safe: tuple[np.ndarray, np.ndarray]) -> None:
     """Where the highest cruise makes the profile wait at a node speed, a lower cruise may be
     faster overall: try levels between the safe one and the highest, keep the quickest (in place).
-    """
+    The windows at the two ends are known (at_safe, and e0, d0 at vp) and not shaped again; the
+    top level is vp itself only where safe + (vp - safe) rounds back to it."""
     sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
     waits = (e0 - sa > win.a * (1.0 + 1e-12) + 1e-12) | (d0 + sd < win.b - 1e-12)
     k = np.flatnonzero(waits & (e0 <= d0) & ~flat & (vp > safe))
     if len(k) == 0:
         return
     frac = np.linspace(0.0, 1.0, CRUISE_LEVELS)
-    levels = (safe[k, None] + (vp[k] - safe[k])[:, None] * frac).ravel()
+    levels = safe[k, None] + (vp[k] - safe[k])[:, None] * frac
+    c0, c1 = np.empty(levels.shape), np.empty(levels.shape)
+    c0[:, 0], c1[:, 0] = at_safe[0][k], at_safe[1][k]  # frac 0: safe + 0 is safe
+    top_known = levels[:, -1] == vp[k]
+    c0[top_known, -1], c1[top_known, -1] = e0[k[top_known]], d0[k[top_known]]
+    shape = np.ones(levels.shape, bool)
+    shape[:, 0] = False
+    shape[top_known, -1] = False
+    rows, cols = np.nonzero(shape)
+    kk = k[rows]
+    c0[rows, cols], c1[rows, cols] = _window(win, vi[kk], vj[kk], levels[rows, cols], kk, accel,
+                                             reach)
+    levels, c0, c1 = levels.ravel(), c0.ravel(), c1.ravel()
     kk = np.repeat(k, CRUISE_LEVELS)
-    c0, c1 = _window(win, vi[kk], vj[kk], levels, kk, accel, reach)
     dur = _segment_time_s(win.a[kk], win.b[kk], vi[kk], vj[kk], levels, c0, c1, accel)
     dur = np.where(c0 <= c1, dur, np.inf).reshape(len(k), CRUISE_LEVELS)
     best = np.argmin(dur, axis=1)
