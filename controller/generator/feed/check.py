@@ -46,7 +46,8 @@ class LimitCurve:
         """span_min(s[start], s[start + 1]) for spans that share their ends (a transition's
         chunks): each position is looked up once, not once per span it bounds."""
         after = np.searchsorted(self.s_mm, s_mm, side="right")
-        before = np.searchsorted(self.s_mm, s_mm, side="left")
+        # side="left" differs only at a position on a grid sample (the grid strictly rises).
+        before = after - ((after > 0) & (self.s_mm[np.maximum(after - 1, 0)] == s_mm))
         lo = after[start]
         inner = _range_reduce(np.minimum, self.vlim_mm_s, np.inf, lo,
                               np.maximum(before[start + 1], lo))
