@@ -9,7 +9,7 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
-from controller.blocks import ArcBlock, LineBlock, NcBlock, NurbsBlock
+from controller.blocks import ArcBlock, LineBlock, NurbsBlock
 from controller.config import MachineConfig, load_config
 from controller.errors import ConfigError, DriveError, NcError, OffsetsError
 from controller.interpreter.extent import (
@@ -49,22 +49,6 @@ class CheckSummary:
 
 _GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
              NurbsBlock: nurbs_length_and_box}  # NURBS: from dense samples, 64 per knot span
-Limits = list[tuple[int, str, float, float]]
-
-
-def _limits(config: MachineConfig) -> Limits:
-    """(index, axis, min, max) of each axis the machine has."""
-    return [(i, name, *config.axis(name).travel_mm) for i, name in enumerate(_AXES)
-            if config.has_axis(name)]
-
-
-def _travel_error(path: str, block: NcBlock, name: str, reached: float, lo: float,
-                  hi: float) -> NcError:
-    axis = name.upper()
-    return NcError(path, block.source.first_line, 1, axis,
-                   f"{axis} travel limit exceeded: the path reaches {reached:.4f} mm, "
-                   f"travel is [{lo:g}, {hi:g}] mm")
-
 
 CHECK_BEAT_BLOCKS = 4096  # on_block is called every this many blocks
 
@@ -86,12 +70,12 @@ def check_program(path: str, config: MachineConfig,
     kinds: Counter[type] = Counter()
     start = start_mm if start_mm is not None else (0.0, 0.0, 0.0)
     lo, hi = list(start), list(start)  # where the machine stands (X0 Y0 Z0 by default)
-    limits = _limits(config)
     feed_mm = rapid_mm = time_s = 0.0
     nurbs_points = 0
     n = 0
     track = track if track is not None else ProgramOffsets()
     travel = TravelLimits(config)
+    limits = travel.axes  # (index, axis, min, max) of each axis the machine has
     for block in read_program(path, config, start_mm, offsets, from_line, track):
         n += 1
         if on_block is not None and n % CHECK_BEAT_BLOCKS == 0:
