@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
 
+from controller.generator.feed.path_plan import _concat
 from controller.generator.feed.planner import PlanResult, plan_feed
 from controller.generator.feed.profile import (
     FeedPhase,
@@ -117,3 +118,21 @@ def test_power_form_distance_matches_bernstein_form(vs: float, ve: float, tau: f
     t = np.array([tau])
     assert float(quintic_distance(t, dur, vs, ve)[0]) == pytest.approx(
         float(bernstein6_distance(t, dur, vs, ve)[0]), abs=1e-12 * (1.0 + max(vs, ve)))
+
+
+def test_profile_rows_phases_and_chaining() -> None:
+    """A profile is its rows: the phases as tuples are the same numbers, a profile built from
+    them equals it, and sections chained by path_plan follow each other in time and arc length,
+    each phase moved as the tuple-by-tuple chaining moved it (t0 + t - t_first, s0 + s - s_0)."""
+    a, b = _plan_const(5.0, 0.0, 0.0), _plan_const(7.5, 0.0, 0.0)
+    assert len(a) == len(a.phases) and np.array_equal(a.rows, np.array(a.phases))
+    assert FeedProfile(a.phases) == a and FeedProfile(a.phases) != b
+    assert len(FeedProfile()) == 0 and FeedProfile().duration_s == 0.0
+    chained = _concat([a, b])
+    expected = list(a.phases)
+    t0, s0 = a.duration_s, a.length_mm
+    expected += [FeedPhase(t0 + p.t0_s - b.t0_s, p.duration_s, s0 + p.s0_mm - b.phases[0].s0_mm,
+                           p.v_start_mm_s, p.v_end_mm_s) for p in b.phases]
+    assert chained.phases == tuple(expected)
+    assert chained.duration_s == pytest.approx(a.duration_s + b.duration_s, abs=1e-15)
+    assert chained.length_mm == pytest.approx(12.5, abs=1e-12)
