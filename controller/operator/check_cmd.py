@@ -8,6 +8,7 @@ import sys
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from typing import Literal, overload
 
 from controller.blocks import ArcBlock, LineBlock, NurbsBlock
 from controller.config import MachineConfig, load_config
@@ -51,6 +52,23 @@ _GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
              NurbsBlock: nurbs_length_and_box}  # NURBS: from dense samples, 64 per knot span
 
 CHECK_BEAT_BLOCKS = 4096  # on_block is called every this many blocks
+
+
+@overload
+def check_program(path: str, config: MachineConfig,
+                  on_block: Callable[[int], None] | None = None,
+                  start_mm: tuple[float, float, float] | None = None,
+                  offsets: OffsetTable | None = None, from_line: int | None = None,
+                  track: ProgramOffsets | None = None, summary: Literal[True] = True
+                  ) -> CheckSummary: ...
+
+
+@overload
+def check_program(path: str, config: MachineConfig,
+                  on_block: Callable[[int], None] | None = None,
+                  start_mm: tuple[float, float, float] | None = None,
+                  offsets: OffsetTable | None = None, from_line: int | None = None,
+                  track: ProgramOffsets | None = None, *, summary: Literal[False]) -> None: ...
 
 
 def check_program(path: str, config: MachineConfig,
