@@ -185,12 +185,12 @@ class ServoStream:
         if pos.size == 0:
             return bound
         out = bound.copy()
-        out[pos] = _windows(held, act, i, pos, self.base, total)
+        out[pos] = _windows(held, act, i, pos, self.base, total, bound[pos])
         return out
 
 
 def _windows(held: np.ndarray, act: np.ndarray, i: np.ndarray, pos: np.ndarray, base: int,
-             total: int) -> np.ndarray:
+             total: int, upper_mm: np.ndarray | None = None) -> np.ndarray:
     """window_distance_mm for the samples i[pos] (rows relative to base) on the kept part of the
     polyline: its segments from the first window's start to the last one's end. A window is
     clipped only at the polyline's true ends (global 0 and total - 2), which are then the ends
@@ -199,4 +199,4 @@ def _windows(held: np.ndarray, act: np.ndarray, i: np.ndarray, pos: np.ndarray, 
     lo_seg = max(int(i[pos[0]]) - near, -base)
     hi_seg = min(int(i[pos[-1]]) + near - 1, total - 2 - base)
     return window_distance_mm(held[lo_seg:hi_seg + 2], act[pos], i[pos] - lo_seg,
-                              near)
+                              near, upper_mm)

@@ -10,10 +10,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from runtime_helpers import xy_config
 
-from controller.generator.dynamics.stops import distance_from_reference_mm
+from controller.generator.dynamics.stops import distance_from_reference_mm, window_distance_mm
 from controller.generator.feed.profile import transition_duration_s
 from controller.generator.feed.stops import approach_split
 from controller.interpreter.program import read_program
+from controller.numeric import segment_distance
 from controller.runtime.simulation import report, simulate
 
 XY_TABLE = xy_config()  # the paper's method: its stops overshoot without pre-compensation
@@ -89,3 +90,41 @@ def test_the_braking_model_finds_the_largest_acceleration_within_the_target() ->
         assert model.overshoot_mm(v, accel) <= target_mm
         assert accel == amax or model.overshoot_mm(v, accel * 1.02) > target_mm  # the largest
     assert model.accel_for(2.0) == amax  # slow approaches need nothing
+
+
+@st.composite
+def _tool_near_a_path(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """A reference polyline (a curve folding back on itself, a random walk, or one with repeated
+    points), a tool lagging it by some samples and off it by up to 10 um, and which samples."""
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    n = draw(st.integers(2, 1500))
+    shape = draw(st.sampled_from(["fold", "walk", "repeats"]))
+    if shape == "fold":
+        t = np.linspace(0.0, draw(st.floats(1.0, 30.0)), n)
+        ref = np.column_stack((np.cos(t), np.sin(2.0 * t))) * draw(st.floats(0.05, 5.0))
+    elif shape == "walk":
+        ref = np.cumsum(rng.standard_normal((n, 2)) * draw(st.floats(1e-4, 0.5)), axis=0)
+    else:
+        ref = np.repeat(rng.standard_normal((n // 3 + 1, 2)), 3, axis=0)[:n]
+    act = np.roll(ref, draw(st.integers(0, 30)), axis=0)
+    act = act + rng.standard_normal(ref.shape) * draw(st.floats(0.0, 0.01))
+    k = np.flatnonzero(rng.random(n) < draw(st.floats(0.05, 1.0)))
+    return ref, act, k, draw(st.integers(1, 50))
+
+
+@settings(max_examples=60, deadline=None)
+@given(_tool_near_a_path())
+def test_the_pruned_window_search_is_the_full_one_bit_for_bit(case: tuple) -> None:
+    """Given the distance to its own segments as the bound, the search that skips boxes of
+    segments further than that finds each sample's distance to the bit of the full search."""
+    ref, act, k, near = case
+    if k.size == 0:
+        return
+    last = len(ref) - 2
+    before, at = np.clip(k - 1, 0, last), np.clip(k, 0, last)
+    bound = np.minimum(segment_distance(act[k], ref[before], ref[before + 1]),
+                       segment_distance(act[k], ref[at], ref[at + 1]))
+    full = window_distance_mm(ref, act[k], k, near)
+    pruned = window_distance_mm(ref, act[k], k, near, bound)
+    assert pruned.view(np.uint64).tolist() == full.view(np.uint64).tolist()
+    assert np.all(full <= bound * (1.0 + 1e-12) + 1e-15)
