@@ -28,6 +28,9 @@ AMAX = 2450.0
 speeds = st.one_of(st.just(0.0), st.floats(1e-9, 300.0))
 
 
+# quad warns on an interval ending near the smallest normal float (tau ~1e-308, which hypothesis
+# draws now and then); its result is still checked below.
+@pytest.mark.filterwarnings("ignore::scipy.integrate.IntegrationWarning")
 @settings(max_examples=40, deadline=None)
 @given(vs=speeds, ve=speeds, tau=st.floats(0.0, 1.0))
 def test_distance_closed_form_matches_integration(vs: float, ve: float, tau: float) -> None:
