@@ -11,7 +11,7 @@ import numpy as np
 from controller.config import MachineConfig
 from controller.generator.dynamics.prediction import ServoPrediction, axis_servos
 from controller.generator.dynamics.servo import tracking_error_mm
-from controller.generator.dynamics.window_search import pruned_window_distance_mm
+from controller.generator.dynamics.window_search import pruned_window_distance_mm, squared_gap
 from controller.numeric import segment_distance
 
 # Reference segments searched each side of a sample's own: the modelled tool is never further
@@ -105,10 +105,8 @@ def window_distance_mm(ref: np.ndarray, points: np.ndarray, k: np.ndarray,
         ax, ay, abx, aby, den = (v[sel] for v in views)
         p = points[lo:lo + WINDOW_BLOCK]
         px, py = p[:, 0][:, None], p[:, 1][:, None]
-        apx, apy = px - ax, py - ay
-        t = np.minimum(np.maximum((apx * abx + apy * aby) / den, 0.0), 1.0)
-        gx, gy = apx - t * abx, apy - t * aby
-        out[lo:lo + WINDOW_BLOCK] = np.sqrt((gx * gx + gy * gy).min(axis=1))
+        out[lo:lo + WINDOW_BLOCK] = np.sqrt(squared_gap(px - ax, py - ay, abx, aby, den)
+                                            .min(axis=1))
     return out
 
 

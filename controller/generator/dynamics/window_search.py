@@ -20,6 +20,15 @@ BOUND_SLACK_MM = 1e-12
 BLOCK_SAMPLES = 512  # samples searched at once: their temporaries stay in the cache
 
 
+def squared_gap(apx: np.ndarray, apy: np.ndarray, abx: np.ndarray, aby: np.ndarray,
+                den: np.ndarray) -> np.ndarray:
+    """Squared distance of P from segment AB, from P - A, AB and |AB|^2 (1 where zero): the
+    one formula of both window searches, so that they give the same bits."""
+    t = np.minimum(np.maximum((apx * abx + apy * aby) / den, 0.0), 1.0)
+    gx, gy = apx - t * abx, apy - t * aby
+    return gx * gx + gy * gy
+
+
 def pruned_window_distance_mm(columns: list[np.ndarray], points: np.ndarray, k: np.ndarray,
                               near: int, upper_mm: np.ndarray) -> np.ndarray:
     """Per point: the least distance over its window, padded segments k .. k + 2 near - 1 of
@@ -68,12 +77,8 @@ def _block(columns: list[np.ndarray], boxes: tuple[np.ndarray, ...], points: np.
     kr = k[point]
     inside = (m >= kr) & (m < kr + span)
     m = np.minimum(m, len(ax) - 1)
-    # The full search's operations, segment by segment (window_distance_mm).
-    apx, apy = px[point] - ax[m], py[point] - ay[m]
-    bx, by = abx[m], aby[m]
-    t = np.minimum(np.maximum((apx * bx + apy * by) / den[m], 0.0), 1.0)
-    gx, gy = apx - t * bx, apy - t * by
-    least = np.where(inside, gx * gx + gy * gy, np.inf).min(axis=0)
+    gap2 = squared_gap(px[point] - ax[m], py[point] - ay[m], abx[m], aby[m], den[m])
+    least = np.where(inside, gap2, np.inf).min(axis=0)
     out = np.full(len(points), np.inf)
     if point.size:
         first = np.flatnonzero(np.r_[True, point[1:] != point[:-1]])

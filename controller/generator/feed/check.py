@@ -35,8 +35,8 @@ class LimitCurve:
 
     def span_min(self, a_mm: np.ndarray, b_mm: np.ndarray) -> np.ndarray:
         """min vlim over each [a, b]: the two interpolated ends and every grid sample inside."""
-        inner = _range_reduce(np.minimum, self.vlim_mm_s, np.inf, *self._inside(a_mm, b_mm))
-        return np.minimum(inner, np.minimum(self.at(a_mm), self.at(b_mm)))
+        lo, hi = self._inside(a_mm, b_mm)
+        return self._least(lo, hi, self.at(a_mm), self.at(b_mm))
 
     def span_max(self, a_mm: np.ndarray, b_mm: np.ndarray) -> np.ndarray:
         inner = _range_reduce(np.maximum, self.vlim_mm_s, -np.inf, *self._inside(a_mm, b_mm))
@@ -49,10 +49,14 @@ class LimitCurve:
         # side="left" differs only at a position on a grid sample (the grid strictly rises).
         before = after - ((after > 0) & (self.s_mm[np.maximum(after - 1, 0)] == s_mm))
         lo = after[start]
-        inner = _range_reduce(np.minimum, self.vlim_mm_s, np.inf, lo,
-                              np.maximum(before[start + 1], lo))
         v = self.at(s_mm)
-        return np.minimum(inner, np.minimum(v[start], v[start + 1]))
+        return self._least(lo, np.maximum(before[start + 1], lo), v[start], v[start + 1])
+
+    def _least(self, lo: np.ndarray, hi: np.ndarray, v_a: np.ndarray,
+               v_b: np.ndarray) -> np.ndarray:
+        """min vlim over the grid samples lo..hi-1 of each span and its two ends' values."""
+        inner = _range_reduce(np.minimum, self.vlim_mm_s, np.inf, lo, hi)
+        return np.minimum(inner, np.minimum(v_a, v_b))
 
     def _inside(self, a_mm: np.ndarray, b_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         lo = np.searchsorted(self.s_mm, a_mm, side="right")
