@@ -41,7 +41,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     known = {name for name, _, _ in COMMANDS}
     for name, module_name, help_text in COMMANDS:
-        p = sub.add_parser(name, help=help_text, description=help_text)
+        # help= is %-formatted by argparse (description is not): "in % (0-150)" crashed --help.
+        p = sub.add_parser(name, help=help_text.replace("%", "%%"), description=help_text)
         if command in known and name != command:
             continue
         module = importlib.import_module(module_name)

@@ -32,13 +32,21 @@ def default_state_dir() -> str:
     return os.environ.get("STATE_DIRECTORY", "/var/lib/cncd").split(":")[0]
 
 
-def _arguments(argv: list[str] | None) -> argparse.Namespace:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="cncd", description="phcnc controller daemon")
     ap.add_argument("--config", help="machine configuration (file or built-in name)")
-    ap.add_argument("--socket", help=f"control socket (default: {default_socket_path()})")
-    ap.add_argument("--state-dir", help=f"job journal (default: {default_state_dir()})")
+    # The defaults come from the environment: a % in them must not break --help (argparse
+    # %-formats help strings).
+    socket_default = default_socket_path().replace("%", "%%")
+    state_default = default_state_dir().replace("%", "%%")
+    ap.add_argument("--socket", help=f"control socket (default: {socket_default})")
+    ap.add_argument("--state-dir", help=f"job journal (default: {state_default})")
     add_drive_option_argument(ap)
-    return ap.parse_args(argv)
+    return ap
+
+
+def _arguments(argv: list[str] | None) -> argparse.Namespace:
+    return build_parser().parse_args(argv)
 
 
 def _lock_memory(log: EventLog) -> None:
