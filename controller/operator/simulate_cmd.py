@@ -16,6 +16,7 @@ from controller.generator.plan import Algorithm
 from controller.interpreter.program import read_program
 from controller.operator.check_cmd import check_program
 from controller.operator.simulate_plot import PlotSeries
+from controller.operator.simulate_view import SimulateView
 from controller.runtime.sim_figures import Figures
 from controller.runtime.sim_stream import SampleBlock
 from controller.runtime.simulation import limit_um, simulate_stream
@@ -53,11 +54,16 @@ def _check_whole_program(path: str, config: MachineConfig) -> None:
 
 
 def _one(path: str, config: MachineConfig, algorithm: str, trajectory: str | None = None,
-         plot: PlotSeries | None = None, stats: bool = False) -> dict:
-    """Simulate one algorithm, streaming: the figures, and the trajectory CSV and the plot's
-    series if asked for, are gathered sample block by sample block (memory bounded)."""
+         plot: PlotSeries | None = None, stats: bool = False,
+         view: SimulateView | None = None) -> dict:
+    """Simulate one algorithm, streaming: the figures, and the trajectory CSV, the plot's
+    series and the terminal's progress bar if asked for, are gathered sample block by sample
+    block (memory bounded)."""
     figures = Figures(len(config.axis_names), config.sample_period_s)
     sinks = [figures.add] + ([plot.add] if plot is not None else [])
+    if view is not None:
+        view.start(algorithm)
+        sinks.append(view.add)
     writer = TrajectoryWriter(trajectory, config.sample_period_s) if trajectory else None
     if writer is not None:
         sinks.append(writer.add)
@@ -134,8 +140,14 @@ def run(args: argparse.Namespace) -> int:
         algorithms = [a.value for a in Algorithm] if args.compare else [args.algorithm]
         chosen = args.algorithm if args.compare else algorithms[-1]
         series = {a: PlotSeries(config) for a in algorithms} if args.plot else {}
-        reports = [_one(args.program, config, a, args.trajectory if a == chosen else None,
-                        series.get(a), args.stats) for a in algorithms]
+        view = SimulateView(args.program, config.sample_period_s, sys.stderr) \
+            if sys.stderr.isatty() else None
+        try:
+            reports = [_one(args.program, config, a, args.trajectory if a == chosen else None,
+                            series.get(a), args.stats, view) for a in algorithms]
+        finally:
+            if view is not None:
+                view.close()
     except NcError as exc:
         print(exc.format(), file=sys.stderr)
         return 2
