@@ -17,10 +17,15 @@ class WallPacer:
         self.cycle_s = cycle_s
         self.late_cycles = 0
         self.max_late_s = 0.0
-        self._deadline_s = time.monotonic()
-        self._start_s = self._deadline_s
+        self._deadline_s: float | None = None  # anchored by the first wait
+        self._start_s = time.monotonic()
 
     def wait(self) -> None:
+        if self._deadline_s is None:
+            # The first cycle runs at once: the set-up between making the pacer and the loop
+            # (reading the drives' positions, over SDO on a CANopen bus) is not a late cycle.
+            self._deadline_s = time.monotonic()
+            return
         self._deadline_s += self.cycle_s
         delay_s = self._deadline_s - time.monotonic()
         if delay_s > 0:
