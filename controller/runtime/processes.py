@@ -37,6 +37,7 @@ from drivers.registry import make_drive
 # fork: children start in ~ms (time to first motion); they are forked before any thread
 # (card clock, UI) exists in this process.
 _CTX = mp.get_context("fork")
+MESSAGE_WAIT_S = 0.05  # a stage's last message may still be in the queue's pipe this long
 
 
 @dataclass
@@ -65,14 +66,27 @@ class _Messages:
         self.errors: dict[str, str] = {}
         self.rss_kb: dict[str, int] = {}
 
-    def drain(self, wait_s: float = 0.0) -> None:
+    def drain(self, wait_s: float = 0.0, until: Callable[[], bool] | None = None) -> None:
+        """Take the messages already sent; wait up to wait_s for more, unless until() holds
+        (the message waited for is in: a stage's peak RSS is the last one it sends)."""
         deadline = time.monotonic() + wait_s
         while True:
+            done = until is not None and until()
             try:
-                kind, stage, value = self.info.get(timeout=max(0.0, deadline - time.monotonic()))
+                kind, stage, value = self.info.get(
+                    timeout=0.0 if done else max(0.0, deadline - time.monotonic()))
             except (queue.Empty, OSError, ValueError):
                 return
             (self.errors if kind == "error" else self.rss_kb)[stage] = value
+
+    def failure(self) -> str:
+        """Why the reference stream failed, once the failed stage's message is in (waited for
+        at most MESSAGE_WAIT_S: it may still be in the queue's pipe)."""
+        self.drain(MESSAGE_WAIT_S, until=lambda: "interpreter" in self.errors
+                   or "generator" in self.rss_kb)
+        if "interpreter" in self.errors:  # the generator only failed because its input did
+            return f"NC interpreter failed: {self.errors['interpreter']}"
+        return self.errors.get("generator", "reference generator failed")
 
 
 class RingSource:
@@ -80,6 +94,7 @@ class RingSource:
 
     def __init__(self, ring: RefRing, generator: Any, messages: _Messages) -> None:
         self.ring, self.generator, self.messages = ring, generator, messages
+        self._failure: str | None = None
 
     def read(self, max_rows: int) -> Any:
         return self.ring.read(max_rows)
@@ -89,11 +104,9 @@ class RingSource:
         if flags & FLAG_FINAL:
             return SourceState.FINISHED, ""
         if flags & FLAG_FAILED:
-            self.messages.drain(wait_s=0.05)  # the message may still be in the queue pipe
-            errors = self.messages.errors
-            if "interpreter" in errors:  # the generator only failed because its input did
-                return SourceState.FAILED, f"NC interpreter failed: {errors['interpreter']}"
-            return SourceState.FAILED, errors.get("generator", "reference generator failed")
+            if self._failure is None:  # asked every cycle of the stop: wait for it once
+                self._failure = self.messages.failure()
+            return SourceState.FAILED, self._failure
         if self.generator.exitcode is not None:
             return SourceState.FAILED, ("reference generator process died "
                                         f"(exit code {self.generator.exitcode})")
@@ -166,7 +179,8 @@ class Runtime:
         finally:
             ring.set_flag(FLAG_ABORT)
             self._stop_children()
-            messages.drain(wait_s=0.05)
+            # The children are joined: their last messages (peak RSS) are in the pipe.
+            messages.drain(MESSAGE_WAIT_S, until=lambda: set(self.procs) <= set(messages.rss_kb))
             ring.close()
         result.extra["realtime"] = rt
         return self._finish(result, messages, t0_s)
@@ -195,16 +209,22 @@ class Runtime:
 
     def _watch(self, messages: _Messages) -> Callable[[], str | None]:
         interp = self.procs["interpreter"]
+        found: list[str] = []
 
         def watch() -> str | None:
-            # Called every motion cycle: a dead process is seen within one cycle (~2 ms).
+            # Called every motion cycle: a dead process is seen within one cycle (~2 ms). Its
+            # message is waited for once, not on every cycle of the stop that follows.
+            if found:
+                return found[0]
             code = interp.exitcode
             if code is None or (code == 0 and "interpreter" not in messages.errors):
                 return None
-            messages.drain(wait_s=0.05)
+            messages.drain(MESSAGE_WAIT_S, until=lambda: "interpreter" in messages.rss_kb)
             if "interpreter" in messages.errors:
-                return f"NC interpreter failed: {messages.errors['interpreter']}"
-            return f"NC interpreter process died (exit code {code})"
+                found.append(f"NC interpreter failed: {messages.errors['interpreter']}")
+            else:
+                found.append(f"NC interpreter process died (exit code {code})")
+            return found[0]
         return watch
 
     def _motion(self, drive: Drive, ring: RefRing, messages: _Messages) -> MotionResult:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import queue
 import signal
 import threading
 import time
@@ -12,9 +13,10 @@ import pytest
 import refgen
 from runtime_helpers import Recorder, assert_smooth, xy_config
 
-from controller.motion.ring import FLAG_ABORT, RefRing
+from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, RefRing
+from controller.motion.source import SourceState
 from controller.motion.types import MotionProgress, Outcome
-from controller.runtime.processes import Runtime, RuntimeOptions
+from controller.runtime.processes import RingSource, Runtime, RuntimeOptions, _Messages
 from drivers.sim.card import SimCard
 
 CFG = xy_config()
@@ -126,3 +128,52 @@ def test_interpreter_error_mid_run_is_reported_with_its_location() -> None:
     assert "NC interpreter failed: test.nc:12:5: error: unknown G-code G5" in result.message
     assert result.underruns == 0 and result.commanded_counts == result.executed_counts
     assert_smooth(rec.commanded(), np.zeros(2), CFG)
+
+
+class _CountingQueue:
+    """The info queue's get(), counting the waits that found nothing."""
+
+    def __init__(self, items: list[tuple]) -> None:
+        self.items, self.empty_waits = list(items), 0
+
+    def get(self, timeout: float) -> tuple:
+        if self.items:
+            return self.items.pop(0)
+        if timeout > 0:
+            self.empty_waits += 1
+        raise queue.Empty
+
+
+def test_drain_stops_waiting_once_the_awaited_message_is_in() -> None:
+    q = _CountingQueue([("error", "interpreter", "t.nc:3:1: error"), ("rss_kb", "interpreter", 9)])
+    messages = _Messages(q)
+    t0 = time.monotonic()
+    messages.drain(30.0, until=lambda: "interpreter" in messages.rss_kb)
+    assert time.monotonic() - t0 < 5.0 and q.empty_waits == 0
+    assert messages.errors == {"interpreter": "t.nc:3:1: error"}
+
+
+def test_a_dead_interpreter_is_waited_for_once_not_on_every_cycle_of_the_stop() -> None:
+    class Dead:
+        exitcode = 9
+
+    runtime = Runtime("t.nc", CFG, RuntimeOptions())
+    runtime.procs["interpreter"] = Dead()  # type: ignore[assignment]
+    q = _CountingQueue([])
+    watch = runtime._watch(_Messages(q))
+    problems = [watch() for _ in range(20)]  # the motion loop asks every cycle
+    assert problems == ["NC interpreter process died (exit code 9)"] * 20
+    assert q.empty_waits == 1
+
+
+def test_a_failed_stream_is_waited_for_once() -> None:
+    ring = RefRing.create(8, 4)
+    try:
+        ring.set_flag(FLAG_FAILED)
+        q = _CountingQueue([])
+        source = RingSource(ring, None, _Messages(q))
+        states = [source.state() for _ in range(20)]
+        assert states == [(SourceState.FAILED, "reference generator failed")] * 20
+        assert q.empty_waits == 1
+    finally:
+        ring.close()
