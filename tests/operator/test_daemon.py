@@ -356,3 +356,20 @@ def test_m0_pauses_the_job_until_resume(tmp_path: Path) -> None:
         final = json.loads(out.splitlines()[-1])
         assert run.returncode == 0 and final["event"] == "done"
         assert final["final_position_mm"] == {"x": 0.0, "y": 0.0} and final["underruns"] == 0
+
+
+def test_a_request_that_once_killed_the_daemon_leaves_the_job_running(tmp_path: Path) -> None:
+    poison = b'{"cmd": "feed", "percent": ' + b"9" * 5000 + b"}\n"  # over the 4300-digit limit
+    with running_cncd(tmp_path) as d:
+        d.cncctl("reset")
+        run = start_run(d, AIRFOIL)
+        try:
+            wait_moving(run)
+            assert raw(d.socket_path, poison)[0]["error"] == "malformed"
+            assert raw(d.socket_path, b'{"cmd": "status", "id": [1]}\n')[0]["error"] \
+                == "bad-field"
+            out, _ = run.communicate(timeout=30)
+        finally:
+            run.kill()
+        assert run.returncode == 0 and json.loads(out.splitlines()[-1])["event"] == "done"
+        assert d.proc.poll() is None and d.status()["state"] == "IDLE"

@@ -164,6 +164,11 @@ def main(argv: list[str] | None = None) -> int:
         daemon.machine.terminate("daemon stopping (control socket failed)")
         daemon.close()
         return 1
+    except Exception as exc:  # noqa: BLE001  (a bug: the job still stops along the path)
+        log.log(ERR, f"cncd: internal error: {type(exc).__name__}: {str(exc)[:200]}")
+        daemon.machine.terminate("daemon stopping (internal error)")
+        daemon.close()
+        return 1
     daemon.close()
     log.log(NOTICE, "stopped")
     return 0

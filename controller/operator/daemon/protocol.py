@@ -45,16 +45,22 @@ def reply_error(request_id: Any, code: str, message: str) -> bytes:
 
 def _id_of(obj: dict[str, Any]) -> Any:
     rid = obj.get("id")
-    if rid is None or isinstance(rid, bool) or not isinstance(rid, int | str):
+    if rid is None:
         return None
-    return rid if not isinstance(rid, str) or len(rid) <= 64 else None
+    if isinstance(rid, bool) or not isinstance(rid, int | str) or \
+            isinstance(rid, str) and len(rid) > 64 or isinstance(rid, int) and abs(rid) >= 2**63:
+        raise ProtocolError("bad-field", "id must be an integer or a text of at most 64 "
+                                         "characters")
+    return rid
 
 
 def parse_request(line: bytes) -> Request:
     """One request line (without its newline) -> Request, or ProtocolError."""
     try:
         obj = json.loads(line.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+    except (ValueError, RecursionError):
+        # ValueError: undecodable bytes, bad JSON, and an integer of more than 4300 digits
+        # (which once took the daemon down mid-job).
         raise ProtocolError("malformed", "a request is one JSON object per line") from None
     if not isinstance(obj, dict):
         raise ProtocolError("malformed", "a request is one JSON object per line")

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from controller.operator.daemon.access import AccessPolicy
-from controller.operator.daemon.log import INFO, WARNING, EventLog
+from controller.operator.daemon.log import ERR, INFO, WARNING, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.protocol import (
     LineReader,
@@ -197,10 +197,22 @@ class Server:
         except ProtocolError as exc:
             self._send(conn, reply_error(None, exc.code, exc.message))
             return
+        except Exception as exc:  # noqa: BLE001  (a request never takes the daemon down)
+            self._internal_error(conn, None, "reading a request", exc)
+            return
         try:
             self._dispatch(conn, request)
         except ProtocolError as exc:
             self._send(conn, reply_error(request.id, exc.code, exc.message))
+        except Exception as exc:  # noqa: BLE001  (the job and the other clients go on)
+            self._internal_error(conn, request.id, request.cmd, exc)
+
+    def _internal_error(self, conn: Conn, request_id: Any, what: str, exc: Exception) -> None:
+        """A bug met by one request: logged (type and a bounded message, for the report),
+        answered, and nothing else changed: the job runs on and the daemon serves on."""
+        self.log.log(ERR, f"control socket: internal error in {what}: {type(exc).__name__}: "
+                          f"{str(exc)[:200]}")
+        self._send(conn, reply_error(request_id, "internal", "internal error: see cncctl log"))
 
     def _dispatch(self, conn: Conn, request: Request) -> None:
         who = f"control socket, uid {conn.uid}"

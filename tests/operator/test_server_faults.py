@@ -1,0 +1,35 @@
+"""The control socket's server meets a bug in one request: it answers, logs, and serves on."""
+
+from __future__ import annotations
+
+import json
+import socket
+
+from controller.operator.daemon.log import EventLog
+from controller.operator.daemon.server import Conn, Server
+
+
+class _BrokenMachine:
+    """A machine whose status() has a bug."""
+
+    def status(self) -> dict:
+        raise RuntimeError("a bug in status")
+
+
+def test_a_bug_in_a_request_is_answered_and_logged_not_raised() -> None:
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    here, there = socket.socketpair()
+    log = EventLog(100)
+    server = Server(listener, _BrokenMachine(), log, policy=None, max_connections=8)  # type: ignore[arg-type]
+    try:
+        conn = Conn(here, 0)
+        server._request(conn, b'{"id": 3, "cmd": "status"}')
+        reply = json.loads(bytes(conn.out).splitlines()[0])
+        assert reply == {"id": 3, "ok": False, "error": "internal",
+                         "message": "internal error: see cncctl log"}
+        events = log.last(5)
+        assert any("internal error in status: RuntimeError: a bug in status" in e["message"]
+                   for e in events)
+    finally:
+        for s in (listener, here, there):
+            s.close()
