@@ -9,6 +9,7 @@ import sys
 from controller.config import load_config
 from controller.errors import ConfigError, NcError
 from controller.operator.inspect_report import format_report, inspect_blocks
+from controller.operator.outputs import OutputError, output_path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,16 +24,20 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         config = load_config(args.config)
+        plot = output_path(args.plot, "--plot") if args.plot is not None else None
         report = inspect_blocks(read_program(args.program, config), config)
     except ConfigError as exc:
         print(f"cncctl: config error: {exc}", file=sys.stderr)
+        return 2
+    except OutputError as exc:
+        print(f"cncctl: error: {exc}", file=sys.stderr)
         return 2
     except NcError as exc:
         print(exc.format(), file=sys.stderr)
         return 2
     print(json.dumps(report.to_json(), indent=2) if args.json else format_report(report))
-    if args.plot:
+    if plot is not None:
         from controller.operator.inspect_plot import plot_report
 
-        plot_report(report, args.plot)
+        plot_report(report, plot)
     return 0

@@ -15,6 +15,7 @@ from controller.errors import CncError, NcError
 from controller.generator.plan import Algorithm
 from controller.interpreter.program import read_program
 from controller.operator.check_cmd import check_program
+from controller.operator.outputs import OutputError, output_path
 from controller.operator.simulate_plot import PlotSeries
 from controller.operator.simulate_view import SimulateView
 from controller.runtime.sim_figures import Figures
@@ -92,10 +93,19 @@ class TrajectoryWriter:
     def __init__(self, path: str, sample_period_s: float) -> None:
         self.path, self.part = path, path + ".part"
         self.T = sample_period_s  # noqa: N815
-        self.fh: TextIO = open(self.part, "w", encoding="utf-8", newline="")  # noqa: SIM115
-        self.fh.write(self.HEADER)
+        try:
+            self.fh: TextIO = open(self.part, "w", encoding="utf-8", newline="")  # noqa: SIM115
+            self.fh.write(self.HEADER)
+        except OSError as exc:
+            raise OutputError(f"--trajectory {path}: {exc.strerror}") from None
 
     def add(self, b: SampleBlock) -> None:
+        try:
+            self._add(b)
+        except OSError as exc:  # a full disk: the run ends with the reason, .part removed
+            raise OutputError(f"--trajectory {self.path}: {exc.strerror}") from None
+
+    def _add(self, b: SampleBlock) -> None:
         n = b.n_ref
         if n == 0:
             return
@@ -107,12 +117,22 @@ class TrajectoryWriter:
         self.fh.write("".join([fmt % tuple(r) for r in rows.tolist()]))
 
     def close(self) -> None:
-        self.fh.close()
-        os.replace(self.part, self.path)
+        try:
+            self.fh.close()
+            os.replace(self.part, self.path)
+        except OSError as exc:
+            self.abandon()
+            raise OutputError(f"--trajectory {self.path}: {exc.strerror}") from None
 
     def abandon(self) -> None:
-        self.fh.close()
-        os.unlink(self.part)
+        try:
+            self.fh.close()
+        except OSError:
+            pass  # the data that did not fit goes with the file
+        try:
+            os.unlink(self.part)
+        except FileNotFoundError:
+            pass
 
 
 def format_table(program: str, results: list[dict]) -> str:
@@ -136,6 +156,10 @@ def _print_summary(r: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config)
+        if args.trajectory is not None:
+            args.trajectory = output_path(args.trajectory, "--trajectory")
+        if args.plot is not None:
+            args.plot = output_path(args.plot, "--plot")
         _check_whole_program(args.program, config)
         algorithms = [a.value for a in Algorithm] if args.compare else [args.algorithm]
         chosen = args.algorithm if args.compare else algorithms[-1]
@@ -158,7 +182,11 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from controller.operator.simulate_plot import plot_simulation
 
-        plot_simulation(args.plot, [series[a] for a in algorithms], reports, config)
+        try:
+            plot_simulation(args.plot, [series[a] for a in algorithms], reports, config)
+        except OSError as exc:
+            print(f"cncctl: error: --plot {args.plot}: {exc.strerror}", file=sys.stderr)
+            return 2
     code = 0 if picked["contour_limit_met"] else 1
     if args.json:
         out = {"program": args.program, "results": reports} if args.compare else reports[0]

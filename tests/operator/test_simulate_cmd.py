@@ -85,3 +85,55 @@ def test_a_plan_that_breaks_the_limit_exits_1_naming_the_worst_place(
     assert main(["simulate", NACA, "--json"]) == 0  # ph-lookahead keeps it, true error included
     r = json.loads(capsys.readouterr().out)
     assert r["contour_limit_met"] and r["contour_error_true_um"]["max"] <= 30.0
+
+
+SQUARE = "G21 G90 G64 F600\nG1 X5\nG1 Y5\nG1 X0\nG1 Y0\nM2\n"
+
+
+@pytest.mark.parametrize("kind", ["folder", "missing folder", "pipe", "empty"])
+def test_an_output_that_must_not_be_written_is_refused_before_planning(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, kind: str) -> None:
+    import os
+    program = tmp_path / "square.nc"
+    program.write_text(SQUARE)
+    target = {"folder": tmp_path / "adir", "missing folder": tmp_path / "nodir" / "t.csv",
+              "pipe": tmp_path / "fifo", "empty": ""}[kind]
+    if kind == "folder":
+        os.mkdir(target)
+    if kind == "pipe":
+        os.mkfifo(target)
+    for option in ("--trajectory", "--plot"):
+        assert main(["simulate", str(program), option, str(target)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"cncctl: error: {option}") and "Traceback" not in err
+    if kind in ("folder", "pipe"):  # left as it was: no rename over it, no .part beside it
+        assert not os.path.isfile(target)
+        assert sorted(os.listdir(tmp_path)) == sorted(["square.nc", os.path.basename(target)])
+
+
+def test_a_symlinked_output_writes_its_target(tmp_path: Path) -> None:
+    program = tmp_path / "square.nc"
+    program.write_text(SQUARE)
+    (tmp_path / "link.csv").symlink_to(tmp_path / "real.csv")
+    assert main(["simulate", str(program), "--trajectory", str(tmp_path / "link.csv")]) == 0
+    assert (tmp_path / "link.csv").is_symlink()
+    assert (tmp_path / "real.csv").read_text().startswith("t,x_ref")
+
+
+def test_a_full_disk_ends_the_run_with_the_reason_and_no_part_file(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    import errno
+
+    from controller.operator import simulate_cmd
+
+    def full(self: simulate_cmd.TrajectoryWriter, b: object) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(simulate_cmd.TrajectoryWriter, "_add", full)
+    program = tmp_path / "square.nc"
+    program.write_text(SQUARE)
+    out = tmp_path / "t.csv"
+    assert main(["simulate", str(program), "--trajectory", str(out)]) == 2
+    assert "--trajectory" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["square.nc"]
