@@ -20,9 +20,25 @@ def check_order(order: float, word: str) -> int:
     return int(order)
 
 
-def _check_weight(weight: float, word: str) -> float:
+# Weights further apart than this within one block make the curve ill-conditioned: a weight
+# of 1e-19 next to 1 asked for arc-length tables of 149 GiB; at a ratio of 1e4 one three-point
+# curve already planned 1.8 GB of samples at 0.004 mm/s, another broke Amax twelve-fold, while
+# at 1e3 both plan normally. Scaling every weight alike changes nothing, so only the ratio is
+# bounded; conic arcs of up to 170 degrees need a ratio under 12.
+MAX_WEIGHT_RATIO = 1e3
+
+
+def _check_weight(weight: float, word: str, weights: list[float] | None = None) -> float:
     if weight <= 0.0:
         raise WordError(word, f"NURBS weight {word}{weight:g} must be positive")
+    if weights:
+        lo, hi = min(weights), max(weights)
+        if weight > hi * MAX_WEIGHT_RATIO or weight * MAX_WEIGHT_RATIO < lo:
+            other = lo if weight > hi else hi
+            raise WordError(word, f"NURBS weight {word}{weight:g} and {other:g}, another "
+                                  f"weight of the block, are more than a factor "
+                                  f"{MAX_WEIGHT_RATIO:g} apart: the curve would be "
+                                  "ill-conditioned")
     return weight
 
 
@@ -56,7 +72,8 @@ class NurbsCollector:
             raise WordError("X", "NURBS control point after the knot-only lines")
         if len(self.points) >= MAX_CONTROL_POINTS:
             raise WordError("X", f"NURBS with more than {MAX_CONTROL_POINTS} control points")
-        self.weights.append(_check_weight(weight, "P" if self.kind == "G5.2" else "R"))
+        self.weights.append(_check_weight(weight, "P" if self.kind == "G5.2" else "R",
+                                          self.weights))
         self.points.append((x, y))
         self.last_line = line
 

@@ -137,3 +137,20 @@ def test_a_full_disk_ends_the_run_with_the_reason_and_no_part_file(
     assert main(["simulate", str(program), "--trajectory", str(out)]) == 2
     assert "--trajectory" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["square.nc"]
+
+
+def test_a_nurbs_of_zero_length_is_no_motion(capsys: pytest.CaptureFixture[str],
+                                             tmp_path: Path) -> None:
+    """All control points at one place: nothing moves there, as for a G1 to where it stands
+    (it once failed the feed planning, and faulted a run)."""
+    lines = "G21 G90 G64 F600\nG1 X10\nG1 X10 Y5\n"
+    plain, dot = tmp_path / "plain.nc", tmp_path / "dot.nc"
+    plain.write_text(lines + "G1 X0 Y0\nM2\n")  # (a blend at the dot divided by zero)
+    dot.write_text(lines + "G5.2 P1 L3\nX10 Y5 P1\nX10 Y5 P1\nG5.3\nG1 X0 Y0\nM2\n")
+    times = []
+    for program in (plain, dot):
+        assert main(["check", str(program)]) == 0
+        capsys.readouterr()
+        assert main(["simulate", str(program), "--json"]) == 0
+        times.append(json.loads(capsys.readouterr().out)["motion_time_s"])
+    assert times[1] == times[0]

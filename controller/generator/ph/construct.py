@@ -74,6 +74,10 @@ def block_curve(block: MotionBlock, feed_cap_mm_s: float,
         tol = block.path.tolerance_mm if block.path.tolerance_mm is not None \
             else default_tolerance_mm
     if isinstance(block, NurbsBlock):
+        # The curve lies in its control polygon's hull: no longer than the polygon.
+        polygon = np.diff(block.control_points[:, :2], axis=0)
+        if float(np.hypot(polygon[:, 0], polygon[:, 1]).sum()) < MIN_LENGTH_MM:
+            return None
         return BlockCurve(Nurbs.from_block(block), feed, line, True, tol)
     if isinstance(block, ArcBlock):
         c = block.center
