@@ -23,6 +23,7 @@ from controller.config import MachineConfig
 from controller.errors import PlanningError
 from controller.generator.baselines import FORMULA_FEEDS, plan_formula_run
 from controller.generator.feed.planner import plan_feed
+from controller.generator.long_blocks import chunk_bounds, contour_parts
 from controller.generator.loop import (
     NURBS_LOOKAHEAD,
     PH_LOOKAHEAD,
@@ -47,6 +48,9 @@ WINDOW_BLOCKS = 500
 # window of NURBS blocks stays a bounded stretch of motion (memory and re-planning), however
 # long each block is. Every program of nc_programs/ is under half of it (plans unchanged).
 WINDOW_NOMINAL_S = 30.0
+# The other algorithms' runs (no look-ahead windows) also stop before this much nominal motion
+# piles up: 500 parts of a long block (long_blocks.py) would be 5000 s of samples.
+MAX_RUN_NOMINAL_S = 120.0
 
 
 class Algorithm(StrEnum):
@@ -72,25 +76,31 @@ def _pos_row(config: MachineConfig, xy: np.ndarray, z_mm: float) -> np.ndarray:
     return xy
 
 
-def _straight_move(block: LineBlock, config: MachineConfig, t0_s: float) -> RefChunk | None:
-    """A line that moves Z, or a rapid: its own quintic feed profile from rest to rest."""
+def _straight_move(block: LineBlock, config: MachineConfig,
+                   t0_s: float) -> Iterator[tuple[RefChunk, bool]]:
+    """A line that moves Z, or a rapid: its own quintic feed profile from rest to rest, in
+    chunks of at most CHUNK_SAMPLES made as they are taken (a slow Z move of hours is never
+    one array), each with whether it is the last."""
     start, end = np.array(block.start), np.array(block.end)
     if not config.has_axis("z"):
         start, end = start[:2], end[:2]
     length = float(np.linalg.norm(end - start))
     if length < 1e-9:
-        return None
+        return
     cap = config.interpolator.rapid_feed_mm_s if block.rapid else min(
         block.feed_mm_s, config.interpolator.max_feed_mm_s)
     plan = plan_feed(np.array([0.0, length]), np.array([cap, cap]),
                      config.interpolator.max_accel_mm_s2)
     T = config.sample_period_s  # noqa: N806
     k = max(int(np.ceil(plan.profile.duration_s / T - 1e-9)), 1)
-    s, v, _ = plan.profile.evaluate(np.minimum(np.arange(1, k + 1) * T, plan.profile.duration_s))
-    pos = start + (s / length)[:, None] * (end - start)
-    pos[-1] = end
-    line = np.full(len(pos), block.source.first_line, np.int32)
-    return RefChunk(t0_s + T, pos, v, line)
+    for i0, i1 in chunk_bounds(k):
+        t = np.minimum(np.arange(i0 + 1, i1 + 1) * T, plan.profile.duration_s)
+        s, v, _ = plan.profile.evaluate(t)
+        pos = start + (s / length)[:, None] * (end - start)
+        if i1 == k:
+            pos[-1] = end
+        line = np.full(len(pos), block.source.first_line, np.int32)
+        yield RefChunk(t0_s + (i0 + 1) * T, pos, v, line), i1 == k
 
 
 def _in_position_hold(last: PlannedStep, config: MachineConfig, t_s: float) -> PlannedStep:
@@ -102,14 +112,16 @@ def _in_position_hold(last: PlannedStep, config: MachineConfig, t_s: float) -> P
     return PlannedStep(chunk, rapid=last.rapid)
 
 
-def _dwell(block: DwellBlock, config: MachineConfig, t0_s: float) -> RefChunk | None:
+def _dwell(block: DwellBlock, config: MachineConfig, t0_s: float) -> Iterator[RefChunk]:
+    """The dwell's samples holding the position, in chunks of at most CHUNK_SAMPLES made as
+    they are taken."""
     T = config.sample_period_s  # noqa: N806
     k = int(round(block.seconds / T))
-    if k <= 0:
-        return None
     pos = np.array(block.position)[: len(config.axis_names)]
-    rows = np.repeat(pos[None, :], k, axis=0)
-    return RefChunk(t0_s + T, rows, np.zeros(k), np.full(k, block.source.first_line, np.int32))
+    for i0, i1 in chunk_bounds(k):
+        rows = np.repeat(pos[None, :], i1 - i0, axis=0)
+        yield RefChunk(t0_s + (i0 + 1) * T, rows, np.zeros(i1 - i0),
+                       np.full(i1 - i0, block.source.first_line, np.int32))
 
 
 def _pause(block: StopBlock, config: MachineConfig, t0_s: float) -> RefChunk:
@@ -262,26 +274,34 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
         step, cont = _window(run_blocks, config, t_s, cont, repeats)
         yield from emit(step, at_rest=cont is None)
 
+    def add_contour(block: NcBlock, last_part: bool) -> Iterator[PlannedStep]:
+        pending.append(block)  # type: ignore[arg-type]
+        pending_s[0] += nominal_s(block, vmax)
+        exact = block.path.mode != PathMode.BLEND  # type: ignore[union-attr]
+        if exact and last_part:
+            yield from flush()
+        elif (len(pending) >= WINDOW_BLOCKS or pending_s[0] >= WINDOW_NOMINAL_S) \
+                and algorithm == Algorithm.PH_LOOKAHEAD:
+            yield from window()
+        elif len(pending) >= MAX_RUN_BLOCKS or pending_s[0] >= MAX_RUN_NOMINAL_S:
+            yield from flush()
+
     for block in blocks:
         if _is_contour_block(block):
-            pending.append(block)  # type: ignore[arg-type]
-            pending_s[0] += nominal_s(block, vmax)
-            exact = block.path.mode != PathMode.BLEND  # type: ignore[union-attr]
-            if exact:
-                yield from flush()
-            elif (len(pending) >= WINDOW_BLOCKS or pending_s[0] >= WINDOW_NOMINAL_S) \
-                    and algorithm == Algorithm.PH_LOOKAHEAD:
-                yield from window()
-            elif len(pending) >= MAX_RUN_BLOCKS:
-                yield from flush()
+            parts = contour_parts(block, vmax) if not isinstance(block, NurbsBlock) else [block]
+            for i, part in enumerate(parts):
+                yield from add_contour(part, i == len(parts) - 1)
             continue
         yield from flush()
+        # A long move or dwell comes in chunks, each timed on from the one before (emit may
+        # put an in-position hold before the first).
         if isinstance(block, LineBlock):
-            chunk = _straight_move(block, config, t_s)
-            yield from emit(PlannedStep(chunk, rapid=block.rapid) if chunk is not None else None)
+            for chunk, last in _straight_move(block, config, 0.0):
+                yield from emit(PlannedStep(replace(chunk, t0_s=t_s + T), rapid=block.rapid),
+                                at_rest=last)
         elif isinstance(block, DwellBlock):
-            chunk = _dwell(block, config, t_s)
-            yield from emit(PlannedStep(chunk) if chunk is not None else None, dwell=True)
+            for chunk in _dwell(block, config, 0.0):
+                yield from emit(PlannedStep(replace(chunk, t0_s=t_s + T)), dwell=True)
         elif isinstance(block, StopBlock) and block.kind is StopKind.PAUSE:
             # M0: settle in position, then the motion controller waits for the operator.
             yield from emit(PlannedStep(_pause(block, config, t_s)), dwell=True)

@@ -233,7 +233,7 @@ class MotionMixin:
             raise WordError("P", "P without X and Y is only allowed for the first control point")
 
     def end_nurbs(self, end_line: int | None = None) -> None:
-        block = self.nurbs.finish(end_line)
+        block = self.nurbs.finish(end_line, self.config.interpolator.max_feed_mm_s)
         self.nurbs = None
         self.out.append(block)
         self.pos = (*block.end[:2], self.pos[2])

@@ -9,6 +9,10 @@ from controller.errors import NcError
 from controller.interpreter.codes import WordError
 
 MIN_ORDER, MAX_ORDER = 2, 6
+# A NURBS block is planned in one piece (lines and arcs are split: generator/long_blocks.py);
+# one whose control polygon (longer than the curve) takes longer than this at its feed is
+# refused, so that its samples stay a bounded array (10 minutes: 600,000 at 1 kHz).
+MAX_NURBS_NOMINAL_S = 600.0
 MAX_CONTROL_POINTS = 100_000  # one block is held in memory; bounded so memory stays bounded
 
 
@@ -93,13 +97,20 @@ class NurbsCollector:
     def _fail(self, line: int, word: str, message: str) -> NcError:
         return NcError(self.program, line, 1, word, message)
 
-    def finish(self, end_line: int | None = None) -> NurbsBlock:
+    def finish(self, end_line: int | None = None, max_feed_mm_s: float = np.inf) -> NurbsBlock:
         """Check the whole block and build it; errors name the line where the block ends."""
         last = end_line if end_line is not None else self.last_line
         n, order = len(self.points), self.order
         if n < order:
             raise self._fail(last, self.kind, f"NURBS of order {order} needs at least {order} "
                                               f"control points, got {n}")
+        polygon_mm = float(np.hypot(*np.diff(np.array(self.points), axis=0).T).sum())
+        feed = min(self.feed_mm_s, max_feed_mm_s)
+        if polygon_mm > feed * MAX_NURBS_NOMINAL_S:
+            raise self._fail(last, self.kind,
+                             f"NURBS of {polygon_mm:.0f} mm (control polygon) at "
+                             f"{feed * 60:g} mm/min may take over {MAX_NURBS_NOMINAL_S:g} s: a "
+                             "NURBS is planned whole; raise the feed or split the curve")
         knots = self._knot_vector(last)
         return NurbsBlock(
             degree=order - 1,

@@ -21,6 +21,9 @@ from controller.interpreter.moves import MotionMixin
 from controller.offsets import OffsetTable, ProgramOffsets
 
 MM_PER_INCH = 25.4
+# A feed below this is refused (F0 stays "no feed yet"): a move planned at 1e-10 mm/min would
+# take 1e13 s of samples. grbl raises such feeds to the same minimum; refusing says so.
+MIN_FEED_MM_MIN = 1.0
 _AXES = frozenset("XYZ")
 _STOPS = {0: StopKind.PAUSE, 1: StopKind.OPTIONAL_PAUSE, 2: StopKind.END, 30: StopKind.END_REWIND}
 # Letters each G code may use (besides F S T, allowed everywhere).
@@ -123,7 +126,7 @@ class InterpState(MotionMixin, OffsetsMixin):
         if not (_ARC_LETTERS if mode >= 20 else _LINE_LETTERS).issuperset(vals):
             return False
         if "F" in vals:
-            if vals["F"] < 0:
+            if vals["F"] < 0 or 0 < vals["F"] * self.scale < MIN_FEED_MM_MIN:
                 return False  # the general path reports it
             self.feed_mm_s = vals["F"] * self.scale / 60.0
         self.move(code if code >= 0 else None, vals, lineno)
@@ -191,6 +194,9 @@ class InterpState(MotionMixin, OffsetsMixin):
         if "F" in vals:
             if vals["F"] < 0:
                 raise WordError("F", "negative feed rate")
+            if 0 < vals["F"] * self.scale < MIN_FEED_MM_MIN:
+                raise WordError("F", f"feed F{vals['F']:g} is below the minimum of "
+                                     f"{MIN_FEED_MM_MIN:g} mm/min (as grbl's)")
             self.feed_mm_s = vals["F"] * self.scale / 60.0
         if "S" in vals:
             if vals["S"] < 0:
