@@ -111,3 +111,17 @@ def test_embedded_run_refused_unhomed_and_homes_with_home(tmp_path: Path) -> Non
     assert "homing X, Y" in done.stderr
     final = json.loads(done.stdout.splitlines()[-1])
     assert final["final_position_mm"] == {"x": -140.0, "y": 140.0}
+
+
+def test_a_jog_feed_below_the_programs_minimum_is_refused_before_any_job() -> None:
+    import pytest
+
+    from controller.config import load_config
+    from controller.operator.daemon.manual import jog_program
+    from controller.operator.daemon.protocol import ProtocolError
+
+    config = load_config("xy_table")
+    with pytest.raises(ProtocolError, match="jog feed must be from 1 to"):
+        jog_program(config, {"x": 0.0, "y": 0.0}, "x", 1.0, 1, 0.5)
+    text, _ = jog_program(config, {"x": 0.0, "y": 0.0}, "x", 1.0, 1, 1.0)
+    assert "F1.000" in text

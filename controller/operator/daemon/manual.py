@@ -7,6 +7,7 @@ from typing import Any, Protocol
 
 from controller.config import MachineConfig
 from controller.errors import CncError
+from controller.interpreter.state import MIN_FEED_MM_MIN
 from controller.operator.daemon.log import ERR, NOTICE, EventLog
 from controller.operator.daemon.protocol import ProtocolError
 from drivers.base import Drive
@@ -82,9 +83,10 @@ def jog_program(config: MachineConfig, position_mm: dict[str, float], axis: str,
     a continuous jog), clipped to the travel: (program text, what it does)."""
     if axis not in config.axis_names:
         raise ProtocolError("bad-field", f"no axis {axis.upper()}")
-    if not 0.0 < feed_mm_min <= config.interpolator.max_feed_mm_s * 60.0:
-        raise ProtocolError("bad-field", "jog feed must be above 0 and at most the maximum "
-                                         f"feed {config.interpolator.max_feed_mm_s * 60:g} mm/min")
+    if not MIN_FEED_MM_MIN <= feed_mm_min <= config.interpolator.max_feed_mm_s * 60.0:
+        raise ProtocolError("bad-field", f"jog feed must be from {MIN_FEED_MM_MIN:g} to the "
+                                         "maximum feed "
+                                         f"{config.interpolator.max_feed_mm_s * 60:g} mm/min")
     lo, hi = config.axis(axis).travel_mm
     here = position_mm[axis]
     wanted = here + distance_mm if distance_mm is not None else (hi if direction > 0 else lo)
