@@ -176,14 +176,18 @@ def from_json(data: Any) -> OffsetTable:
                        SYSTEM_NAMES.index(data["active"]) + 1)
 
 
-def load_offsets(path: str | os.PathLike[str]) -> OffsetTable:
-    """The table kept in `path`; the default (all zero, G54) when the file does not exist.
-    A file that cannot be read or is not a valid table raises OffsetsError naming it."""
+def load_offsets(path: str | os.PathLike[str], missing_ok: bool = True) -> OffsetTable:
+    """The table kept in `path`; the default (all zero, G54) when the file does not exist and
+    missing_ok (the daemon's own state: none kept yet). A file that cannot be read or is not a
+    valid table raises OffsetsError naming it, and so does a missing one a user named
+    (`--offsets`: all-zero offsets in its place would move the work elsewhere)."""
     name = os.fspath(path)
     try:
         with open(name, "rb") as f:
             raw = f.read(MAX_FILE_BYTES + 1)
-    except FileNotFoundError:
+    except FileNotFoundError as exc:
+        if not missing_ok:
+            raise OffsetsError(name, "no such offset table") from exc
         return OffsetTable()
     except OSError as exc:
         raise OffsetsError(name, f"cannot read the offset table: {exc.strerror or exc}") from exc

@@ -158,7 +158,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
-        offsets = load_offsets(args.offsets) if args.offsets else None
+        offsets = load_offsets(args.offsets, missing_ok=False) \
+            if args.offsets is not None else None
         summary = check_program(args.program, config, offsets=offsets)
         assert summary is not None  # summary=True
         probe_drive(config)

@@ -104,7 +104,8 @@ def run(args: argparse.Namespace) -> int:
             return 3
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
-        offsets = load_offsets(args.offsets) if args.offsets else None
+        offsets = load_offsets(args.offsets, missing_ok=False) \
+            if args.offsets is not None else None
         track = ProgramOffsets()
         check_program(args.program, config, offsets=offsets, from_line=args.from_line,
                       track=track, summary=False)

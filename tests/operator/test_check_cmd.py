@@ -118,3 +118,14 @@ def test_the_check_before_motion_samples_no_nurbs_inside_the_travel(
     assert sampled == []
     summary = check_program(naca, load_config(None))
     assert len(sampled) == 1 and summary is not None and summary.path_length_mm > 60.0
+
+
+@pytest.mark.parametrize("command", ["check", "run"])
+def test_a_missing_offset_table_is_an_error_not_zero_offsets(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        command: str) -> None:
+    missing = tmp_path / "offsets.json"
+    monkeypatch.setenv("CNCD_SOCKET", str(tmp_path / "none.sock"))  # no daemon: embedded
+    words = [command, str(REPO / "nc_programs/arcs.nc"), "--offsets", str(missing)]
+    assert main(words + (["--virtual-time"] if command == "run" else [])) == 2
+    assert f"{missing}: no such offset table" in capsys.readouterr().err
