@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 from dataclasses import dataclass, field, replace
@@ -164,6 +165,10 @@ class _Section:
         self.used.add(key)
         if key not in self.data:
             if default is _REQUIRED:
+                typo = _close_match(key, [k for k in self.data if k not in self.used])
+                if typo is not None:  # name the key as written, not only the one missing
+                    raise ConfigError(self.path, self._key(typo), f"unknown key (did you "
+                                                                  f"mean {key}?)")
                 raise ConfigError(self.path, self._key(key), "is required")
             return default
         return self.data[key]
@@ -176,7 +181,10 @@ class _Section:
     def _check_float(self, key: str, value: Any, above: float | None, minval: float | None,
                      maxval: float | None) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(self.path, self._key(key), f"must be a number, got {value!r}")
+            hint = ""
+            if isinstance(value, str) and _number_text(value):
+                hint = " (YAML reads 1e3 as text: write 1.0e+3)"
+            raise ConfigError(self.path, self._key(key), f"must be a number, got {value!r}{hint}")
         value = float(value)
         if not math.isfinite(value):
             raise ConfigError(self.path, self._key(key), "must be finite")
@@ -238,7 +246,25 @@ class _Section:
     def finish(self) -> None:
         unknown = [k for k in self.data if k not in self.used]
         if unknown:
-            raise ConfigError(self.path, self._key(str(unknown[0])), "unknown key")
+            near = _close_match(unknown[0], list(self.used))
+            raise ConfigError(self.path, self._key(str(unknown[0])), "unknown key" + (
+                f" (did you mean {near}?)" if near is not None else ""))
+
+
+def _close_match(key: Any, candidates: list[Any]) -> Any:
+    """The candidate a mistyped key most likely meant, if one is close."""
+    names = [c for c in candidates if isinstance(c, str)]
+    found = difflib.get_close_matches(key, names, n=1, cutoff=0.8) if isinstance(key, str) \
+        else []
+    return found[0] if found else None
+
+
+def _number_text(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _read_servo(sec: _Section) -> ServoParams:
@@ -392,6 +418,22 @@ def resolve_config_path(explicit: str | None = None) -> Path:
 MAX_CONFIG_BYTES = 1 << 20  # a machine config is a few kB; a larger file is refused unread
 
 
+class _StrictLoader(yaml.SafeLoader):
+    """SafeLoader that refuses a key given twice in one mapping (PyYAML keeps the last one:
+    a second `max_feed_mm_s:` further down would silently win)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: set = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)  # type: ignore[no-untyped-call]
+            if isinstance(key, str | int | float | bool) and key in seen:
+                raise yaml.constructor.ConstructorError(
+                    "while reading a mapping", node.start_mark,
+                    f"the key {key!r} is given twice", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 def load_config(explicit: str | None = None) -> MachineConfig:
     """Load and check a machine configuration (see resolve_config_path for which one)."""
     path = resolve_config_path(explicit)
@@ -402,7 +444,7 @@ def load_config(explicit: str | None = None) -> MachineConfig:
             raise ConfigError(str(path), "<file>", f"larger than {MAX_CONFIG_BYTES} bytes: "
                               "not a machine configuration")
         text = raw.decode("utf-8")
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506  (a SafeLoader)
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(str(path), "<file>", f"cannot read: {exc}") from exc
     except yaml.YAMLError as exc:

@@ -1,0 +1,79 @@
+"""Machine configs are read strictly: a mistake is a ConfigError naming the key, never a guess."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from controller.config import ConfigError, load_config, parse_config
+
+REPO = Path(__file__).resolve().parents[2]
+SHIPPED = sorted((REPO / "config").glob("*.yaml"))
+BASE = (REPO / "config/xy_table.yaml").read_text()
+
+
+def _load(tmp_path: Path, text: str) -> None:
+    path = tmp_path / "machine.yaml"
+    path.write_text(text)
+    load_config(str(path))
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
+def test_every_shipped_config_loads(path: Path) -> None:
+    assert load_config(str(path)).name
+
+
+def test_a_mistyped_required_key_is_named_as_written(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"interpolator\.max_acel_mm_s2: unknown key "
+                                          r"\(did you mean max_accel_mm_s2\?\)"):
+        _load(tmp_path, BASE.replace("max_accel_mm_s2", "max_acel_mm_s2"))
+
+
+def test_a_mistyped_optional_key_suggests_the_known_one(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"max_dynamic_rounds: unknown key \(did you mean "
+                                          r"max_dynamics_rounds\?\)"):
+        _load(tmp_path, BASE.replace("max_dynamics_rounds", "max_dynamic_rounds"))
+
+
+def test_a_key_given_twice_is_refused_with_both_places(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"(?s)line 2.*'name' is given twice.*line \d+"):
+        _load(tmp_path, BASE + "name: dup\n")
+
+
+def test_yaml_exponent_text_gets_a_hint(tmp_path: Path) -> None:
+    text = BASE.replace("max_accel_mm_s2: 2450.0", "max_accel_mm_s2: 1e3")
+    assert text != BASE
+    with pytest.raises(ConfigError, match=r"got '1e3' \(YAML reads 1e3 as text: write "
+                                          r"1\.0e\+3\)"):
+        _load(tmp_path, text)
+
+
+DATA = yaml.safe_load(BASE)
+PATHS = [(k,) for k in DATA] + [(k, j) for k, v in DATA.items() if isinstance(v, dict)
+                                for j in v]
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from(PATHS), st.sampled_from(["drop", "rename", "value"]),
+       st.none() | st.booleans() | st.integers() | st.floats(allow_nan=True)
+       | st.text(max_size=5) | st.lists(st.integers(), max_size=3))
+def test_any_one_mistake_is_a_config_error_or_a_valid_config(path: tuple, action: str,
+                                                             value: object) -> None:
+    import copy
+    data = copy.deepcopy(DATA)
+    parent = data if len(path) == 1 else data[path[0]]
+    key = path[-1]
+    if action == "drop":
+        del parent[key]
+    elif action == "rename":
+        parent[key + "x"] = parent.pop(key)
+    else:
+        parent[key] = value
+    try:
+        parse_config(data, "machine.yaml")
+    except ConfigError:
+        pass
