@@ -119,7 +119,8 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
 
 def _simple(client: DaemonClient, args: argparse.Namespace) -> int:
     reply = client.request(args.command)
-    print(f"cncctl {args.command}: {reply['state']}")
+    print(f"cncctl {args.command}: {reply['state']}"
+          + (f" ({reply['note']})" if reply.get("note") else ""))
     return 0
 
 

@@ -35,8 +35,10 @@ def test_hold_resume_and_feed_through_the_daemon(tmp_path: Path) -> None:
         run = start_run(d, program)
         try:
             wait_moving(run, after_s=0.5)
-            assert d.cncctl("hold").returncode == 0
+            hold = d.cncctl("hold")
+            assert hold.returncode == 0 and hold.stdout.strip() == "cncctl hold: HOLDING"
             held = wait_state(d, "HELD")
+            assert d.cncctl("hold").stdout.strip() == "cncctl hold: HELD"
             time.sleep(0.3)
             again = d.status()
             assert again["state"] == "HELD" and again["position_mm"] == held["position_mm"]
@@ -45,8 +47,13 @@ def test_hold_resume_and_feed_through_the_daemon(tmp_path: Path) -> None:
             assert d.cncctl("feed", "50").returncode == 0
             assert d.status()["feed_override_pct"] == 50.0
             time.sleep(0.2)
+            assert d.cncctl("feed", "0").returncode == 0
+            resume = d.cncctl("resume")  # resumed, but 0 % keeps it where it is: said so
+            assert resume.returncode == 0 and resume.stdout.startswith(
+                "cncctl resume: HELD (the feed override is 0 %")
+            time.sleep(0.3)
+            assert d.status()["position_mm"] == held["position_mm"]
             assert d.cncctl("feed", "100").returncode == 0
-            assert d.cncctl("resume").returncode == 0
             wait_state(d, "RUNNING")
             out, err = run.communicate(timeout=30)
         finally:

@@ -231,9 +231,18 @@ class Server:
             getattr(self.machine, cmd)(f"{'aborted' if cmd == 'abort' else 'e-stop'} by "
                                        f"operator ({who})")
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
-        elif cmd in ("resume", "hold"):
-            getattr(self.machine, cmd)()
-            self._send(conn, reply_ok(rid, state=self.machine.state.value))
+        elif cmd == "hold":
+            self.machine.hold()
+            # The stop along the path takes a moment: HELD once at a standstill.
+            held = self.machine.status()["state"] == "HELD"
+            self._send(conn, reply_ok(rid, state="HELD" if held else "HOLDING"))
+        elif cmd == "resume":
+            self.machine.resume()
+            if self.machine.feed_override_pct == 0.0:
+                self._send(conn, reply_ok(rid, state="HELD", note="the feed override is 0 %: "
+                                          "the job moves once it is raised (cncctl feed)"))
+            else:
+                self._send(conn, reply_ok(rid, state="RUNNING"))
         elif cmd == "home":
             self.machine.home(list(request.fields.get("axes", [])))
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
