@@ -120,3 +120,32 @@ def _moved(p: Piece, s0_mm: float) -> Piece:
     fields.update(p.__dict__)
     fields["s0_mm"] = s0_mm
     return moved
+
+
+# A first derivative below this share of a piece's mean |dC/du| has no direction: the end of a
+# NURBS split at a cusp (interpreter/nurbs_blocks.py), where the curve stops and turns back.
+DEGENERATE_SPEED = 1e-9
+
+
+def _end_derivative(piece: Piece, at_end: bool) -> tuple[np.ndarray, bool]:
+    """dC/du at the piece's end (at_end) or start, and whether it is too small to point."""
+    u = piece.u1 if at_end else piece.u0
+    d = piece.curve.evaluate(np.array([u]), 1)[1, 0]
+    mean_speed = piece.length_mm / max(abs(piece.u1 - piece.u0), 1e-300)
+    return d, float(np.hypot(d[0], d[1])) <= DEGENERATE_SPEED * mean_speed
+
+
+def degenerate_end(piece: Piece, at_end: bool) -> bool:
+    return _end_derivative(piece, at_end)[1]
+
+
+def end_tangent(piece: Piece, at_end: bool) -> np.ndarray:
+    """The unit direction of travel at the piece's end (at_end) or start. Where dC/du vanishes,
+    it is the second derivative's, reversed on arrival (dC/du ~ C''(u) (u - u_end) < 0 there)."""
+    d, degenerate = _end_derivative(piece, at_end)
+    if degenerate:
+        u = piece.u1 if at_end else piece.u0
+        d2 = piece.curve.evaluate(np.array([u]), 2)[2, 0]
+        if float(np.hypot(d2[0], d2[1])) > 0.0:
+            d = -d2 if at_end else d2
+    return d / max(float(np.hypot(d[0], d[1])), 1e-300)

@@ -8,7 +8,7 @@ from controller.blocks import ArcBlock, LineBlock, NcBlock, PathControl, Source
 from controller.config import MachineConfig
 from controller.interpreter.arcs import center_ijk, center_r
 from controller.interpreter.codes import WordError, g_name
-from controller.interpreter.nurbs_blocks import NurbsCollector, check_order
+from controller.interpreter.nurbs_blocks import NurbsCollector, check_order, split_at_corners
 
 SAME_POINT_MM = 1e-6  # G6.2's first control point must be the current position within this
 _G6_LETTERS = frozenset("XYZRK")
@@ -235,7 +235,7 @@ class MotionMixin:
     def end_nurbs(self, end_line: int | None = None) -> None:
         block = self.nurbs.finish(end_line, self.config.interpolator.max_feed_mm_s)
         self.nurbs = None
-        self.out.append(block)
+        self.out.extend(split_at_corners(block))
         self.pos = (*block.end[:2], self.pos[2])
 
 

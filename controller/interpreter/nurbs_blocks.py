@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from controller.blocks import NurbsBlock, PathControl, Source
 from controller.errors import NcError
+from controller.geometry.nurbs import Nurbs
+from controller.geometry.nurbs_split import kink_knots, split_at
 from controller.interpreter.codes import WordError
 
 MIN_ORDER, MAX_ORDER = 2, 6
@@ -140,3 +144,19 @@ class NurbsCollector:
         if not k[order - 1] < k[n]:
             raise self._fail(last, "K", "NURBS knot vector has an empty parameter range")
         return np.array(k, dtype=float)
+
+
+def split_at_corners(block: NurbsBlock) -> list[NurbsBlock]:
+    """The block as NURBS blocks that meet where its tangent jumps (a knot of full multiplicity,
+    a cusp): each such corner then is a joint between blocks, blended within the tolerance
+    under G64 or stopped at, as a corner between two G1 lines is."""
+    kinks = kink_knots(Nurbs.from_block(block))
+    parts: list[NurbsBlock] = []
+    knots, points, weights = block.knots, block.control_points, block.weights
+    for u in kinks:
+        left, (knots, points, weights) = split_at(block.degree, knots, points, weights, u)
+        parts.append(replace(block, knots=left[0], control_points=left[1], weights=left[2]))
+    if not parts:
+        return [block]
+    parts.append(replace(block, knots=knots, control_points=points, weights=weights))
+    return parts

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from controller.config import load_config
 from controller.operator.cli import main
 
 REPO = Path(__file__).resolve().parents[2]
@@ -154,3 +155,22 @@ def test_a_nurbs_of_zero_length_is_no_motion(capsys: pytest.CaptureFixture[str],
         assert main(["simulate", str(program), "--json"]) == 0
         times.append(json.loads(capsys.readouterr().out)["motion_time_s"])
     assert times[1] == times[0]
+
+
+@pytest.mark.parametrize("name, body, ph_segments", [
+    ("cusp", "G5.2 P1 L3\nX10 Y0 P1\nX10 Y0 P1\nX0 Y0 P1\nG5.3\n", 0),  # out and back: a stop
+    ("polyline", "G5.2 P1 L2\nX20 Y0 P1\nX20 Y20 P1\nX0 Y20 P1\nX0 Y0 P1\nG5.3\n", 3),
+])
+def test_corners_inside_a_nurbs_keep_amax_and_the_limit(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, name: str, body: str,
+        ph_segments: int) -> None:
+    """A NURBS whose tangent jumps at a knot (a cusp, a degree-1 polyline) was passed at speed:
+    a velocity step (Amax broken at the cusp) or rounds of slowing down. Now it is split there
+    and the corner is blended or stopped at, as between G1 lines."""
+    program = tmp_path / f"{name}.nc"
+    program.write_text("G21 G90 G64 F3000\n" + body + "M2\n")
+    assert main(["simulate", str(program), "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    amax = load_config("xy_table").interpolator.max_accel_mm_s2
+    assert r["max_tangential_accel_mm_s2"] <= amax * 1.001
+    assert r["dynamics_rounds"] == 1 and r["ph_segments"] == ph_segments

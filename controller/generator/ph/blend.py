@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from controller.geometry.path import Piece, PieceKind, make_piece
+from controller.geometry.path import Piece, PieceKind, degenerate_end, end_tangent, make_piece
 from controller.geometry.ph_quintic import PhQuintic
 from controller.numeric import clamp
 
@@ -126,7 +126,11 @@ class _Side:
 
     def tangent_at_joint(self) -> complex:
         """The unit tangent where the piece meets the other (at its end parameter when
-        by_parameter, else at its end arc length, as the single run always did)."""
+        by_parameter, else at its end arc length, as the single run always did); the direction
+        of travel where the curve's derivative vanishes there (a cusp)."""
+        if self.p.kind != PieceKind.LINE and degenerate_end(self.p, self.at_end):
+            x, y = end_tangent(self.p, self.at_end)
+            return complex(x, y)
         if not self.by_parameter:
             return _point(self.p, self.p.length_mm if self.at_end else 0.0)[1]
         d = self.p.curve.evaluate(np.array([self._edge_u()]), 1)[1, 0]

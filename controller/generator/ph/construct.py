@@ -20,7 +20,7 @@ from controller.generator.ph.fit import PhSegment, fit_zones
 from controller.generator.ph.line_blends import LineJoints, applies, blend_lines, line_joints
 from controller.geometry.curves import ArcCurve, Curve, LineCurve
 from controller.geometry.nurbs import Nurbs
-from controller.geometry.path import Path, Piece, PieceKind, chain, make_piece
+from controller.geometry.path import Path, Piece, PieceKind, chain, end_tangent, make_piece
 
 # Joints whose tangents turn by less than this are treated as smooth (CAM output jitter).
 SMOOTH_JOINT_RAD = math.radians(0.5)
@@ -184,8 +184,7 @@ def _materialise(bc: BlockCurve, spans: list, corner_base: int) -> list[Piece]:
 
 
 def _tangent(piece: Piece, at_end: bool) -> np.ndarray:
-    d = piece.curve.evaluate(np.array([piece.u1 if at_end else piece.u0]), 1)[1, 0]
-    return d / max(float(np.hypot(d[0], d[1])), 1e-300)
+    return end_tangent(piece, at_end)
 
 
 # A joint's blend by what it depends on: both pieces (curve, parameters, offset, length) and the

@@ -1,0 +1,58 @@
+"""Corners inside a NURBS: where its tangent jumps at a knot, and splitting it there (Boehm)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from controller.geometry.nurbs import Nurbs
+
+# A turn of the tangent across a knot above this is a corner, as at a joint of two G1 blocks
+# (construct.SMOOTH_JOINT_RAD): curvature-based detection cannot see it, the curvature on either
+# side being finite, so the path would have passed it at full speed with a jump of velocity.
+KINK_RAD = math.radians(0.5)
+SIDE_STEP = 1e-7  # of the parameter range: where each side's tangent is read
+
+
+def kink_knots(curve: Nurbs) -> list[float]:
+    """Interior knots where the tangent turns by more than KINK_RAD (C0 joints, cusps)."""
+    inner = np.unique(curve.knots[(curve.knots > curve.u_start) & (curve.knots < curve.u_end)])
+    if inner.size == 0:
+        return []
+    h = SIDE_STEP * (curve.u_end - curve.u_start)
+    before = curve.evaluate(inner - h, 1)[1]
+    after = curve.evaluate(inner + h, 1)[1]
+    cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+    dot = np.einsum("ij,ij->i", before, after)
+    turn = np.arctan2(np.abs(cross), dot)
+    return [float(u) for u in inner[turn > KINK_RAD]]
+
+
+def insert_knot(degree: int, knots: np.ndarray, homogeneous: np.ndarray,
+                u: float) -> tuple[np.ndarray, np.ndarray]:
+    """Boehm's insertion of u once into (knots, homogeneous points (n, 3)): the same curve."""
+    k = int(np.searchsorted(knots, u, side="right")) - 1  # knots[k] <= u < knots[k + 1]
+    p = degree
+    new = np.empty((homogeneous.shape[0] + 1, homogeneous.shape[1]))
+    new[: k - p + 1] = homogeneous[: k - p + 1]
+    new[k + 1:] = homogeneous[k:]
+    for i in range(k - p + 1, k + 1):
+        alpha = (u - knots[i]) / (knots[i + p] - knots[i])
+        new[i] = (1.0 - alpha) * homogeneous[i - 1] + alpha * homogeneous[i]
+    return np.insert(knots, k + 1, u), new
+
+
+def split_at(degree: int, knots: np.ndarray, points: np.ndarray, weights: np.ndarray,
+             u: float) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """The curve split at an interior parameter u: (knots, points, weights) of the part before
+    and of the part after, both clamped; the curve passes through their shared end point."""
+    h = np.column_stack((points * weights[:, None], weights))
+    while np.count_nonzero(knots == u) < degree:
+        knots, h = insert_knot(degree, knots, h, u)
+    s = int(np.searchsorted(knots, u, side="left"))  # first of the `degree` copies of u
+    left_knots = np.concatenate((knots[:s], np.full(degree + 1, u)))
+    right_knots = np.concatenate((np.full(degree + 1, u), knots[s + degree:]))
+    left, right = h[:s], h[s - 1:]
+    return ((left_knots, left[:, :2] / left[:, 2:], left[:, 2].copy()),
+            (right_knots, right[:, :2] / right[:, 2:], right[:, 2].copy()))

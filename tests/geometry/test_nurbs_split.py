@@ -1,0 +1,77 @@
+"""Corners inside a NURBS: found at the knots where the tangent jumps, split there exactly."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from controller.geometry.nurbs import Nurbs
+from controller.geometry.nurbs_split import kink_knots, split_at
+from controller.geometry.path import PieceKind, end_tangent, make_piece
+
+
+@st.composite
+def nurbs(draw: st.DrawFn) -> Nurbs:
+    degree = draw(st.integers(1, 5))
+    n = draw(st.integers(degree + 1, degree + 8))
+    inner = sorted(draw(st.lists(st.floats(0.01, 0.99), min_size=n - degree - 1,
+                                 max_size=n - degree - 1)))
+    knots = np.concatenate((np.zeros(degree + 1), inner, np.ones(degree + 1)))
+    points = np.array(draw(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)),
+                                    min_size=n, max_size=n)))
+    weights = np.array(draw(st.lists(st.floats(0.1, 10), min_size=n, max_size=n)))
+    return Nurbs(degree, knots, points, weights)
+
+
+@settings(max_examples=300, deadline=None)
+@given(nurbs(), st.floats(0.02, 0.98))
+def test_both_parts_are_the_curve(curve: Nurbs, u: float) -> None:
+    (lk, lp, lw), (rk, rp, rw) = split_at(curve.degree, curve.knots, curve.control_points,
+                                          curve.weights, u)
+    left, right = Nurbs(curve.degree, lk, lp, lw), Nurbs(curve.degree, rk, rp, rw)
+    scale = 1.0 + float(np.abs(curve.control_points).max())
+    for part, lo, hi in ((left, 0.0, u), (right, u, 1.0)):
+        t = np.linspace(lo, hi, 41)
+        assert np.abs(part.evaluate(t, 0)[0] - curve.evaluate(t, 0)[0]).max() <= 1e-9 * scale
+        assert (part.u_start, part.u_end) == (lo, hi)
+    assert np.array_equal(lp[-1], rp[0])  # they meet at one point
+    assert np.all(lw > 0) and np.all(rw > 0)
+
+
+def _poly_line(points: list[tuple[float, float]]) -> Nurbs:
+    """Degree 1 (G5.2 L2): a polyline, a corner at every inner point."""
+    n = len(points)
+    knots = np.concatenate(([0.0, 0.0], np.arange(1, n - 1, dtype=float), [n - 1.0] * 2))
+    return Nurbs(1, knots, np.array(points, float), np.ones(n))
+
+
+def test_a_polyline_turns_at_every_inner_point() -> None:
+    square = _poly_line([(0, 0), (20, 0), (20, 20), (0, 20), (0, 0)])
+    assert kink_knots(square) == [1.0, 2.0, 3.0]
+    straight = _poly_line([(0, 0), (5, 0), (10, 0)])
+    assert kink_knots(straight) == []
+
+
+def test_a_cusp_is_a_corner_and_each_side_points_the_way_it_travels() -> None:
+    cusp = Nurbs(2, np.array([0, 0, 0, 1, 2, 2, 2.0]),
+                 np.array([[0, 0], [10, 0], [10, 0], [0, 0.0]]), np.ones(4))
+    assert kink_knots(cusp) == [1.0]
+    (lk, lp, lw), (rk, rp, rw) = split_at(2, cusp.knots, cusp.control_points, cusp.weights, 1.0)
+    left, right = Nurbs(2, lk, lp, lw), Nurbs(2, rk, rp, rw)
+    a = make_piece(PieceKind.NURBS, left, 0.0, 1.0, 0.0, 10.0, 3)
+    b = make_piece(PieceKind.NURBS, right, 1.0, 2.0, 0.0, 10.0, 3)
+    assert np.allclose(end_tangent(a, True), [1.0, 0.0])  # arriving: +X, not a zero vector
+    assert np.allclose(end_tangent(b, False), [-1.0, 0.0])  # leaving: back along -X
+
+
+@settings(max_examples=100, deadline=None)
+@given(nurbs())
+def test_a_smooth_curve_has_no_corner(curve: Nurbs) -> None:
+    if curve.degree < 3 or len(np.unique(curve.knots)) != len(curve.knots) - 2 * curve.degree:
+        return  # lower degrees and repeated inner knots may have true corners
+    inner = np.unique(curve.knots)[1:-1]
+    d1 = curve.evaluate(inner, 1)[1]
+    if inner.size and np.hypot(d1[:, 0], d1[:, 1]).min() < 1e-3:
+        return  # a vanishing derivative may be a cusp
+    assert kink_knots(curve) == []
