@@ -412,7 +412,9 @@ def resolve_config_path(explicit: str | None = None) -> Path:
     builtin = builtin_config_path(chosen.removesuffix(".yaml"))
     if builtin is not None and os.sep not in chosen:
         return builtin
-    raise ConfigError(chosen, "<file>", "no such configuration file")
+    if path.is_dir():
+        raise ConfigError(chosen, "<file>", "a folder, not a configuration file")
+    raise ConfigError(chosen, "<file>", "no such configuration file (nor a built-in one)")
 
 
 MAX_CONFIG_BYTES = 1 << 20  # a machine config is a few kB; a larger file is refused unread

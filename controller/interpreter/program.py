@@ -312,6 +312,8 @@ def _unknown_letter(letter: str) -> str:
         return f"axis {letter} is not supported (X Y Z only)"
     if letter == "O":
         return "O-words (subroutines, loops) are not supported"
+    if letter == "E":  # most often X1e3: G-code numbers have no exponent
+        return "E words are not supported (nor exponents: write 1e3 as 1000)"
     return f"{letter} words are not supported"
 
 

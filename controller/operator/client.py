@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import socket
@@ -12,6 +13,14 @@ from controller.errors import CncError
 
 CONNECT_TIMEOUT_S = 2.0
 SOCKET_NAME = "cncd.sock"
+
+
+def socket_argument(text: str) -> str:
+    """--socket PATH: never empty (an unset variable in `--socket $SOCK` would otherwise mean
+    the default socket, or for `run` an embedded run that opens the drive itself)."""
+    if not text:
+        raise argparse.ArgumentTypeError("empty path")
+    return text
 
 
 def default_socket_path() -> str:

@@ -17,6 +17,7 @@ from controller.operator.client import (
     DaemonError,
     DaemonUnavailable,
     default_socket_path,
+    socket_argument,
 )
 from controller.operator.run_remote import RemoteOperator
 
@@ -24,9 +25,25 @@ EXIT_REFUSED = 2
 EXIT_NO_DAEMON = 3
 
 
+def socket_help() -> str:
+    here = default_socket_path().replace("%", "%%")
+    return f"the daemon's control socket (default: $CNCD_SOCKET, else /run/cncd/cncd.sock; " \
+           f"here {here})"
+
+
+def log_lines(text: str) -> int:
+    """-n: how many of the last events, 0..100000 (the daemon's bounds)."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if not 0 <= n <= 100_000:
+        raise argparse.ArgumentTypeError(f"{n} is not within 0..100000")
+    return n
+
+
 def add_socket_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--socket", default=None,
-                        help=f"the daemon's control socket (default: {default_socket_path()})")
+    parser.add_argument("--socket", default=None, type=socket_argument, help=socket_help())
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -57,12 +74,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             help="feed override in %% of the programmed feed, 0-150 "
                                  "(0 holds until raised)")
     elif command == "log":
-        parser.add_argument("-n", "--lines", type=int, default=50, help="last events")
+        parser.add_argument("-n", "--lines", type=log_lines, default=50,
+                            help="last events (0-100000, default 50)")
         parser.add_argument("-f", "--follow", action="store_true", help="then follow")
 
 
 def run(args: argparse.Namespace) -> int:
-    path = args.socket or default_socket_path()
+    path = args.socket if args.socket is not None else default_socket_path()
     try:
         with DaemonClient(path) as client:
             return _COMMANDS[args.command](client, args)
@@ -213,7 +231,7 @@ def _feed(client: DaemonClient, args: argparse.Namespace) -> int:
 
 
 def _log(client: DaemonClient, args: argparse.Namespace) -> int:
-    reply = client.request("log", lines=max(0, args.lines), follow=args.follow)
+    reply = client.request("log", lines=args.lines, follow=args.follow)
     for event in reply["events"]:
         _print_event(event)
     if args.follow:

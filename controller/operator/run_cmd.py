@@ -13,7 +13,12 @@ from controller.config import load_config
 from controller.errors import CncError, ConfigError, NcError, OffsetsError
 from controller.motion.types import MotionProgress, MotionState
 from controller.offsets import ProgramOffsets, load_offsets
-from controller.operator.client import DaemonUnavailable, daemon_answers, default_socket_path
+from controller.operator.client import (
+    DaemonUnavailable,
+    daemon_answers,
+    default_socket_path,
+    socket_argument,
+)
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
 from controller.operator.run_from_line import Sequence, run_from_line
@@ -42,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="M1 pauses like M0 (optional stop on)")
     parser.add_argument("--virtual-time", action="store_true",
                         help="clock the simulated card as fast as possible (no wall clock)")
-    parser.add_argument("--socket", metavar="PATH",
+    parser.add_argument("--socket", metavar="PATH", type=socket_argument,
                         help="run through the cncd answering here (default: the one at "
                              "$CNCD_SOCKET or /run/cncd/cncd.sock if it answers, else embedded)")
 
@@ -86,7 +91,7 @@ class _Announcer:
 def _daemon_socket(args: argparse.Namespace) -> str | None:
     """The daemon to run through: --socket, or the default one if a daemon answers there.
     Without one, the run is embedded (the drive is opened by this process)."""
-    if args.socket:
+    if args.socket is not None:
         return str(args.socket)
     path = default_socket_path()
     return path if os.path.exists(path) and daemon_answers(path) else None

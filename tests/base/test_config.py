@@ -77,3 +77,10 @@ def test_any_one_mistake_is_a_config_error_or_a_valid_config(path: tuple, action
         parse_config(data, "machine.yaml")
     except ConfigError:
         pass
+
+
+def test_a_folder_is_not_a_config(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="a folder, not a configuration file"):
+        load_config(str(tmp_path))
+    with pytest.raises(ConfigError, match="no such configuration file"):
+        load_config(str(tmp_path / "nope.yaml"))

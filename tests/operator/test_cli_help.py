@@ -43,3 +43,18 @@ def test_help_from_a_real_process_exits_zero(words: list[str]) -> None:
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("usage: cncctl")
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("words", [
+    ["log", "-n", "-5"],  # printed nothing and exited 0
+    ["status", "--socket", ""],  # an unset $SOCK: the default socket in silence
+    ["run", "nc_programs/arcs.nc", "--socket", ""],  # ... or an embedded run
+])
+def test_bad_arguments_are_refused_before_anything_happens(
+        words: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    from controller.operator.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main(words)
+    assert info.value.code == 2
+    assert "error: argument" in capsys.readouterr().err

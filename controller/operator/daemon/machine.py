@@ -234,10 +234,10 @@ class Machine(OperatorCommands):
     def require_idle(self) -> None:
         """Raise the reason a job cannot start now (busy, e-stop, fault), if there is one."""
         if self.job is not None:
-            raise ProtocolError("busy", f"busy: a job is {self.state.value.lower()} "
+            raise ProtocolError("busy", f"a job is {self.state.value.lower()} "
                                         "(one job at a time; nothing was queued)")
         if self.state is State.HOMING:
-            raise ProtocolError("busy", "busy: homing")
+            raise ProtocolError("busy", "homing")
         if self.state is State.ESTOP:
             raise ProtocolError("estop", f"e-stop is latched ({self.fault}): reset first")
         if self.state is State.FAULT:
