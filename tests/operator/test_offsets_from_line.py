@@ -20,6 +20,10 @@ def test_offsets_set_here_select_and_kept_across_a_restart(tmp_path: Path) -> No
         d.cncctl("reset")
         assert d.cncctl("offset", "set", "G55", "X10", "Y5").returncode == 0
         assert d.cncctl("offset", "set", "G56", "Q1").returncode == 2  # bad word
+        nothing = d.cncctl("offset", "set", "G56")  # neither values nor --here: not a no-op
+        assert nothing.returncode == 2 and "set needs values" in nothing.stderr
+        no_z = d.cncctl("offset", "set", "G56", "Z5")  # xy_table has no Z
+        assert no_z.returncode == 2 and "no axis Z" in no_z.stderr
         assert d.cncctl("offset", "select", "G55").returncode == 0
         assert d.status()["offsets"]["active"] == "G55"
     with running_cncd(tmp_path) as d:  # same state directory: a restarted daemon

@@ -141,7 +141,11 @@ class OperatorCommands:
                 # the current position reads `reads` in that system (G10 L20), G92 included
                 origin["xyz".index(axis)] = pos[axis] - reads - table.g92_mm["xyz".index(axis)]
         else:
+            if not values:
+                raise ProtocolError("bad-field", "set needs values (X10 Y-5) or here")
             for axis, value in values.items():
+                if axis not in self.config.axis_names:
+                    raise ProtocolError("bad-field", f"no axis {axis.upper()}")
                 origin["xyz".index(axis)] = value
         return origin[0], origin[1], origin[2]
 
