@@ -37,6 +37,7 @@ def test_offsets_set_here_select_and_kept_across_a_restart(tmp_path: Path) -> No
         assert ran.returncode == 0 and final["final_position_mm"] == {"x": 11.0, "y": 7.0}
         # M2 selects G54 again (LinuxCNC): the table the program leaves is kept.
         status = d.status()
+        assert status["line"] is None and status["last_job"]["last_line"] == 1  # no job now
         assert status["offsets"]["active"] == "G54"
         assert status["work_position_mm"] == {"x": 11.0, "y": 7.0}
         # --here: the current position becomes G54's zero; the program then starts here.

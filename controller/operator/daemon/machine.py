@@ -197,7 +197,7 @@ class Machine(OperatorCommands):
             out: dict[str, Any] = {"state": state, "fault": self.fault,
                                    "program": job.name if job else None,
                                    "job": job.number if job else None}
-        out["line"] = p.line if p else self.last_job.get("last_line")
+        out["line"] = p.line if p else None  # the last job's is in last_job
         out["feed_mm_s"] = round(p.feed_mm_s, 3) if p else 0.0
         out["ferror_um"] = round(p.ferror_um, 1) if p else 0.0
         out["feed_override_pct"] = self.feed_override_pct
