@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from controller.operator.client import DaemonClient, DaemonError, DaemonUnavailable
+from controller.operator.client import DaemonClient, DaemonError, DaemonUnavailable, daemon_answers
 from controller.operator.daemon.protocol import MAX_PROGRAM_BYTES
 from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
 from controller.operator.run_from_line import confirm
@@ -23,15 +23,18 @@ FINAL_EVENTS = {outcome.value: code for outcome, code in EXIT_CODES.items()}
 def run_on_daemon(args: argparse.Namespace, socket_path: str, view: Any) -> int:
     try:
         text = _program_text(args.program)
-    except (OSError, ValueError) as exc:
-        print(f"cncctl: {args.program}: {exc}", file=sys.stderr)
+    except (OSError, ValueError) as exc:  # as the embedded run and `check` say it
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        print(f"{args.program}:0:0: error: cannot open program: {reason}", file=sys.stderr)
         return EXIT_REJECTED
     from_line = getattr(args, "from_line", None)
-    if from_line is not None and not confirm(args, f"cncctl: run from line {from_line}: the "
-                                                   "machine first moves in a straight line to "
-                                                   "where the program stands there"):
-        print("cncctl: not confirmed: nothing moved", file=sys.stderr)
-        return EXIT_REJECTED
+    if from_line is not None:
+        if not daemon_answers(socket_path):  # no question about a motion that cannot happen
+            raise DaemonUnavailable(f"no daemon answers on {socket_path}")
+        if not confirm(args, f"cncctl: run from line {from_line}: the machine first moves in "
+                             "a straight line to where the program stands there"):
+            print("cncctl: not confirmed: nothing moved", file=sys.stderr)
+            return EXIT_REJECTED
     with DaemonClient(socket_path) as client:
         try:
             client.request("run", payload=text, name=args.program[-255:],

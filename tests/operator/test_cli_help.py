@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -58,3 +59,23 @@ def test_bad_arguments_are_refused_before_anything_happens(
         main(words)
     assert info.value.code == 2
     assert "error: argument" in capsys.readouterr().err
+
+
+def test_run_through_a_daemon_names_a_missing_program_as_check_does(
+        tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    from controller.operator.cli import main
+
+    missing = tmp_path / "none.nc"
+    assert main(["run", str(missing), "--socket", str(tmp_path / "d.sock")]) == 2
+    assert capsys.readouterr().err.startswith(f"{missing}:0:0: error: cannot open program")
+
+
+def test_from_line_asks_nothing_when_no_daemon_answers(
+        tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    from controller.operator.cli import main
+
+    arcs = str(Path(__file__).resolve().parents[2] / "nc_programs/arcs.nc")
+    code = main(["run", arcs, "--from-line", "2", "--socket",
+                 str(tmp_path / "d.sock")])
+    err = capsys.readouterr().err
+    assert code == 3 and "no daemon" in err and "first moves" not in err
