@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
-import math
 import os
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -13,10 +11,10 @@ from typing import Any
 import yaml
 
 from controller.errors import ConfigError
+from controller.yaml_strict import Section, StrictLoader
 
 DEFAULT_CONFIG_NAME = "xy_table"
 CONFIG_ENV_VAR = "CNC_CONFIG"
-_REQUIRED = object()
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,133 +145,13 @@ class MachineConfig:
         return replace(self, drive=replace(self.drive, options=tuple(sorted(options.items()))))
 
 
-class _Section:
-    """Reads one mapping; every key must be consumed, so unknown keys are errors."""
-
-    def __init__(self, data: Any, path: str, prefix: str) -> None:
-        if not isinstance(data, dict):
-            raise ConfigError(path, prefix or "<top>", "must be a mapping")
-        self.data = data
-        self.path = path
-        self.prefix = prefix
-        self.used: set[str] = set()
-
-    def _key(self, key: str) -> str:
-        return f"{self.prefix}.{key}" if self.prefix else key
-
-    def _raw(self, key: str, default: Any) -> Any:
-        self.used.add(key)
-        if key not in self.data:
-            if default is _REQUIRED:
-                typo = _close_match(key, [k for k in self.data if k not in self.used])
-                if typo is not None:  # name the key as written, not only the one missing
-                    raise ConfigError(self.path, self._key(typo), f"unknown key (did you "
-                                                                  f"mean {key}?)")
-                raise ConfigError(self.path, self._key(key), "is required")
-            return default
-        return self.data[key]
-
-    def float(self, key: str, default: Any = _REQUIRED, *, above: float | None = None,
-              minval: float | None = None, maxval: float | None = None) -> float:
-        value = self._raw(key, default)
-        return self._check_float(key, value, above, minval, maxval)
-
-    def _check_float(self, key: str, value: Any, above: float | None, minval: float | None,
-                     maxval: float | None) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            hint = ""
-            if isinstance(value, str) and _number_text(value):
-                hint = " (YAML reads 1e3 as text: write 1.0e+3)"
-            raise ConfigError(self.path, self._key(key), f"must be a number, got {value!r}{hint}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise ConfigError(self.path, self._key(key), "must be finite")
-        if above is not None and value <= above:
-            raise ConfigError(self.path, self._key(key), f"must be > {above}, got {value}")
-        if minval is not None and value < minval:
-            raise ConfigError(self.path, self._key(key), f"must be >= {minval}, got {value}")
-        if maxval is not None and value > maxval:
-            raise ConfigError(self.path, self._key(key), f"must be <= {maxval}, got {value}")
-        return value
-
-    def int(self, key: str, default: Any = _REQUIRED, *, minval: int, maxval: int) -> int:
-        value = self._raw(key, default)
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(self.path, self._key(key), f"must be an integer, got {value!r}")
-        if not minval <= value <= maxval:
-            raise ConfigError(self.path, self._key(key), f"must be in [{minval}, {maxval}]")
-        return value
-
-    def str(self, key: str, default: Any = _REQUIRED, *, choices: tuple[str, ...] = ()) -> str:
-        value = self._raw(key, default)
-        if not isinstance(value, str):
-            raise ConfigError(self.path, self._key(key), f"must be a string, got {value!r}")
-        if choices and value not in choices:
-            raise ConfigError(self.path, self._key(key), f"must be one of {', '.join(choices)}")
-        return value
-
-    def bool(self, key: str, default: Any = _REQUIRED) -> bool:
-        value = self._raw(key, default)
-        if not isinstance(value, bool):
-            raise ConfigError(self.path, self._key(key), f"must be true or false, got {value!r}")
-        return value
-
-    def names(self, key: str) -> tuple[str, ...]:
-        value = self._raw(key, [])
-        if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
-            raise ConfigError(self.path, self._key(key), "must be a list of names")
-        return tuple(value)
-
-    def range(self, key: str) -> tuple[float, float]:
-        value = self._raw(key, _REQUIRED)
-        if not isinstance(value, list) or len(value) != 2:
-            raise ConfigError(self.path, self._key(key), "must be a list [min, max]")
-        lo = self._check_float(key, value[0], None, None, None)
-        hi = self._check_float(key, value[1], None, None, None)
-        if lo >= hi:
-            raise ConfigError(self.path, self._key(key), "min must be below max")
-        return lo, hi
-
-    def section(self, key: str, default: Any = _REQUIRED) -> _Section:
-        return _Section(self._raw(key, default), self.path, self._key(key))
-
-    def mapping(self, key: str, default: Any = _REQUIRED) -> dict[str, Any]:
-        value = self._raw(key, default)
-        if not isinstance(value, dict):
-            raise ConfigError(self.path, self._key(key), "must be a mapping")
-        return value
-
-    def finish(self) -> None:
-        unknown = [k for k in self.data if k not in self.used]
-        if unknown:
-            near = _close_match(unknown[0], list(self.used))
-            raise ConfigError(self.path, self._key(str(unknown[0])), "unknown key" + (
-                f" (did you mean {near}?)" if near is not None else ""))
-
-
-def _close_match(key: Any, candidates: list[Any]) -> Any:
-    """The candidate a mistyped key most likely meant, if one is close."""
-    names = [c for c in candidates if isinstance(c, str)]
-    found = difflib.get_close_matches(key, names, n=1, cutoff=0.8) if isinstance(key, str) \
-        else []
-    return found[0] if found else None
-
-
-def _number_text(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def _read_servo(sec: _Section) -> ServoParams:
+def _read_servo(sec: Section) -> ServoParams:
     values = {k: sec.float(k, above=0.0) for k in ("a0", "a1", "a2", "a3", "a4", "b0", "b1", "b2")}
     sec.finish()
     return ServoParams(**values)
 
 
-def _read_axis(sec: _Section, name: str) -> AxisConfig:
+def _read_axis(sec: Section, name: str) -> AxisConfig:
     axis = AxisConfig(
         name=name,
         servo=_read_servo(sec.section("servo")),
@@ -290,7 +168,7 @@ def _read_axis(sec: _Section, name: str) -> AxisConfig:
     return axis
 
 
-def _read_homing(sec: _Section, axis: AxisConfig) -> HomingConfig:
+def _read_homing(sec: Section, axis: AxisConfig) -> HomingConfig:
     lo, hi = axis.travel_mm
     direction = sec.int("direction", minval=-1, maxval=1)
     if direction == 0:
@@ -312,7 +190,7 @@ def _read_homing(sec: _Section, axis: AxisConfig) -> HomingConfig:
     return cfg
 
 
-def _read_interpolator(sec: _Section) -> InterpolatorConfig:
+def _read_interpolator(sec: Section) -> InterpolatorConfig:
     cfg = InterpolatorConfig(
         max_feed_mm_s=sec.float("max_feed_mm_min", above=0.0, maxval=600000.0) / 60.0,
         max_accel_mm_s2=sec.float("max_accel_mm_s2", above=0.0, maxval=1e6),
@@ -328,14 +206,14 @@ def _read_interpolator(sec: _Section) -> InterpolatorConfig:
     return cfg
 
 
-def _read_drive(sec: _Section) -> DriveConfig:
+def _read_drive(sec: Section) -> DriveConfig:
     backend = sec.str("backend", choices=("sim", "canopen", "serial"))
     options = sec.mapping("options", {})
     sec.finish()
     return DriveConfig(backend=backend, options=tuple(sorted(options.items())))
 
 
-def _read_runtime(sec: _Section) -> RuntimeConfig:
+def _read_runtime(sec: Section) -> RuntimeConfig:
     cfg = RuntimeConfig(
         nc_fifo_blocks=sec.int("nc_fifo_blocks", 64, minval=2, maxval=100000),
         card_fifo_low_water_ms=sec.float("card_fifo_low_water_ms", 20.0, above=0.0),
@@ -347,7 +225,7 @@ def _read_runtime(sec: _Section) -> RuntimeConfig:
     return cfg
 
 
-def _read_service(sec: _Section) -> ServiceConfig:
+def _read_service(sec: Section) -> ServiceConfig:
     group = sec._raw("socket_group", None)
     if group is not None and not (isinstance(group, str) and group):
         raise ConfigError(sec.path, sec._key("socket_group"), "must be a group name")
@@ -364,7 +242,7 @@ def _read_service(sec: _Section) -> ServiceConfig:
 
 def parse_config(data: Any, path: str) -> MachineConfig:
     """Build a MachineConfig from parsed YAML; any mistake is a ConfigError naming the key."""
-    top = _Section(data, path, "")
+    top = Section(data, path, "")
     name = top.str("name")
     period = top.float("sample_period_s", above=0.0, maxval=0.1)
     axes_sec = top.mapping("axes")
@@ -374,7 +252,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
     for needed in ("x", "y"):
         if needed not in axes_sec:
             raise ConfigError(path, f"axes.{needed}", "is required")
-    axes = tuple(_read_axis(_Section(axes_sec[a], path, f"axes.{a}"), a)
+    axes = tuple(_read_axis(Section(axes_sec[a], path, f"axes.{a}"), a)
                  for a in ("x", "y", "z") if a in axes_sec)
     cfg = MachineConfig(
         name=name,
@@ -420,22 +298,6 @@ def resolve_config_path(explicit: str | None = None) -> Path:
 MAX_CONFIG_BYTES = 1 << 20  # a machine config is a few kB; a larger file is refused unread
 
 
-class _StrictLoader(yaml.SafeLoader):
-    """SafeLoader that refuses a key given twice in one mapping (PyYAML keeps the last one:
-    a second `max_feed_mm_s:` further down would silently win)."""
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
-        seen: set = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)  # type: ignore[no-untyped-call]
-            if isinstance(key, str | int | float | bool) and key in seen:
-                raise yaml.constructor.ConstructorError(
-                    "while reading a mapping", node.start_mark,
-                    f"the key {key!r} is given twice", key_node.start_mark)
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
-
-
 def load_config(explicit: str | None = None) -> MachineConfig:
     """Load and check a machine configuration (see resolve_config_path for which one)."""
     path = resolve_config_path(explicit)
@@ -446,7 +308,7 @@ def load_config(explicit: str | None = None) -> MachineConfig:
             raise ConfigError(str(path), "<file>", f"larger than {MAX_CONFIG_BYTES} bytes: "
                               "not a machine configuration")
         text = raw.decode("utf-8")
-        data = yaml.load(text, Loader=_StrictLoader)  # noqa: S506  (a SafeLoader)
+        data = yaml.load(text, Loader=StrictLoader)  # noqa: S506  (a SafeLoader)
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(str(path), "<file>", f"cannot read: {exc}") from exc
     except yaml.YAMLError as exc:
