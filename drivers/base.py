@@ -14,6 +14,7 @@ from controller.config import MachineConfig
 from controller.errors import DriveError
 from drivers.errors import HomingError
 from drivers.homing import plan_for
+from drivers.port_lock import PortLock
 
 
 class CardStatus(enum.Flag):
@@ -67,12 +68,30 @@ class Drive(ABC):
         self._is_open = False
         self._homed_axes: set[int] = set()  # axes homed on this open drive (host side)
         self._homing = False  # a home() is running: write_frames is refused
+        self._port_guard: PortLock | None = None  # held while open (see _lock_key)
 
     # -- public API -----------------------------------------------------------------------
     def open(self) -> None:
         self._homed_axes = set()  # a drive just opened is unhomed until home() succeeds
-        self._open()
+        lock = self._port_lock()
+        self._open_locked(lock, self._open)
         self._is_open = True
+
+    def _port_lock(self) -> PortLock | None:
+        if self._port_guard is None and self._lock_key() is not None:
+            self._port_guard = PortLock(str(self._lock_key()))
+        return self._port_guard
+
+    def _open_locked(self, lock: PortLock | None, action: Any) -> None:
+        """action() with the port locked; the lock goes again if it fails."""
+        if lock is not None:
+            lock.acquire()
+        try:
+            action()
+        except BaseException:
+            if lock is not None:
+                lock.release()
+            raise
 
     def write_frames(self, counts: np.ndarray, end_of_stream: bool = False) -> None:
         """Queue (N, n_axes) integer pulse counts, one row per sample; EOS marks program end."""
@@ -196,13 +215,21 @@ class Drive(ABC):
     def probe(self) -> None:
         """Check, before any motion, that the backend can be opened and configured as the
         config says (device present, peer answering); nothing is enabled and nothing moves.
-        Raises DriveError naming what failed."""
-        self._probe()
+        Raises DriveError naming what failed (DriveBusyError: another process has it open,
+        which the probe then leaves alone)."""
+        lock = self._port_lock()
+        self._open_locked(lock, self._probe)
+        if lock is not None:
+            lock.release()
 
     def close(self) -> None:
-        if self._is_open:
-            self._close()
-        self._is_open = False
+        try:
+            if self._is_open:
+                self._close()
+        finally:
+            self._is_open = False
+            if self._port_guard is not None:
+                self._port_guard.release()
 
     def __enter__(self) -> Drive:
         self.open()
@@ -216,6 +243,11 @@ class Drive(ABC):
             raise DriveError(f"{type(self).__name__}: drive is not open")
 
     # -- backend hooks --------------------------------------------------------------------
+    def _lock_key(self) -> str | None:
+        """What this backend opens, locked while it is open (drivers/port_lock.py); None: a
+        drive of this process alone (the simulated card)."""
+        return None
+
     @abstractmethod
     def _open(self) -> None:
         """Backend hook."""

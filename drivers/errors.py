@@ -22,6 +22,10 @@ class DriveUnavailableError(DriveError):
     nothing has moved."""
 
 
+class DriveBusyError(DriveUnavailableError):
+    """Another controller process holds the drive's port or bus (drivers/port_lock.py)."""
+
+
 class BadFrameError(DriveError):
     """The host sent a frame the card cannot execute (too many pulses, FIFO overflow, shape)."""
 

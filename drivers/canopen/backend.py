@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from typing import Any
 
@@ -21,6 +22,7 @@ from drivers.errors import (
     LostCommunicationError,
     UnderrunError,
 )
+from drivers.port_lock import device_key
 
 CLOSE_CONFIRM_S = 0.2  # wait this long for the drives to confirm the shutdown at close
 
@@ -49,6 +51,12 @@ class CanopenDrive(Drive):
         self._last_rtt_ms = np.zeros(0)
 
     # -- open / close ---------------------------------------------------------------------
+    def _lock_key(self) -> str:
+        channel = self.o.channel
+        if os.sep in channel:  # an adapter's device (slcan): one port, by whatever name
+            channel = device_key(channel)
+        return f"can-{self.o.interface}-{channel}"
+
     def _open(self) -> None:
         t0_s = time.monotonic()
         self._network = bringup.connect(self.o)

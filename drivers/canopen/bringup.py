@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import time
 from typing import Any
 
@@ -15,6 +17,11 @@ from drivers.canopen import cia402 as c
 from drivers.canopen.options import CanopenOptions
 
 CAN_ERRORS = (can.CanError, OSError, ValueError)
+# The libraries log what our DriveErrors already say ("Transfer aborted by client", "An error
+# has caused receiving of messages to stop"); with no handler of theirs, Python's last-resort
+# handler printed those lines on every cncctl's stderr.
+for _name in ("canopen", "can"):
+    logging.getLogger(_name).addHandler(logging.NullHandler())
 NOTIFIER_CYCLE_S = 0.05  # receive-thread poll (canopen's 1 s made every close take 1 s)
 
 
@@ -200,4 +207,7 @@ def probe(o: CanopenOptions, axes: tuple[str, ...]) -> None:
         for node, axis in zip(add_nodes(network, o), axes, strict=True):
             identify(node, axis)
     finally:
-        network.disconnect()
+        # disconnect() re-raises what the receive thread met (a broken adapter): the probe's
+        # own answer, or its DriveError, is what counts.
+        with contextlib.suppress(Exception):
+            network.disconnect()

@@ -12,6 +12,7 @@ import numpy as np
 from controller.config import MachineConfig
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, LostCommunicationError
+from drivers.port_lock import device_key
 from drivers.serial import homing
 from drivers.serial import protocol as p
 
@@ -251,6 +252,9 @@ class SerialCard(Drive):
                              f"fifo_frames {self.capacity} and {self.n_axes} axes")
 
     # -- hooks ------------------------------------------------------------------------------
+    def _lock_key(self) -> str:
+        return device_key(self.port)
+
     def _open(self) -> None:
         self._connect()
         try:

@@ -378,3 +378,26 @@ def test_bad_crc_from_the_card_is_a_lost_link() -> None:
     assert "0 status frames" not in final["message"] and not final["position_known"]
     assert final["planned_time_s"] >= 0.400
     _bounded(final, 0.400, LINK_S + DETECT_S)
+
+
+def test_a_second_process_on_the_port_is_refused_and_the_job_runs_on() -> None:
+    """A second `cncctl run` or `check` on the port of a moving job used to open it too: its
+    reset emptied the card's FIFO and the table stopped dead, 3 mm off the path."""
+    with peer() as (port, _):
+        second: list[subprocess.CompletedProcess[str]] = []
+
+        def intrude(event: dict[str, Any]) -> None:
+            if event.get("event") == "progress" and event.get("state") == "running" \
+                    and not second:
+                for command in ("run", "check"):
+                    second.append(subprocess.run(
+                        [*CLI, command, NACA, "--config", "serial", "--drive-option",
+                         f"port={port}"], capture_output=True, text=True, timeout=30, cwd=REPO))
+
+        code, final, err = run_airfoil(port, intrude)
+        assert (code, final["event"]) == (0, "done"), err
+        assert final["underruns"] == 0
+        assert [r.returncode for r in second] == [2, 2], [r.stderr for r in second]
+        for r in second:
+            assert "in use by another controller process" in r.stderr, r.stderr
+            assert "Traceback" not in r.stderr
