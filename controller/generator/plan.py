@@ -174,6 +174,13 @@ def _run_step(xy: np.ndarray, v: np.ndarray, line: np.ndarray, run: RunPlan | No
     """Samples of a run (or its first part) as one chunk; end_xy, for a run to rest, replaces
     the last point by the programmed end point exactly, not a curve evaluation."""
     if end_xy is not None:
+        # The plan's own end must be the programmed one: replacing a far-off last point would
+        # be a jump of the reference in one sample (a NURBS whose arc-length inverse failed on
+        # extreme knot spacing ended 10 mm short, and the jump went out).
+        miss_mm = float(np.hypot(xy[-1][0] - end_xy[0], xy[-1][1] - end_xy[1]))
+        if miss_mm > END_MISS_MM:
+            raise PlanningError(f"line {int(line[-1])}: the plan ends {miss_mm:.4f} mm from the "
+                                f"programmed end X{end_xy[0]:.4f} Y{end_xy[1]:.4f}")
         xy = xy.copy()
         xy[-1] = end_xy
     phi = None if run is None else run.samples.phi_rad[:len(xy)]
@@ -238,6 +245,7 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
     repeats = Repeats()  # shared by the windows of a long run (repeats.py)
 
     settle_after: PlannedStep | None = None  # the last step, if it came to rest moving
+    last_pos: list[np.ndarray | None] = [None]  # the last reference point sent (check_steps)
 
     def emit(step: PlannedStep | None, at_rest: bool = True,
              dwell: bool = False) -> Iterator[PlannedStep]:
@@ -252,6 +260,8 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
             yield hold
             t_s += len(hold.chunk) * T
             step = replace(step, chunk=replace(step.chunk, t0_s=t_s + T))
+        check_steps(step.chunk, last_pos[0], config)
+        last_pos[0] = step.chunk.pos_mm[-1]
         t_s = step.chunk.t0_s + (len(step.chunk) - 1) * T
         yield step
         settle_after = step if at_rest and not dwell else None
@@ -308,7 +318,29 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
     yield from flush()
 
 
+END_MISS_MM = 1e-3  # a run's planned end this far from the programmed end is a planning fault
 TRAVEL_SLACK_MM = 1e-6  # rounding only: the programs were checked against travel beforehand
+
+
+STEP_SLACK = 1.01  # of the fastest feed per sample: rounding, never a jump
+
+
+def check_steps(chunk: RefChunk, before_mm: np.ndarray | None, config: MachineConfig) -> None:
+    """Last line of defence, as LinuxCNC's motion tests check every servo cycle: no reference
+    point may be further from the one before than the fastest feed covers in one period (a
+    plan that lost its way on a degenerate curve once ended with a 10 mm jump)."""
+    ip = config.interpolator
+    limit_mm = STEP_SLACK * max(ip.max_feed_mm_s, ip.rapid_feed_mm_s) * config.sample_period_s
+    pos = chunk.pos_mm if before_mm is None else np.vstack((before_mm[None, :], chunk.pos_mm))
+    if len(pos) < 2:
+        return
+    step = np.sqrt(np.sum(np.diff(pos, axis=0) ** 2, axis=1))
+    k = int(np.argmax(step))
+    if step[k] > limit_mm:
+        i = max(k - (before_mm is not None), 0)
+        raise PlanningError(f"line {int(chunk.line[i])}: the planned reference jumps "
+                            f"{step[k]:.4f} mm in one sample (at most {limit_mm:.4f}): the "
+                            "path could not be planned")
 
 
 def check_travel(chunk: RefChunk, config: MachineConfig) -> None:

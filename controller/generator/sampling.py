@@ -7,6 +7,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from controller.errors import PlanningError
 from controller.generator.feed.profile import FeedProfile
 from controller.geometry.arclength import INVERSE_TOL_MM
 from controller.geometry.path import Path, PieceKind
@@ -40,8 +41,17 @@ class Samples:
     line: np.ndarray
 
 
+MAX_PLANNED_RUN_S = 3600.0  # no window or run plans longer than this (see sample_profile)
+
+
 def sample_profile(profile: FeedProfile, sample_period_s: float) -> tuple[np.ndarray, ...]:
     """(t, s, v, a) at t = kT for k = 1..K, K = ceil(duration / T); the last is the end."""
+    if profile.duration_s > MAX_PLANNED_RUN_S:
+        # Last line of defence: a look-ahead window or run is at most a few minutes of motion
+        # (long blocks come in parts, a NURBS over 600 s is refused); one planned far longer
+        # is a broken plan, and its samples alone would need gigabytes.
+        raise PlanningError(f"a planned stretch of {profile.duration_s:.0f} s of motion: the "
+                            "path could not be planned (a NURBS parametrised too unevenly?)")
     k_count = max(int(np.ceil(profile.duration_s / sample_period_s - 1e-9)), 1)
     t = np.arange(1, k_count + 1) * sample_period_s
     s, v, a = profile.evaluate(np.minimum(t, profile.duration_s))

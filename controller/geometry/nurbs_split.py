@@ -29,6 +29,19 @@ def kink_knots(curve: Nurbs) -> list[float]:
     return [float(u) for u in inner[turn > KINK_RAD]]
 
 
+def still_spans(degree: int, knots: np.ndarray, points: np.ndarray) -> list[tuple[float, float]]:
+    """Knot spans [u_k, u_k+1] over which the curve stands still: all degree + 1 control points
+    that shape the span are one point (repeated points in a program). The arc-length inverse
+    and the PH fit cannot work on a piece of zero length."""
+    out = []
+    for k in range(degree, len(knots) - degree - 1):
+        if knots[k + 1] > knots[k]:
+            shaping = points[k - degree:k + 1]
+            if np.all(shaping == shaping[0]):
+                out.append((float(knots[k]), float(knots[k + 1])))
+    return out
+
+
 def insert_knot(degree: int, knots: np.ndarray, homogeneous: np.ndarray,
                 u: float) -> tuple[np.ndarray, np.ndarray]:
     """Boehm's insertion of u once into (knots, homogeneous points (n, 3)): the same curve."""

@@ -9,7 +9,7 @@ import numpy as np
 from controller.blocks import NurbsBlock, PathControl, Source
 from controller.errors import NcError
 from controller.geometry.nurbs import Nurbs
-from controller.geometry.nurbs_split import kink_knots, split_at
+from controller.geometry.nurbs_split import kink_knots, split_at, still_spans
 from controller.interpreter.codes import WordError
 
 MIN_ORDER, MAX_ORDER = 2, 6
@@ -17,6 +17,7 @@ MIN_ORDER, MAX_ORDER = 2, 6
 # one whose control polygon (longer than the curve) takes longer than this at its feed is
 # refused, so that its samples stay a bounded array (10 minutes: 600,000 at 1 kHz).
 MAX_NURBS_NOMINAL_S = 600.0
+MAX_SPAN_RATIO = 1e4  # G6.2 knot spans: widest over narrowest (see _check_spacing)
 MAX_CONTROL_POINTS = 100_000  # one block is held in memory; bounded so memory stays bounded
 
 
@@ -143,17 +144,51 @@ class NurbsCollector:
                              f"NURBS knots not clamped: the last {order} knots must be equal")
         if not k[order - 1] < k[n]:
             raise self._fail(last, "K", "NURBS knot vector has an empty parameter range")
+        self._check_inner_multiplicity(k, n, order)
+        self._check_spacing(k, n, order, last)
         return np.array(k, dtype=float)
+
+    def _check_spacing(self, k: list[float], n: int, order: int, last: int) -> None:
+        """Knot spans (of the parameter range) more than MAX_SPAN_RATIO apart make the
+        parametric speed vary as much: K0 K1 K100000 planned a 15 mm curve to crawl for 506 s,
+        and wider ratios asked for 40-100 GiB of samples. G5.2's knots are uniform."""
+        spans = np.diff(np.array(k[order - 1:n + 1], dtype=float))
+        spans = spans[spans > 0.0]
+        if spans.size > 1 and spans.max() > MAX_SPAN_RATIO * spans.min():
+            raise self._fail(last, "K", f"NURBS knot spans range from {spans.min():.6g} to "
+                                        f"{spans.max():.6g}, more than a factor "
+                                        f"{MAX_SPAN_RATIO:g} apart: a parametrisation this "
+                                        "uneven cannot be planned; respace the knots")
+
+    def _check_inner_multiplicity(self, k: list[float], n: int, order: int) -> None:
+        """An inner knot repeated `order` times breaks the curve in two: it jumps from one
+        control point to the next (the plan then went 317 mm off the path); `order - 1` times
+        is a corner, which the planner handles."""
+        i = order
+        while i < n:
+            j = i
+            while j + 1 < n and k[j + 1] == k[i]:
+                j += 1
+            if j - i + 1 >= order:
+                raise self._fail(self.knot_lines[j], "K",
+                                 f"NURBS knot K{k[i]:g} repeated {j - i + 1} times inside the "
+                                 f"curve: at most {order - 1} (the order less one), or the curve "
+                                 "breaks apart there")
+            i = j + 1
 
 
 def split_at_corners(block: NurbsBlock) -> list[NurbsBlock]:
     """The block as NURBS blocks that meet where its tangent jumps (a knot of full multiplicity,
-    a cusp): each such corner then is a joint between blocks, blended within the tolerance
-    under G64 or stopped at, as a corner between two G1 lines is."""
-    kinks = kink_knots(Nurbs.from_block(block))
+    a cusp) and around any stretch where it stands still (repeated control points): each such
+    corner then is a joint between blocks, blended within the tolerance under G64 or stopped
+    at, as a corner between two G1 lines is; a part of zero length is no motion."""
+    still = still_spans(block.degree, block.knots, block.control_points)
+    u0, u1 = float(block.knots[block.degree]), float(block.knots[-block.degree - 1])
+    cuts = sorted({*kink_knots(Nurbs.from_block(block)), *(u for span in still for u in span)}
+                  - {u0, u1})
     parts: list[NurbsBlock] = []
     knots, points, weights = block.knots, block.control_points, block.weights
-    for u in kinks:
+    for u in cuts:
         left, (knots, points, weights) = split_at(block.degree, knots, points, weights, u)
         parts.append(replace(block, knots=left[0], control_points=left[1], weights=left[2]))
     if not parts:

@@ -108,3 +108,22 @@ def test_blocks_of_a_long_program_keep_their_line(tmp_path: Path) -> None:
     blocks = motion(blocks_of(tmp_path, "G21 G90 F60\nG1 X20\nM2\n"))
     parts = contour_parts(blocks[0], VMAX)  # 20 s at 1 mm/s: two parts
     assert len(parts) == 2 and {p.source.first_line for p in parts} == {2}
+
+
+def test_a_jump_of_the_reference_is_a_planning_error() -> None:
+    import pytest
+
+    from controller.errors import PlanningError
+    from controller.generator.plan import check_steps
+    from controller.refpoints import RefChunk
+
+    step_mm = XY_TABLE.interpolator.max_feed_mm_s * XY_TABLE.sample_period_s
+    pos = np.column_stack((np.arange(5) * step_mm, np.zeros(5)))
+    line = np.full(5, 7, np.int32)
+    check_steps(RefChunk(0.001, pos, np.zeros(5), line), None, XY_TABLE)  # at full feed: fine
+    jumped = pos.copy()
+    jumped[3:, 0] += 10.0
+    with pytest.raises(PlanningError, match=r"line 7: the planned reference jumps 10\.0"):
+        check_steps(RefChunk(0.001, jumped, np.zeros(5), line), None, XY_TABLE)
+    with pytest.raises(PlanningError):  # from the last point of the chunk before, too
+        check_steps(RefChunk(0.001, pos, np.zeros(5), line), np.array([-10.0, 0.0]), XY_TABLE)

@@ -17,6 +17,10 @@ def nurbs(draw: st.DrawFn) -> Nurbs:
     n = draw(st.integers(degree + 1, degree + 8))
     inner = sorted(draw(st.lists(st.floats(0.01, 0.99), min_size=n - degree - 1,
                                  max_size=n - degree - 1)))
+    for i in range(degree, len(inner)):  # at most `degree` copies: more breaks the curve
+        if inner[i] == inner[i - degree]:
+            inner[i] = min(inner[i - 1] + 0.005, 0.995)
+    inner = sorted(inner)
     knots = np.concatenate((np.zeros(degree + 1), inner, np.ones(degree + 1)))
     points = np.array(draw(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50)),
                                     min_size=n, max_size=n)))
