@@ -10,7 +10,9 @@ from controller.interpreter.arcs import center_ijk, center_r
 from controller.interpreter.codes import WordError, g_name
 from controller.interpreter.nurbs_blocks import NurbsCollector, check_order, split_at_corners
 
-SAME_POINT_MM = 1e-6  # G6.2's first control point must be the current position within this
+# G6.2's first control point must be the current position within this: a drive reports whole
+# pulses (1 um), so a program that ended at Y0.00059 stands at Y0.001 when run again.
+SAME_POINT_MM = 2e-3
 _G6_LETTERS = frozenset("XYZRK")
 _AXES = frozenset("XYZ")
 

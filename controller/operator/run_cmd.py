@@ -127,7 +127,11 @@ def run(args: argparse.Namespace) -> int:
     options = RuntimeOptions(virtual_time=args.virtual_time, optional_stop=args.optional_stop,
                              offsets=offsets, override_off_lines=track.override_off_lines)
     runtime: Any = Runtime(args.program, config, options)
-    shared_drive = args.from_line is not None or args.home
+    # A real drive keeps its position between runs: the program is checked and planned from
+    # where it stands (read from the drive opened once for the run), not from X0 Y0, which
+    # faulted the second run ("reference starts at 0 but the machine is at 5") or, for a
+    # G0 X0 Y0, reported done with nothing moved. The simulated card starts at 0 when opened.
+    shared_drive = args.from_line is not None or args.home or config.drive.backend != "sim"
     if shared_drive:
         runtime = Sequence()
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,

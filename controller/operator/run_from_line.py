@@ -15,7 +15,7 @@ from controller.motion.types import MotionResult, Outcome
 from controller.offsets import OffsetTable
 from controller.operator.check_cmd import check_program
 from controller.operator.from_line import approach_program
-from controller.runtime.processes import Runtime, RuntimeOptions, build_drive
+from controller.runtime.processes import Runtime, RuntimeOptions, build_drive, open_drive
 from drivers.base import Drive
 from drivers.homing import homing_groups
 
@@ -62,7 +62,7 @@ def run_from_line(args: argparse.Namespace, config: MachineConfig, offsets: Offs
     """On one open drive: homing first (--home), then the program, from line N after an
     approach (--from-line). None if the operator declined the approach (nothing moved)."""
     drive = build_drive(config, options.virtual_time)
-    drive.open()
+    open_drive(drive)  # a drive that cannot be brought up: exit 2, nothing moved
     try:
         if getattr(args, "home", False):
             home_all(drive, config)

@@ -169,7 +169,7 @@ class Runtime:
             if self.options.rt_priority is not None and not self.options.virtual_time:
                 rt = try_realtime(self.options.rt_priority)
             if not self.options.keep_drive_open:
-                _open_drive(drive)
+                open_drive(drive)
             try:
                 result = self._motion(drive, ring, messages)
             finally:
@@ -303,7 +303,7 @@ def _build_drive(config: MachineConfig, virtual_time: bool) -> Drive:
         raise DriveUnavailableError(f"drive {config.drive.backend!r}: {exc}") from exc
 
 
-def _open_drive(drive: Drive) -> None:
+def open_drive(drive: Drive) -> None:
     """Open (bring up) the drive; a failure here is before any motion."""
     try:
         drive.open()

@@ -180,11 +180,12 @@ def test_killed_controller_faults_the_drives_on_their_heartbeat_consumer() -> No
                 time.sleep(0.05)
                 states = drive_states(path)
             assert states == [("FAULT", c.EMCY_HEARTBEAT)] * 2
-            # A new run fault-resets them at bring-up, enables them where they stopped
-            # (bumpless) and refuses a program that starts elsewhere: no jump, no motion.
-            code, last, err = run(path)
-            assert (code, last["event"]) == (3, "fault"), err
-            assert "but the machine is at" in last["message"]
+            # A new run fault-resets them at bring-up, reads where they stopped and checks
+            # the program from there: naca2415's G6.2 must start where the tool is, so it is
+            # refused by name (exit 2) and the drives are left disabled: no jump, no motion.
+            code, _, err = run(path)
+            assert code == 2, err
+            assert "the first G6.2 control point must be the current position" in err
             assert not_enabled(drive_states(path))
         finally:
             if runner.poll() is None:

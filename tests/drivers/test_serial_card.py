@@ -401,3 +401,23 @@ def test_a_second_process_on_the_port_is_refused_and_the_job_runs_on() -> None:
         for r in second:
             assert "in use by another controller process" in r.stderr, r.stderr
             assert "Traceback" not in r.stderr
+
+
+def test_an_embedded_run_starts_where_the_card_stands(tmp_path: Path) -> None:
+    """The card keeps its position between runs, as hardware does: the second run used to be
+    planned from X0 Y0 (a fault, or 'done' with nothing moved for a G0 X0 Y0)."""
+    out_there, back = tmp_path / "a.nc", tmp_path / "b.nc"
+    out_there.write_text("G21 G90\nG0 X5 Y5\nM2\n")
+    back.write_text("G21 G90\nG0 X0 Y0\nM2\n")
+    with peer() as (port, _):
+        finals = []
+        for program in (out_there, out_there, back):
+            done = subprocess.run([*CLI, "run", str(program), "--config", "serial", "--json",
+                                   "--drive-option", f"port={port}", "--drive-option",
+                                   f"link_timeout_s={LINK_S}"], capture_output=True, text=True,
+                                  timeout=60, cwd=REPO)
+            assert done.returncode == 0, done.stderr
+            finals.append(json.loads(done.stdout.splitlines()[-1]))
+    assert [f["final_position_mm"] for f in finals] == [
+        {"x": 5.0, "y": 5.0}, {"x": 5.0, "y": 5.0}, {"x": 0.0, "y": 0.0}]
+    assert finals[2]["motion_time_s"] > 0.1  # it moved back

@@ -110,3 +110,13 @@ def test_sampled_box_is_inside_the_control_point_box() -> None:
     _, (lo, hi) = nurbs_length_and_box(b)
     assert np.all(np.array(lo[:2]) >= b.control_points.min(axis=0) - 1e-12)
     assert np.all(np.array(hi[:2]) <= b.control_points.max(axis=0) + 1e-12)
+
+
+def test_g62_starts_where_the_tool_is_within_a_pulse_or_two(tmp_path: Path) -> None:
+    """A drive stands on whole pulses: a program that ended at Y0.00059 is at Y0.001 when it
+    runs again, and its G6.2 X0 Y0 must still start there (from the exact position)."""
+    text = "G1 X5 Y5.001 F600\nG6.2 P3 X5 Y5 R1 K0\nX6 Y6 R1 K0\nX7 Y5 R1 K0\nK1\nK1\nK1\n"
+    nurbs = [b for b in blocks_of(tmp_path, text) if isinstance(b, NurbsBlock)]
+    assert nurbs[0].control_points[0].tolist() == [5.0, 5.001]
+    with pytest.raises(Exception, match="must be the current position"):
+        blocks_of(tmp_path, text.replace("Y5.001", "Y5.003"))
