@@ -179,11 +179,20 @@ class PlainView:
               f"{s['following_error_um_max']:.0f} um\n"
               f"  underruns {s['underruns']}, late cycles {s['late_cycles']}, "
               f"lowest FIFO {s['min_fifo_ms']:.0f} ms, final position "
-              f"{s['final_position_mm']}, pulses {s['pulses']}", file=self.out, flush=True)
+              f"{_final_position_text(s)}, pulses {s['pulses']}", file=self.out, flush=True)
 
     def close(self) -> None:
         if isinstance(self.lines, ProgramLines):
             self.lines.close()
+
+
+def _final_position_text(s: dict[str, Any]) -> str:
+    """Where the run ended, or plainly that it is not known (the link was lost: the figures
+    are what was commanded, the table may stand millimetres away)."""
+    if s.get("position_known", True):
+        return str(s["final_position_mm"])
+    return (f"UNKNOWN (the drive stopped answering; last commanded {s['final_position_mm']}: "
+            "home or check the machine before the next job)")
 
 
 def status_text(p: MotionProgress, lines: Sequence[str]) -> str:

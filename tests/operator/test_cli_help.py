@@ -79,3 +79,20 @@ def test_from_line_asks_nothing_when_no_daemon_answers(
                  str(tmp_path / "d.sock")])
     err = capsys.readouterr().err
     assert code == 3 and "no daemon" in err and "first moves" not in err
+
+
+def test_a_lost_position_is_said_plainly_in_the_text_summary(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from controller.operator.run_view import PlainView
+
+    summary = {"event": "fault", "message": "serial link lost", "motion_time_s": 1.0,
+               "planned_time_s": 2.0, "contour_error_um": {"max": 1.0, "rms": 0.5},
+               "following_error_um_max": 3.0, "underruns": 0, "late_cycles": 0,
+               "min_fifo_ms": 90.0, "final_position_mm": {"x": 28.337, "y": -43.295},
+               "pulses": {}, "position_known": False}
+    view = PlainView([])
+    view.final_summary(summary)
+    out = capsys.readouterr().out
+    assert "final position UNKNOWN" in out and "home or check the machine" in out
+    view.final_summary(summary | {"position_known": True})
+    assert "final position {'x': 28.337, 'y': -43.295}" in capsys.readouterr().out
