@@ -66,6 +66,7 @@ class SimCard(Drive):
 
     # -- hooks ----------------------------------------------------------------------------
     def _open(self) -> None:
+        self._comm_ok = True  # a port opened again is a fresh link
         if self.realtime:
             self._stop.clear()
             self._thread = threading.Thread(target=self._clock_thread, name="simcard",

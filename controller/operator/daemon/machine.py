@@ -29,7 +29,8 @@ from controller.operator.daemon.protocol import ProtocolError
 from controller.operator.from_line import approach_program
 from controller.operator.run_view import result_summary
 from controller.runtime.processes import Runtime, RuntimeOptions
-from drivers.base import Drive
+from drivers.base import CardStatus, Drive
+from drivers.errors import LostCommunicationError
 
 JOURNAL_EVERY_S = 0.5  # the journal's last line is at most this old after a crash
 MOTION_STALL_S = 1.0  # no motion-loop cycle for this long while running: unhealthy
@@ -162,13 +163,27 @@ class Machine(OperatorCommands):
                 raise ProtocolError("busy", f"a job is {self.state.value.lower()}: abort it "
                                             "first")
             try:
-                if self.drive.status().halted:
-                    self.drive.reset()
+                self._reset_drive()
             except CncError as exc:
                 raise ProtocolError("drive", f"drive reset failed: {exc}") from None
             self.fault = None
             self._set_state(State.IDLE)
         self.log.log(NOTICE, "reset: idle")
+
+    def _reset_drive(self) -> None:
+        """Clear the drive's latched condition; after a lost link, open it afresh (bring-up,
+        position read again, axes to be homed again): the old handle is dead, and a reset over
+        it failed until the daemon was restarted."""
+        try:
+            status = self.drive.status()
+        except LostCommunicationError:
+            status = CardStatus.LOST_COMM
+        if CardStatus.LOST_COMM in status:
+            self.log.log(NOTICE, "reset: the drive link was lost: opening it again")
+            self.drive.close()
+            self.drive.open()
+        elif status.halted:
+            self.drive.reset()
 
     def terminate(self, reason: str) -> None:
         """SIGTERM: stop a running job along the path (the caller waits for wait_idle)."""
