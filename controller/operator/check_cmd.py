@@ -132,6 +132,13 @@ def check_program(path: str, config: MachineConfig,
         travel_mm={name: [tlo, thi] for _, name, tlo, thi in limits})
 
 
+def _json_error(args: argparse.Namespace, kind: str, message: str) -> None:
+    """--json: every outcome is one JSON object on stdout (a program error has file and line,
+    a config or drive error only its kind and message)."""
+    if args.json:
+        print(json.dumps({"ok": False, "error": {"kind": kind, "message": message}}))
+
+
 def format_summary(s: CheckSummary) -> str:
     lines = [f"{s.program}: OK (config {s.config})",
              "blocks: " + (", ".join(f"{k} {v}" for k, v in s.blocks.items()) or "none"),
@@ -165,9 +172,11 @@ def run(args: argparse.Namespace) -> int:
         probe_drive(config)
     except (ConfigError, OffsetsError) as exc:
         print(f"cncctl: config error: {exc}", file=sys.stderr)
+        _json_error(args, "config", str(exc))
         return 2
     except DriveError as exc:
         print(f"cncctl: drive {config.drive.backend!r} cannot be opened: {exc}", file=sys.stderr)
+        _json_error(args, "drive", str(exc))
         return 2
     except NcError as exc:
         print(exc.format(), file=sys.stderr)

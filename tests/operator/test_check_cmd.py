@@ -129,3 +129,12 @@ def test_a_missing_offset_table_is_an_error_not_zero_offsets(
     words = [command, str(REPO / "nc_programs/arcs.nc"), "--offsets", str(missing)]
     assert main(words + (["--virtual-time"] if command == "run" else [])) == 2
     assert f"{missing}: no such offset table" in capsys.readouterr().err
+
+
+def test_json_says_why_when_the_drive_cannot_be_opened(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["check", str(REPO / "nc_programs/naca2415.nc"), "--config", "canopen",
+                 "--drive-option", "channel=/dev/cnc-no-such-adapter", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 2 and out["ok"] is False and out["error"]["kind"] == "drive"
+    assert "no CAN adapter at /dev/cnc-no-such-adapter" in out["error"]["message"]
