@@ -16,8 +16,18 @@ SIDE_STEP = 1e-7  # of the parameter range: where each side's tangent is read
 
 
 def kink_knots(curve: Nurbs) -> list[float]:
-    """Interior knots where the tangent turns by more than KINK_RAD (C0 joints, cusps)."""
-    inner = np.unique(curve.knots[(curve.knots > curve.u_start) & (curve.knots < curve.u_end)])
+    """Interior knots where the tangent turns by more than KINK_RAD: joints of continuity C0
+    (a knot repeated `degree` times, every knot of a polyline) and cusps where repeated control
+    points stop the curve. Only those knots can be corners short of a cusp inside a span's
+    polynomial, which needs a contrived control polygon and is not looked for: so a curve
+    with neither (every airfoil and CAM spline seen) costs one pass over its knots and points,
+    not two evaluations (which doubled the interpreter's time on NURBS programs)."""
+    knots, p = curve.knots, curve.degree
+    inner, count = np.unique(knots[(knots > curve.u_start) & (knots < curve.u_end)],
+                             return_counts=True)
+    points = curve.control_points
+    if not np.any(np.all(points[1:] == points[:-1], axis=1)):
+        inner = inner[count >= p]  # without repeated points only C0 joints can turn
     if inner.size == 0:
         return []
     h = SIDE_STEP * (curve.u_end - curve.u_start)
@@ -33,6 +43,8 @@ def still_spans(degree: int, knots: np.ndarray, points: np.ndarray) -> list[tupl
     """Knot spans [u_k, u_k+1] over which the curve stands still: all degree + 1 control points
     that shape the span are one point (repeated points in a program). The arc-length inverse
     and the PH fit cannot work on a piece of zero length."""
+    if not np.any(np.all(points[1:] == points[:-1], axis=1)):
+        return []  # no point repeated: every span moves
     out = []
     for k in range(degree, len(knots) - degree - 1):
         if knots[k + 1] > knots[k]:
