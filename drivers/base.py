@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import enum
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -82,7 +82,7 @@ class Drive(ABC):
             self._port_guard = PortLock(str(self._lock_key()))
         return self._port_guard
 
-    def _open_locked(self, lock: PortLock | None, action: Any) -> None:
+    def _open_locked(self, lock: PortLock | None, action: Callable[[], None]) -> None:
         """action() with the port locked; the lock goes again if it fails."""
         if lock is not None:
             lock.acquire()

@@ -331,15 +331,16 @@ def check_steps(chunk: RefChunk, before_mm: np.ndarray | None, config: MachineCo
     plan that lost its way on a degenerate curve once ended with a 10 mm jump)."""
     ip = config.interpolator
     limit_mm = STEP_SLACK * max(ip.max_feed_mm_s, ip.rapid_feed_mm_s) * config.sample_period_s
-    pos = chunk.pos_mm if before_mm is None else np.vstack((before_mm[None, :], chunk.pos_mm))
-    if len(pos) < 2:
+    pos = chunk.pos_mm
+    if not len(pos):
         return
-    step = np.sqrt(np.sum(np.diff(pos, axis=0) ** 2, axis=1))
-    k = int(np.argmax(step))
-    if step[k] > limit_mm:
-        i = max(k - (before_mm is not None), 0)
-        raise PlanningError(f"line {int(chunk.line[i])}: the planned reference jumps "
-                            f"{step[k]:.4f} mm in one sample (at most {limit_mm:.4f}): the "
+    first = 0.0 if before_mm is None else float(np.sqrt(np.sum((pos[0] - before_mm) ** 2)))
+    steps = np.sqrt(np.sum(np.diff(pos, axis=0) ** 2, axis=1))
+    k = int(np.argmax(steps)) if len(steps) else 0
+    jump, at = (first, 0) if not len(steps) or first >= steps[k] else (float(steps[k]), k + 1)
+    if jump > limit_mm:
+        raise PlanningError(f"line {int(chunk.line[at])}: the planned reference jumps "
+                            f"{jump:.4f} mm in one sample (at most {limit_mm:.4f}): the "
                             "path could not be planned")
 
 
