@@ -18,6 +18,7 @@ IntegralFn = Callable[[SpeedFn, np.ndarray, np.ndarray], np.ndarray]  # speed ov
 # generator's interpolation needs no Newton step at all.
 INVERSE_TOL_MM = 1e-11
 _PASSES = 6
+MAX_ROWS = 50_000  # sub-intervals one refinement may make (3.6 MB); the rest uses Newton
 
 
 @dataclass(eq=False)
@@ -95,6 +96,7 @@ def _refine(t: InverseTable, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray,
     """Rows for the intervals [u0, u1]: each checked at its midpoint and, failing, split in k
     parts (k from the error's h^6 scaling) that are checked in turn."""
     done: list[np.ndarray] = []
+    rows = 0
     for attempt in range(_PASSES + 1):
         # Both ends in one curve evaluation (the end seen from inside: just below u1).
         dd, cc = _u_derivatives(t.derivs(np.concatenate((u0, np.nextafter(u1, -np.inf)))))
@@ -112,9 +114,17 @@ def _refine(t: InverseTable, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray,
         ok = ~fail
         done.append(np.column_stack((u0[ok], u1[ok], s0[ok], s0[ok] + length[ok], d0[ok], c0[ok],
                                      d1[ok], c1[ok], np.ones(int(ok.sum())))))
+        rows += int(ok.sum())
         if not fail.any():
             break
         parts = clamp(np.ceil(1.25 * (err[fail] / INVERSE_TOL_MM) ** (1 / 6)), 2, 64)
+        if rows + int(parts.sum()) > MAX_ROWS:
+            # Out of rows: kept, unchecked, like out of passes. Splitting by up to 64 a pass,
+            # a knot span 1e4 times narrower than its neighbours grew 489,533 rows (1 GB).
+            done.append(np.column_stack((u0[fail], u1[fail], s0[fail], s0[fail] + length[fail],
+                                         d0[fail], c0[fail], d1[fail], c1[fail],
+                                         np.zeros(int(fail.sum())))))
+            break
         u0, u1, s0, length = _split(t, u0[fail], u1[fail], s0[fail], parts.astype(np.intp))
     return np.concatenate(done)
 

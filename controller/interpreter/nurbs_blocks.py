@@ -154,7 +154,7 @@ class NurbsCollector:
         and wider ratios asked for 40-100 GiB of samples. G5.2's knots are uniform."""
         spans = np.diff(np.array(k[order - 1:n + 1], dtype=float))
         spans = spans[spans > 0.0]
-        if spans.size > 1 and spans.max() > MAX_SPAN_RATIO * spans.min():
+        if spans.size > 1 and spans.max() > MAX_SPAN_RATIO * spans.min() * (1.0 + 1e-9):
             raise self._fail(last, "K", f"NURBS knot spans range from {spans.min():.6g} to "
                                         f"{spans.max():.6g}, more than a factor "
                                         f"{MAX_SPAN_RATIO:g} apart: a parametrisation this "

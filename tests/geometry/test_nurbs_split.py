@@ -79,3 +79,45 @@ def test_a_smooth_curve_has_no_corner(curve: Nurbs) -> None:
     if inner.size and np.hypot(d1[:, 0], d1[:, 1]).min() < 1e-3:
         return  # a vanishing derivative may be a cusp
     assert kink_knots(curve) == []
+
+
+# From the adversarial run (g62_080): weights 0.001-1, a last knot span of 1e-4 next to 1s.
+NARROW_SPAN = """G21 G90 G0 X143.690787 Y9.837479 G61 F3500
+G6.2 P5 X143.690787 Y9.837479 R0.01 K0
+X143.747223 Y15.027096 R0.01 K0
+X148.4151 Y147.841871 R0.5 K0
+X149.285407 Y131.492565 R0.01 K0
+X140.543897 Y-77.609805 R0.001 K0
+X149.46017 Y18.860643 R0.001 K1
+X141.447411 Y36.380404 R0.5 K2
+X149.354404 Y-80.626283 R1 K3
+X143.533404 Y-98.09482 R0.001 K4
+X149.77027 Y-88.824279 R0.001 K5
+X142.584995 Y-126.287635 R0.001 K6
+X141.014505 Y-145.23897 R1 K7
+X140.039769 Y8.225844 R0.001 K8
+X142.977382 Y-39.678773 R0.01 K9
+X145.792628 Y-55.551972 R0.01 K10
+X147.415027 Y-76.959317 R0.5 K11
+X144.970273 Y-39.116982 R0.001 K12
+K12.0001
+K12.0001
+K12.0001
+K12.0001
+K12.0001
+"""
+
+
+def test_a_narrow_knot_span_keeps_the_inverse_bounded_and_exact(tmp_path) -> None:  # noqa: ANN001
+    """The arc-length inverse split this curve's sub-intervals by up to 64 a pass: 489,533
+    rows (1 GB for the whole simulate). Past MAX_ROWS the rest is kept unchecked and inverted
+    by Newton instead, as accurately."""
+    from controller.interpreter.program import program_nurbs
+
+    path = tmp_path / "narrow.nc"
+    path.write_text(NARROW_SPAN)
+    table = program_nurbs(str(path))[0].arc_length_table
+    s = np.linspace(0.0, table.total_length_mm, 20001)
+    u = table.u_of_s(s)
+    assert table._inverse.rows.shape[0] <= 60_000  # MAX_ROWS and the base intervals
+    assert np.abs(table.s_of_u(u) - s).max() < 1e-5
