@@ -87,6 +87,11 @@ class ArcBlock:
         return abs(self.sweep_rad) * self.radius_mm
 
 
+def polygon_length_mm(points: np.ndarray) -> float:
+    """Length of the polyline through points (n, 2)."""
+    return float(np.sum(np.hypot(*np.diff(points, axis=0).T)))
+
+
 @dataclass(frozen=True, eq=False)
 class NurbsBlock:
     """A planar NURBS (G5.2 or G6.2) at constant Z: clamped knots, positive weights."""
@@ -104,6 +109,11 @@ class NurbsBlock:
     def start(self) -> Point3:
         p = self.control_points[0]
         return (float(p[0]), float(p[1]), self.z_mm)
+
+    @property
+    def polygon_length_mm(self) -> float:
+        """Length of the control polygon: the curve, lying in its hull, is no longer."""
+        return polygon_length_mm(self.control_points)
 
     @property
     def end(self) -> Point3:

@@ -213,7 +213,7 @@ def nominal_s(block: NcBlock, max_feed_mm_s: float) -> float:
     """Length over programmed feed: a lower bound of a contour block's motion time (a NURBS by
     its control polygon, which is at least as long as the curve)."""
     if isinstance(block, NurbsBlock):
-        length = float(np.sum(np.hypot(*np.diff(block.control_points, axis=0).T)))
+        length = block.polygon_length_mm
     elif isinstance(block, ArcBlock):
         length = block.length_mm
     else:
@@ -245,11 +245,11 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
     repeats = Repeats()  # shared by the windows of a long run (repeats.py)
 
     settle_after: PlannedStep | None = None  # the last step, if it came to rest moving
-    last_pos: list[np.ndarray | None] = [None]  # the last reference point sent (check_steps)
+    last_pos: np.ndarray | None = None  # the last reference point sent (check_steps)
 
     def emit(step: PlannedStep | None, at_rest: bool = True,
              dwell: bool = False) -> Iterator[PlannedStep]:
-        nonlocal t_s, settle_after
+        nonlocal t_s, settle_after, last_pos
         if step is None or not len(step.chunk):
             return
         if settle_after is not None and not dwell:
@@ -260,8 +260,8 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
             yield hold
             t_s += len(hold.chunk) * T
             step = replace(step, chunk=replace(step.chunk, t0_s=t_s + T))
-        check_steps(step.chunk, last_pos[0], config)
-        last_pos[0] = step.chunk.pos_mm[-1]
+        check_steps(step.chunk, last_pos, config)
+        last_pos = step.chunk.pos_mm[-1]
         t_s = step.chunk.t0_s + (len(step.chunk) - 1) * T
         yield step
         settle_after = step if at_rest and not dwell else None

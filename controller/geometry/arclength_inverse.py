@@ -102,8 +102,7 @@ def _refine(t: InverseTable, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray,
         dd, cc = _u_derivatives(t.derivs(np.concatenate((u0, np.nextafter(u1, -np.inf)))))
         d0, c0, d1, c1 = dd[:u0.size], cc[:u0.size], dd[u0.size:], cc[u0.size:]
         if attempt == _PASSES:  # out of passes: kept, unchecked (u_of_s then uses Newton)
-            done.append(np.column_stack((u0, u1, s0, s0 + length, d0, c0, d1, c1,
-                                         np.zeros(u0.size))))
+            done.append(_rows(slice(None), u0, u1, s0, length, d0, c0, d1, c1, checked=False))
             break
         u_mid = 0.5 * (u0 + u1)
         s_mid = s0 + t.integrate(t.speed, u0, u_mid)
@@ -112,8 +111,7 @@ def _refine(t: InverseTable, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray,
         err = np.abs(_quintic(x, h, u0, u1, d0, c0, d1, c1) - u_mid) / np.where(d0 > 0, d0, 1.0)
         fail = err > 0.5 * INVERSE_TOL_MM
         ok = ~fail
-        done.append(np.column_stack((u0[ok], u1[ok], s0[ok], s0[ok] + length[ok], d0[ok], c0[ok],
-                                     d1[ok], c1[ok], np.ones(int(ok.sum())))))
+        done.append(_rows(ok, u0, u1, s0, length, d0, c0, d1, c1, checked=True))
         rows += int(ok.sum())
         if not fail.any():
             break
@@ -121,12 +119,19 @@ def _refine(t: InverseTable, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray,
         if rows + int(parts.sum()) > MAX_ROWS:
             # Out of rows: kept, unchecked, like out of passes. Splitting by up to 64 a pass,
             # a knot span 1e4 times narrower than its neighbours grew 489,533 rows (1 GB).
-            done.append(np.column_stack((u0[fail], u1[fail], s0[fail], s0[fail] + length[fail],
-                                         d0[fail], c0[fail], d1[fail], c1[fail],
-                                         np.zeros(int(fail.sum())))))
+            done.append(_rows(fail, u0, u1, s0, length, d0, c0, d1, c1, checked=False))
             break
         u0, u1, s0, length = _split(t, u0[fail], u1[fail], s0[fail], parts.astype(np.intp))
     return np.concatenate(done)
+
+
+def _rows(pick: np.ndarray | slice, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray,
+          length: np.ndarray, d0: np.ndarray, c0: np.ndarray, d1: np.ndarray, c1: np.ndarray,
+          checked: bool) -> np.ndarray:
+    """Table rows (u0 u1 s0 s1 d0 c0 d1 c1 checked) of the intervals picked."""
+    u0 = u0[pick]
+    return np.column_stack((u0, u1[pick], s0[pick], s0[pick] + length[pick], d0[pick],
+                            c0[pick], d1[pick], c1[pick], np.full(u0.size, float(checked))))
 
 
 def _split(t: InverseTable, u0: np.ndarray, u1: np.ndarray, s0: np.ndarray,

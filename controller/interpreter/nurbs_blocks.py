@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from controller.blocks import NurbsBlock, PathControl, Source
+from controller.blocks import NurbsBlock, PathControl, Source, polygon_length_mm
 from controller.errors import NcError
 from controller.geometry.nurbs import Nurbs
 from controller.geometry.nurbs_split import kink_knots, split_at, still_spans
@@ -109,7 +109,7 @@ class NurbsCollector:
         if n < order:
             raise self._fail(last, self.kind, f"NURBS of order {order} needs at least {order} "
                                               f"control points, got {n}")
-        polygon_mm = float(np.hypot(*np.diff(np.array(self.points), axis=0).T).sum())
+        polygon_mm = polygon_length_mm(np.array(self.points, dtype=float))
         feed = min(self.feed_mm_s, max_feed_mm_s)
         if polygon_mm > feed * MAX_NURBS_NOMINAL_S:
             raise self._fail(last, self.kind,

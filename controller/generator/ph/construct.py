@@ -74,9 +74,7 @@ def block_curve(block: MotionBlock, feed_cap_mm_s: float,
         tol = block.path.tolerance_mm if block.path.tolerance_mm is not None \
             else default_tolerance_mm
     if isinstance(block, NurbsBlock):
-        # The curve lies in its control polygon's hull: no longer than the polygon.
-        polygon = np.diff(block.control_points[:, :2], axis=0)
-        if float(np.hypot(polygon[:, 0], polygon[:, 1]).sum()) < MIN_LENGTH_MM:
+        if block.polygon_length_mm < MIN_LENGTH_MM:  # the curve is no longer than this
             return None
         return BlockCurve(Nurbs.from_block(block), feed, line, True, tol)
     if isinstance(block, ArcBlock):
@@ -183,10 +181,6 @@ def _materialise(bc: BlockCurve, spans: list, corner_base: int) -> list[Piece]:
     return pieces
 
 
-def _tangent(piece: Piece, at_end: bool) -> np.ndarray:
-    return end_tangent(piece, at_end)
-
-
 # A joint's blend by what it depends on: both pieces (curve, parameters, offset, length) and the
 # tolerance. The dynamics rounds rebuild the path, mostly with the same joints: a round then
 # reuses the blends (the same objects, so the same numbers) instead of fitting them again.
@@ -220,7 +214,7 @@ def _blend(a: Piece, b: Piece, tol: float, cache: BlendCache | None,
 def _joint_angle_rad(a: Piece, b: Piece, line_row: tuple[LineJoints, int] | None) -> float:
     if line_row is not None:
         return line_row[0].angle_rad[line_row[1]]
-    return joint_angle_rad(_tangent(a, True), _tangent(b, False))
+    return joint_angle_rad(end_tangent(a, True), end_tangent(b, False))
 
 
 def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],

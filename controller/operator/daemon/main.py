@@ -159,14 +159,14 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGHUP, signal.SIG_IGN)  # no config reload: restart to apply one
     try:
         daemon.serve()
-    except OSError as exc:
-        log.log(ERR, f"cncd: control socket: {exc}")
-        daemon.machine.terminate("daemon stopping (control socket failed)")
-        daemon.close()
-        return 1
-    except Exception as exc:  # noqa: BLE001  (a bug: the job still stops along the path)
-        log.log(ERR, f"cncd: internal error: {type(exc).__name__}: {str(exc)[:200]}")
-        daemon.machine.terminate("daemon stopping (internal error)")
+    except Exception as exc:  # noqa: BLE001  (the socket failed, or a bug: stop the job too)
+        if isinstance(exc, OSError):
+            log.log(ERR, f"cncd: control socket: {exc}")
+            reason = "control socket failed"
+        else:
+            log.log(ERR, f"cncd: internal error: {type(exc).__name__}: {str(exc)[:200]}")
+            reason = "internal error"
+        daemon.machine.terminate(f"daemon stopping ({reason})")
         daemon.close()
         return 1
     daemon.close()
