@@ -289,9 +289,14 @@ def _segment_time_s(a: np.ndarray, b: np.ndarray, vi: np.ndarray, vj: np.ndarray
     """Time of: wait at vi, accelerate, cruise at vp from e0 to d0, brake, wait at vj."""
     sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
     w0, w1 = np.maximum(e0 - sa - a, 0.0), np.maximum(b - d0 - sd, 0.0)
+    # As in segment_phases, a wait shorter than eps is a rounding residue of the positions, not
+    # a cruise: at a node speed of zero it took forever, and a braking to rest that ended 1e-15
+    # mm early made every cruise level but the lowest "infinitely slow" (a 10 mm stretch after
+    # a near-stop then crawled at a fifth of the feed).
+    eps = 1e-12 * max(1.0, float(np.abs(b).max(initial=0.0)))
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        t0 = np.where(w0 > 0.0, w0 / vi, 0.0)
-        t1 = np.where(w1 > 0.0, w1 / vj, 0.0)
+        t0 = np.where(w0 > eps, w0 / vi, 0.0)
+        t1 = np.where(w1 > eps, w1 / vj, 0.0)
         tc = np.maximum(d0 - e0, 0.0) / vp
     return (t0 + t1 + tc + transition_duration_s(vi, vp, accel)
             + transition_duration_s(vp, vj, accel))

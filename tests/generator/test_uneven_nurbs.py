@@ -1,0 +1,79 @@
+"""NURBS whose parametric speed is very uneven: the feed-limit grid still sees their whole length
+and the curvature at their knots, and the plan keeps the tool within the contour limit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from nc_helpers import XY_TABLE, blocks_of
+
+from controller.generator.feed import path_plan
+from controller.geometry.nurbs import Nurbs
+from controller.geometry.path import Path as ToolPath
+from controller.geometry.path import PieceKind, make_piece
+from controller.runtime.simulation import limit_um, report, simulate
+
+# A quadratic with knot spans 1 and 9999 (within the interpreter's factor 10000): its first span
+# is 5.1 mm of path in one parameter unit, the rest 10 mm in 9999; at the knot it turns 22
+# degrees within 0.5 um (curvature 3.8e6 /mm from the left, 0.019 /mm from the right).
+UNEVEN = """G21 G90
+G1 X0 Y0 F1000
+G6.2 P3 X0 Y0 R1 K0
+X5 Y1 R1 K0
+X10 Y0 R1 K0
+X15 Y0 R1 K1
+K{end}
+K{end}
+K{end}
+M2
+"""
+
+
+def _curve(end: float) -> Nurbs:
+    return Nurbs(2, np.array([0.0, 0.0, 0.0, 1.0, end, end, end]),
+                 np.array([[0.0, 0.0], [5.0, 1.0], [10.0, 0.0], [15.0, 0.0]]), np.ones(4))
+
+
+def _grid(curve: Nurbs) -> tuple[np.ndarray, np.ndarray]:
+    piece = make_piece(PieceKind.NURBS, curve, curve.u_start, curve.u_end, 0.0, 16.0, 3)
+    return path_plan.limit_samples(ToolPath((piece,)))
+
+
+def test_the_grid_covers_every_knot_span_and_the_knot_curvature() -> None:
+    s, kappa = _grid(_curve(1e4))
+    spacing = path_plan.grid_step_mm(ToolPath((make_piece(
+        PieceKind.NURBS, _curve(1e4), 0.0, 1e4, 0.0, 16.0, 3),)))
+    # Even parameters put one sample on the first 5.1 mm. By knot span, even parameters in a
+    # span whose speed falls from 10 to 0.001 are at most twice their mean spacing apart.
+    assert float(np.diff(s).max()) <= 2.0 * spacing
+    assert np.all(np.diff(s) > 0.0)
+    # The left side's curvature at the knot is on the grid, where the path is at the knot.
+    k = int(np.argmax(kappa))
+    assert kappa[k] > 3.7e6
+    assert s[k] == pytest.approx(float(_curve(1e4).s_of_u(np.array([1.0]))[0]), abs=1e-9)
+    assert s[-1] == pytest.approx(_curve(1e4).length_mm, rel=1e-12)
+
+
+def test_an_even_nurbs_keeps_its_even_grid() -> None:
+    """The airfoil and the other programs' NURBS are resolved by even parameters: their grid,
+    and so their plans, are as before (the golden test checks the plans themselves)."""
+    even = _curve(2.0)
+    piece = make_piece(PieceKind.NURBS, even, 0.0, 2.0, 0.0, 16.0, 3)
+    s, kappa = path_plan.limit_samples(ToolPath((piece,)))
+    n = len(s)
+    u = np.linspace(0.0, 2.0, n)
+    expected = path_plan._speed_and_kappa(even, u)[1]
+    assert np.array_equal(kappa, expected)
+
+
+@pytest.mark.parametrize("end", [1000, 9999])
+def test_an_uneven_nurbs_is_planned_within_the_contour_limit(tmp_path: Path, end: int) -> None:
+    """At 9999 the tool was 34.6 um from the path (limit 30) after 20 dynamics rounds: the
+    grid never saw the turn, so the feed passed it at 16.7 mm/s."""
+    blocks = blocks_of(tmp_path, UNEVEN.format(end=end))
+    rep = report(simulate(blocks, XY_TABLE, "ph-lookahead"), "uneven", "ph-lookahead", XY_TABLE)
+    assert rep["contour_limit_met"]
+    assert rep["contour_error_true_um"]["max"] <= limit_um(XY_TABLE)
+    assert rep["motion_time_s"] < 1.2  # a stop at the turn, then the feed again (was 3.4 s)
