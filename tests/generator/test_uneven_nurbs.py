@@ -77,3 +77,41 @@ def test_an_uneven_nurbs_is_planned_within_the_contour_limit(tmp_path: Path, end
     assert rep["contour_limit_met"]
     assert rep["contour_error_true_um"]["max"] <= limit_um(XY_TABLE)
     assert rep["motion_time_s"] < 1.2  # a stop at the turn, then the feed again (was 3.4 s)
+
+
+# A cusp next to a weight of 0.01 (weights within the interpreter's factor 1000): the curve runs
+# out to X7 and back, and where it turns back its feed limit is 5e-21 mm/s at one grid sample.
+CUSP_NEXT_TO_LIGHT_WEIGHT = """F1000
+G5.2 P0.500000 L3
+X7.000000 Y0.000000 P1
+X7.000000 Y0.000000 P0.010000
+X0.007000 Y0.007000 P1
+G5.3
+"""
+
+
+def test_a_lone_spike_of_the_feed_limit_is_a_stop(tmp_path: Path) -> None:
+    """It was planned as a creep of 1.4e7 s toward and away from that sample (the quintics
+    cannot follow the straight rise the grid draws from it) and refused by the planner's 3600 s
+    guard, mid-program, after `check` had passed the program. Now the plan rests there."""
+    blocks = blocks_of(tmp_path, CUSP_NEXT_TO_LIGHT_WEIGHT)
+    rep = report(simulate(blocks, XY_TABLE, "ph-lookahead"), "cusp", "ph-lookahead", XY_TABLE)
+    assert rep["contour_limit_met"]
+    assert rep["contour_error_true_um"]["max"] <= limit_um(XY_TABLE)
+    assert rep["motion_time_s"] < 14.0 / 16.0 + 0.2  # 14 mm at F1000, and the stop
+
+
+def test_spikes_are_lone_samples_far_under_the_programmed_feed() -> None:
+    curve = _curve(2.0)
+    piece = make_piece(PieceKind.NURBS, curve, 0.0, 2.0, 0.0, 16.0, 3)
+    path = ToolPath((piece,))
+    s = np.linspace(0.0, piece.length_mm, 11)
+    vlim = np.full(11, 16.0)
+    assert path_plan.spike_stops_mm(path, s, vlim, 58.0) == ()
+    vlim[4] = 0.001  # under 1e-3 of the feed 16: a spike
+    vlim[7] = 0.05  # 3e-3 of it: a slow corner, passed
+    assert path_plan.spike_stops_mm(path, s, vlim, 58.0) == (float(s[4]),)
+    vlim[5] = 0.001  # two low samples in a row are a stretch, not a spike
+    assert path_plan.spike_stops_mm(path, s, vlim, 58.0) == ()
+    slow = make_piece(PieceKind.NURBS, curve, 0.0, 2.0, 0.0, 0.0167, 3)  # F1: all of it slow
+    assert path_plan.spike_stops_mm(ToolPath((slow,)), s, np.full(11, 0.0167), 58.0) == ()

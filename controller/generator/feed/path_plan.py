@@ -12,7 +12,12 @@ import numpy as np
 from controller.generator.feed.limits import chord_error_feed_mm_s, corner_feed_mm_s
 from controller.generator.feed.planner import PlanResult, plan_feed
 from controller.generator.feed.profile import FeedProfile
-from controller.generator.feed.stops import approach_split, model_stop_accel, stop_accel_at
+from controller.generator.feed.stops import (
+    STOP_MATCH_MM,
+    approach_split,
+    model_stop_accel,
+    stop_accel_at,
+)
 from controller.geometry.curves import Curve
 from controller.geometry.path import Path, Piece, PieceKind
 from controller.numeric import sorted_unique
@@ -328,6 +333,32 @@ def _section(s: np.ndarray, vlim: np.ndarray, a: float,
     return s_sec, v_sec
 
 
+# A feed limit under this share of the programmed feed at one grid sample alone is a spike (the
+# curvature of a turn within a micrometre, as a NURBS makes at a knot where its parametric speed
+# nearly vanishes): the plan stops there. Passing it at that feed instead means creeping up to
+# and away from it, for the quintics cannot follow the straight rise the grid draws from the
+# spike to its neighbours: at 1e-6 mm/s (a cusp next to a weight of 0.01) that took 1.4e7 s.
+# A sharp corner of the benchmarks needs 13 % of the feed (butterfly, 42 /mm).
+SPIKE_SHARE = 1e-3
+
+
+def spike_stops_mm(path: Path, s: np.ndarray, vlim: np.ndarray,
+                   max_feed_mm_s: float) -> tuple[float, ...]:
+    """Path positions of lone samples where vlim is under SPIKE_SHARE of the programmed feed
+    (not the path's ends, which are at rest or continue a window)."""
+    feeds = np.array([p.feed_mm_s for p in path.pieces])
+    cap = np.minimum(feeds, max_feed_mm_s)
+    if len(s) < 3 or float(vlim.min()) >= SPIKE_SHARE * float(cap.min()):
+        return ()  # nothing is that low: the usual case, at the cost of one min()
+    low = vlim < SPIKE_SHARE * cap[path.piece_index(s)]
+    lone = low[1:-1] & ~low[:-2] & ~low[2:]
+    return tuple(float(x) for x in s[1:-1][lone])
+
+
+def _near(x: float, positions: tuple[float, ...] | list[float]) -> bool:
+    return any(abs(x - y) <= STOP_MATCH_MM for y in positions)
+
+
 def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None,
                    raise_cruises: bool = True, v_start_mm_s: float = 0.0) -> FeedOutput:
     """Module 3: vlim on a fine grid, then a quintic plan per section, ending at rest.
@@ -343,19 +374,26 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
             cache[key] = limit_samples(path, cache)  # type: ignore[index]
         s, kappa = cache[key]  # type: ignore[index]
     vlim = feed_limit_mm_s(path, s, kappa, inp)
-    cuts = [0.0, *path.stops_at_mm, path.length_mm]
+    spikes = spike_stops_mm(path, s, vlim, inp.max_feed_mm_s)
+    extra = [x for x in spikes if not _near(x, path.stops_at_mm)]  # a stop already rests there
+    cuts = sorted([0.0, *path.stops_at_mm, *extra, path.length_mm])
     profiles: list[FeedProfile] = []
     used: list[float] = []
     result = PlanResult.OK
     for a, b in zip(cuts[:-1], cuts[1:], strict=True):
         s_sec, v_sec = _section(s, vlim, a, b)
+        if len(v_sec) > 2 and spikes:  # at rest on a spike, its own sample binds no more
+            v_sec = v_sec.copy()
+            v_sec[0] = v_sec[1] if _near(a, spikes) else v_sec[0]
+            v_sec[-1] = v_sec[-2] if _near(b, spikes) else v_sec[-1]
         v0 = v_start_mm_s if a == 0.0 else 0.0
         accel = stop_accel_at(inp.stop_accels, b)
         if accel is None and inp.stop_accel_for is not None:
             accel = model_stop_accel(s_sec, v_sec, inp.max_accel_mm_s2, inp.stop_accel_for)
         if accel is not None and accel >= inp.max_accel_mm_s2:
             accel = None
-        used.append(inp.max_accel_mm_s2 if accel is None else accel)
+        if b not in extra:  # one per stop of the path, in order (the dynamics module's)
+            used.append(inp.max_accel_mm_s2 if accel is None else accel)
         parts = [(s_sec, v_sec, inp.max_accel_mm_s2, v0, 0.0)] if accel is None else \
             approach_split(s_sec, v_sec, inp.max_accel_mm_s2, accel, v0)
         for s_part, v_part, a_part, vs, ve in parts:
