@@ -115,3 +115,50 @@ def test_spikes_are_lone_samples_far_under_the_programmed_feed() -> None:
     assert path_plan.spike_stops_mm(path, s, vlim, 58.0) == ()
     slow = make_piece(PieceKind.NURBS, curve, 0.0, 2.0, 0.0, 0.0167, 3)  # F1: all of it slow
     assert path_plan.spike_stops_mm(ToolPath((slow,)), s, np.full(11, 0.0167), 58.0) == ()
+
+
+# Found by 120 random NURBS with knot spans up to 1e4 apart and weights down to 0.01: the
+# tool was 44 um from the path (limit 30), its first knot span 8241 times the next one.
+SEVEN_SPANS = """G21 G90 G64
+G1 X0 Y0 F1000
+G6.2 P3 X0.0000 Y0.0000 R1.0000 K0.000000
+X-4.6454 Y2.9149 R1.0000 K0.000000
+X-9.2618 Y1.7098 R1.0000 K0.000000
+X-9.8384 Y2.3694 R1.0000 K8240.965619
+X-9.1226 Y3.4049 R1.0000 K8241.965619
+X-13.8774 Y1.6903 R1.0000 K8244.843733
+X-11.4965 Y0.8624 R1.0000 K8247.028487
+X-8.2334 Y1.2982 R1.0000 K8253.478854
+K8254.646771
+K8254.646771
+K8254.646771
+M2
+"""
+
+
+def _random_uneven(seed: int) -> str:
+    """A quadratic or cubic NURBS with knot spans up to 1e4 apart and, half the time, weights
+    down to 0.01, as in the hunt that found SEVEN_SPANS."""
+    rng = np.random.default_rng(seed)
+    order = int(rng.integers(3, 5))
+    n = int(rng.integers(order, order + 6))
+    pts = np.clip(np.cumsum(rng.uniform(-5.0, 5.0, (n, 2)), axis=0), -100.0, 100.0)
+    pts[0] = 0.0
+    w = np.exp(rng.uniform(np.log(0.01), 0.0, n)) if rng.random() < 0.5 else np.ones(n)
+    spans = np.exp(rng.uniform(0.0, np.log(1e4), n - order + 1))
+    spans = 1.0 + (spans / spans.min() - 1.0) * min(1.0, 9998.0 / (spans.max() / spans.min()))
+    knots = np.r_[[0.0] * order, np.cumsum(spans)[:-1], [spans.sum()] * order]
+    rows = [f"G6.2 P{order} X0 Y0 R{w[0]:.4f} K{knots[0]:.6f}"]
+    rows += [f"X{x:.4f} Y{y:.4f} R{r:.4f} K{k:.6f}"
+             for (x, y), r, k in zip(pts[1:], w[1:], knots[1:n], strict=True)]
+    rows += [f"K{k:.6f}" for k in knots[n:]]
+    return "\n".join(["G21 G90 G64", "G1 X0 Y0 F3500", *rows, "M2", ""])
+
+
+@pytest.mark.parametrize("text", [SEVEN_SPANS, *(_random_uneven(seed) for seed in range(8))],
+                         ids=["seven_spans", *(f"random{seed}" for seed in range(8))])
+def test_uneven_nurbs_stay_within_the_contour_limit(tmp_path: Path, text: str) -> None:
+    blocks = blocks_of(tmp_path, text)
+    rep = report(simulate(blocks, XY_TABLE, "ph-lookahead"), "uneven", "ph-lookahead", XY_TABLE)
+    assert rep["contour_limit_met"]
+    assert rep["max_feed_mm_s"] <= 58.34
