@@ -274,14 +274,19 @@ def _scale(s: np.ndarray, inp: FeedInput) -> np.ndarray:
     return scale
 
 
-def feed_limit_mm_s(path: Path, s: np.ndarray, kappa: np.ndarray, inp: FeedInput) -> np.ndarray:
-    """vlim(s) under the chosen policy, capped by the programmed feed of each piece.
+def feed_limit_mm_s(path: Path, s: np.ndarray, kappa: np.ndarray, inp: FeedInput,
+                    ending: bool = False) -> np.ndarray:
+    """vlim(s) under the chosen policy, capped by the programmed feed of each piece: on a joint,
+    of the piece that starts there, or with ending, of the one that ends there.
 
     A reduction by factor f scales the normal acceleration kappa v^2, and with it the servo's
     contour error, by f: the feed limit is scaled by sqrt(f)."""
     # path.feed_cap(s), gathered in one go (it masks the grid once per piece)
     feeds = np.array([p.feed_mm_s for p in path.pieces])
-    cap = np.minimum(feeds[path.piece_index(s)], inp.max_feed_mm_s)
+    index = path.piece_index(s)
+    if ending:
+        index = np.maximum(np.searchsorted(path.breaks_mm, s, side="left") - 1, 0)
+    cap = np.minimum(feeds[index], inp.max_feed_mm_s)
     vlim = chord_error_feed_mm_s(kappa, inp.sample_period_s, inp.chord_tolerance_mm, cap)
     if inp.policy == LimitPolicy.CONTINUOUS:
         with np.errstate(divide="ignore"):
@@ -374,6 +379,14 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
             cache[key] = limit_samples(path, cache)  # type: ignore[index]
         s, kappa = cache[key]  # type: ignore[index]
     vlim = feed_limit_mm_s(path, s, kappa, inp)
+    # A section ending at a stop brakes to rest under its own piece's feed: the next block's,
+    # which its last grid sample has, once made G1 X10 F3500 then G1 X10 Y1 F1.5 creep the
+    # whole first line at F1.5 (440 s).
+    stops = np.array(path.stops_at_mm)
+    at_stop = np.flatnonzero(np.isin(s, stops))
+    ending = dict(zip(s[at_stop].tolist(),
+                      feed_limit_mm_s(path, s[at_stop], kappa[at_stop], inp, True).tolist(),
+                      strict=True))
     spikes = spike_stops_mm(path, s, vlim, inp.max_feed_mm_s)
     extra = [x for x in spikes if not _near(x, path.stops_at_mm)]  # a stop already rests there
     cuts = sorted([0.0, *path.stops_at_mm, *extra, path.length_mm])
@@ -382,6 +395,9 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
     result = PlanResult.OK
     for a, b in zip(cuts[:-1], cuts[1:], strict=True):
         s_sec, v_sec = _section(s, vlim, a, b)
+        if b in ending:
+            v_sec = v_sec.copy()
+            v_sec[-1] = ending[b]
         if len(v_sec) > 2 and spikes:  # at rest on a spike, its own sample binds no more
             v_sec = v_sec.copy()
             v_sec[0] = v_sec[1] if _near(a, spikes) else v_sec[0]
