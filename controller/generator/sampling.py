@@ -50,8 +50,10 @@ def sample_profile(profile: FeedProfile, sample_period_s: float) -> tuple[np.nda
         # Last line of defence: a look-ahead window or run is at most a few minutes of motion
         # (long blocks come in parts, a NURBS over 600 s is refused); one planned far longer
         # is a broken plan, and its samples alone would need gigabytes.
-        raise PlanningError(f"a planned stretch of {profile.duration_s:.0f} s of motion: the "
-                            "path could not be planned (a NURBS parametrised too unevenly?)")
+        raise PlanningError(f"a planned stretch of {profile.duration_s:.0f} s of motion, "
+                            f"longer than any window may take ({MAX_PLANNED_RUN_S:.0f} s): the "
+                            "path could not be planned (a fault of the planner: please report "
+                            "the program)")
     k_count = max(int(np.ceil(profile.duration_s / sample_period_s - 1e-9)), 1)
     t = np.arange(1, k_count + 1) * sample_period_s
     s, v, a = profile.evaluate(np.minimum(t, profile.duration_s))

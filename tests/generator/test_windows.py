@@ -180,3 +180,19 @@ def test_a_section_starting_in_a_cluster_of_grid_points_stays_increasing() -> No
     assert np.all(np.diff(s_sec) > 0) and len(v_sec) == len(s_sec)
     plain = np.array([0.0, 1.0, 2.0, 3.0])  # the usual case is left as it was
     assert np.array_equal(_section(plain, np.ones(4), 1.0, 3.0)[0], [1.0, 2.0, 3.0])
+
+
+def test_a_slow_window_plans_again_only_its_last_seconds(tmp_path: Path) -> None:
+    """At F1.27 the 10 mm overlap was 470 s of samples, planned again by every 30 s window:
+    after a tiny circle (which keeps the windows from stopping), 10 mm took 245 MB. A window
+    now plans again at most its last MIN_OVERLAP_S of motion (and still 10 mm at speed)."""
+    prog = tmp_path / "slow.nc"
+    prog.write_text("G21 G90 G64\nG1 X100 Y0 F2540\nG3 X100 Y0 I0.0127 J0\nG1 X90 Y0 F1.27\n"
+                    "M2\n", encoding="utf-8")
+    runs, ref, _ = _runs(prog)
+    assert len(runs) > 10
+    planned_s = [len(r.samples.xy_mm) * T for r in runs]
+    assert max(planned_s) < 100.0  # was 470 s of samples per window
+    # Once the circle is behind: the new blocks and a tail (at least 5 % of a window's path).
+    assert max(planned_s[len(planned_s) // 2:]) < WINDOW_NOMINAL_S + 15.0
+    assert np.hypot(*(ref[-1] - [90.0, 0.0])) < 1e-9
