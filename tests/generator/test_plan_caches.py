@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from controller.config import load_config
-from controller.generator.feed import path_plan
-from controller.generator.feed.path_plan import limit_samples
+from controller.generator.feed import grid
+from controller.generator.feed.grid import limit_samples
 from controller.generator.feed.planner import clear_memo
 from controller.geometry.curves import ArcCurve, LineCurve
 from controller.geometry.path import Path, PieceKind, chain, make_piece
@@ -92,10 +92,10 @@ def test_pieces_sampled_together_are_sampled_as_one_by_one(
         pieces.append(make_piece(PieceKind.PH, ph, u0, u1, 0.0, 50.0, 1))
         pieces.append(make_piece(PieceKind.LINE, LineCurve((0.0, k), (1.0 + u1, k)), u0, u1,
                                  0.0, 50.0, 1))
-    path_plan._ph_samples([(p, n) for p in pieces if p.kind == PieceKind.PH], cache)
-    path_plan._line_samples([(p, n) for p in pieces if p.kind == PieceKind.LINE], cache)
+    grid._ph_samples([(p, n) for p in pieces if p.kind == PieceKind.PH], cache)
+    grid._line_samples([(p, n) for p in pieces if p.kind == PieceKind.LINE], cache)
     for p in pieces:
         s, kappa = cache[(p.curve, p.u0, p.u1, n)]
-        one_s, one_kappa = path_plan._piece_samples(p, n)
+        one_s, one_kappa = grid._piece_samples(p, n)
         np.testing.assert_array_equal(s, one_s)
         np.testing.assert_array_equal(kappa, one_kappa)

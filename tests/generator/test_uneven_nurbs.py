@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from nc_helpers import XY_TABLE, blocks_of
 
-from controller.generator.feed import path_plan
+from controller.generator.feed import grid, path_plan
 from controller.geometry.nurbs import Nurbs
 from controller.geometry.path import Path as ToolPath
 from controller.geometry.path import PieceKind, make_piece
@@ -38,12 +38,12 @@ def _curve(end: float) -> Nurbs:
 
 def _grid(curve: Nurbs) -> tuple[np.ndarray, np.ndarray]:
     piece = make_piece(PieceKind.NURBS, curve, curve.u_start, curve.u_end, 0.0, 16.0, 3)
-    return path_plan.limit_samples(ToolPath((piece,)))
+    return grid.limit_samples(ToolPath((piece,)))
 
 
 def test_the_grid_covers_every_knot_span_and_the_knot_curvature() -> None:
     s, kappa = _grid(_curve(1e4))
-    spacing = path_plan.grid_step_mm(ToolPath((make_piece(
+    spacing = grid.grid_step_mm(ToolPath((make_piece(
         PieceKind.NURBS, _curve(1e4), 0.0, 1e4, 0.0, 16.0, 3),)))
     # Even parameters put one sample on the first 5.1 mm. By knot span, even parameters in a
     # span whose speed falls from 10 to 0.001 are at most twice their mean spacing apart.
@@ -61,10 +61,10 @@ def test_an_even_nurbs_keeps_its_even_grid() -> None:
     and so their plans, are as before (the golden test checks the plans themselves)."""
     even = _curve(2.0)
     piece = make_piece(PieceKind.NURBS, even, 0.0, 2.0, 0.0, 16.0, 3)
-    s, kappa = path_plan.limit_samples(ToolPath((piece,)))
+    s, kappa = grid.limit_samples(ToolPath((piece,)))
     n = len(s)
     u = np.linspace(0.0, 2.0, n)
-    expected = path_plan._speed_and_kappa(even, u)[1]
+    expected = grid._speed_and_kappa(even, u)[1]
     assert np.array_equal(kappa, expected)
 
 

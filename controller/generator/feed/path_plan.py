@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 
 import numpy as np
 
+from controller.generator.feed.grid import PieceSamples, grid_step_mm, limit_samples
 from controller.generator.feed.limits import chord_error_feed_mm_s, corner_feed_mm_s
 from controller.generator.feed.planner import PlanResult, plan_feed
 from controller.generator.feed.profile import FeedProfile
@@ -18,16 +18,8 @@ from controller.generator.feed.stops import (
     model_stop_accel,
     stop_accel_at,
 )
-from controller.geometry.curves import Curve
-from controller.geometry.path import Path, Piece, PieceKind
+from controller.geometry.path import Path
 from controller.numeric import sorted_unique
-
-# Feed-limit samples per run, their spacing clamped: at most 35 um, under the 58 um a sample
-# period covers at full feed. Measured over 17 programs, 35 um planned 0.05 % less motion time
-# than 20 um (and fewer dynamics rounds), with half the samples on the long ones.
-GRID_POINTS = 5000
-MIN_SPACING_MM = 0.002
-MAX_SPACING_MM = 0.035
 
 
 class LimitPolicy(StrEnum):
@@ -69,201 +61,6 @@ class FeedOutput:
     profile: FeedProfile
     result: PlanResult
     stop_accels: tuple[float, ...] = ()  # the braking acceleration used into each stop
-
-
-# Keyed by the curve itself, not id(curve): an id is only unique among live objects, and a
-# blend freed between dynamics rounds would hand its id (and its samples) to the next one.
-PieceSamples = dict[tuple[Curve, float, float, int], tuple[np.ndarray, np.ndarray]]
-
-
-def _speed_and_kappa(curve: Curve, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    d = curve.evaluate(u, 2)
-    speed2 = np.einsum("ni,ni->n", d[1], d[1])
-    speed = np.sqrt(speed2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        kappa = np.abs(d[1, :, 0] * d[2, :, 1] - d[1, :, 1] * d[2, :, 0]) / (speed2 * speed)
-    return speed, np.where(np.isfinite(kappa), kappa, 0.0)  # |C'| = 0: nan or +inf
-
-
-def _trapezoid_s(u: np.ndarray, speed: np.ndarray, length_mm: float) -> np.ndarray:
-    """Arc length at u by the trapezoid rule on |C'|, rescaled to length_mm."""
-    s = np.concatenate(([0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(u))))
-    if s[-1] > 0:
-        s *= length_mm / s[-1]
-    return s
-
-
-def _piece_samples(p: Piece, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(local s, kappa) at n parameters of a piece; s by the trapezoid rule on |C'| rescaled to
-    the exact piece length (planning needs positions to ~1e-6 mm, not the table's 1e-12).
-    A NURBS piece that n even parameters do not resolve is sampled by knot span instead
-    (_knot_span_samples), with as many samples as its length needs."""
-    u = np.linspace(p.u0, p.u1, n)
-    speed, kappa = _speed_and_kappa(p.curve, u)
-    s = _trapezoid_s(u, speed, p.length_mm)
-    inner = _inner_knots(p)
-    if inner is not None and not _resolved(p, s, kappa, inner, n):
-        return _knot_span_samples(p, inner, p.length_mm / (n - 1))
-    return s, kappa
-
-
-# Uniform parameters resolve a NURBS piece when no two samples are further apart than this
-# many times their mean spacing (the programs of nc_programs/ and the benchmarks: at most 4.3)
-# and no knot's curvature, from either side, exceeds the samples' largest by this factor
-# (there: at most 0.95). A quadratic with knot spans 1 and 9999 put one sample on its first
-# 5 mm, and its 22 degree turn within 0.5 um of a knot between samples: passed at full feed,
-# the tool was 34.6 um off the path.
-SPARSE_GAP = 8.0
-KNOT_KAPPA = 1.5
-
-
-def _inner_knots(p: Piece) -> np.ndarray | None:
-    knots = getattr(p.curve, "knots", None)
-    if knots is None or p.kind != PieceKind.NURBS or not p.u1 > p.u0 or p.length_mm <= 0.0:
-        return None
-    return np.unique(knots[(knots > p.u0) & (knots < p.u1)])
-
-
-def _knot_kappa(curve: Curve, knots: np.ndarray) -> np.ndarray:
-    """Curvature at each knot, the larger of its two sides (it jumps where C'' does)."""
-    if not knots.size:
-        return np.zeros(0)
-    right = _speed_and_kappa(curve, knots)[1]
-    left = _speed_and_kappa(curve, np.nextafter(knots, -np.inf))[1]
-    return np.maximum(left, right)
-
-
-def _resolved(p: Piece, s: np.ndarray, kappa: np.ndarray, inner: np.ndarray, n: int) -> bool:
-    if float(np.diff(s).max()) > SPARSE_GAP * p.length_mm / (n - 1):
-        return False
-    peak = _knot_kappa(p.curve, inner)
-    return not (peak.size and float(peak.max()) > KNOT_KAPPA * float(kappa.max()))
-
-
-def _knot_span_samples(p: Piece, inner: np.ndarray,
-                       spacing_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """(local s, kappa) of a NURBS piece sampled span by span: each knot span gets even
-    parameters at about spacing_mm (at least 8 intervals), its arc length exact from the curve's
-    table, and each knot the larger curvature of its two sides."""
-    bounds = np.concatenate(([p.u0], inner, [p.u1]))
-    s_bounds = p.curve.s_of_u(bounds)
-    s_bounds = s_bounds - s_bounds[0]
-    span_mm = np.diff(s_bounds)
-    counts = np.maximum(np.ceil(span_mm / spacing_mm).astype(int), 8)
-    u_parts, s_parts, k_parts = [], [], []
-    for i, m in enumerate(counts.tolist()):
-        u = np.linspace(bounds[i], bounds[i + 1], m + 1)
-        speed, kappa = _speed_and_kappa(p.curve, u)
-        u_parts.append(u[:-1])
-        s_parts.append(s_bounds[i] + _trapezoid_s(u, speed, float(span_mm[i]))[:-1])
-        k_parts.append(kappa[:-1])
-    u = np.concatenate((*u_parts, bounds[-1:]))
-    s = np.concatenate((*s_parts, [float(s_bounds[-1])]))
-    kappa = np.concatenate((*k_parts, _speed_and_kappa(p.curve, bounds[-1:])[1]))
-    at_knot = np.searchsorted(u, inner)
-    kappa[at_knot] = np.maximum(kappa[at_knot], _knot_kappa(p.curve, inner))
-    s *= p.length_mm / s[-1] if s[-1] > 0 else 1.0
-    return s, kappa
-
-
-def _batches(todo: list[tuple[Piece, int]], cache: PieceSamples
-             ) -> Iterator[tuple[int, list[Piece], np.ndarray]]:
-    """The pieces to sample grouped by sample count, each group with its parameters (one row
-    per piece); a group with a zero parameter step is sampled piece by piece into the cache
-    instead (linspace treats a zero step apart)."""
-    by_count: dict[int, list[Piece]] = {}
-    for p, n in todo:
-        by_count.setdefault(n, []).append(p)
-    for n, ps in by_count.items():
-        u0, u1 = np.array([p.u0 for p in ps]), np.array([p.u1 for p in ps])
-        if np.any(u1 == u0):
-            for p in ps:
-                cache[(p.curve, p.u0, p.u1, n)] = _piece_samples(p, n)
-            continue
-        yield n, ps, np.linspace(u0, u1, n, axis=1)
-
-
-def _store(ps: list[Piece], n: int, u: np.ndarray, speed: np.ndarray, kappa: np.ndarray,
-           cache: PieceSamples) -> None:
-    """_piece_samples' trapezoids of |C'| on each row, rescaled to its piece's length, into
-    the cache with the row's curvature."""
-    s = np.zeros(u.shape)
-    np.cumsum(0.5 * (speed[:, 1:] + speed[:, :-1]) * np.diff(u, axis=1), axis=1, out=s[:, 1:])
-    length = np.array([p.length_mm for p in ps])
-    last = s[:, -1].copy()
-    scale = length / np.where(last > 0, last, 1.0)
-    s[last > 0] *= scale[last > 0, None]
-    for p, row_s, row_k in zip(ps, s, np.broadcast_to(kappa, u.shape), strict=True):
-        cache[(p.curve, p.u0, p.u1, n)] = (row_s, row_k)
-
-
-def _line_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
-    """_piece_samples of many LINE pieces at once, into the cache: the same operations on
-    arrays of pieces with the same count (curvature 0; the trapezoids of a constant speed,
-    then rescaled to the piece length), so the same numbers, without numpy's cost per call
-    on every line of a G1 program."""
-    for n, ps, u in _batches(todo, cache):
-        dx = np.array([p.curve.p1[0] - p.curve.p0[0] for p in ps])  # type: ignore[attr-defined]
-        dy = np.array([p.curve.p1[1] - p.curve.p0[1] for p in ps])  # type: ignore[attr-defined]
-        speed = np.broadcast_to(np.sqrt(dx * dx + dy * dy)[:, None], u.shape)
-        _store(ps, n, u, speed, np.zeros(n), cache)
-
-
-def _ph_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
-    """_piece_samples of many PH pieces at once, into the cache: PhQuintic.evaluate's
-    operations (w, w^2, 2 w w') on an array of pieces with the same count, then the same
-    speed, curvature and trapezoids, so the same numbers (tests/generator/test_plan_caches.py
-    compares them bit for bit); a G1 program has a PH blend at every joint."""
-    for n, ps, x in _batches(todo, cache):
-        w0, w1, w2 = (np.array([getattr(p.curve, k) for p in ps])[:, None]
-                      for k in ("w0", "w1", "w2"))
-        w = w0 * (1 - x) ** 2 + 2 * w1 * (1 - x) * x + w2 * x * x
-        d1 = w ** 2
-        d2 = 2 * w * (2 * ((w1 - w0) * (1 - x) + (w2 - w1) * x))
-        dx, dy, ddx, ddy = d1.real, d1.imag, d2.real, d2.imag
-        speed2 = dx * dx + dy * dy
-        speed = np.sqrt(speed2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            kappa = np.abs(dx * ddy - dy * ddx) / (speed2 * speed)
-        _store(ps, n, x, speed, np.where(np.isfinite(kappa), kappa, 0.0), cache)
-
-
-def grid_step_mm(path: Path) -> float:
-    """Target spacing of the feed-limit grid (each piece's own step is at most this)."""
-    return float(np.clip(path.length_mm / GRID_POINTS, MIN_SPACING_MM, MAX_SPACING_MM))
-
-
-def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(s, kappa) on a fine grid, each piece sampled in its own parameter (no inversion needed).
-
-    At a joint both sides are sampled and the larger curvature is kept (curvature may jump)."""
-    spacing = grid_step_mm(path)
-    cache = {} if cache is None else cache
-    pieces = path.pieces
-    counts = [max(math.ceil(p.length_mm / spacing), 8) + 1 for p in pieces]
-    keys = [(p.curve, p.u0, p.u1, n) for p, n in zip(pieces, counts, strict=True)]
-    missing = [i for i, key in enumerate(keys) if key not in cache]
-    for kind, batch in ((PieceKind.LINE, _line_samples), (PieceKind.PH, _ph_samples)):
-        batch([(pieces[i], counts[i]) for i in missing if pieces[i].kind == kind], cache)
-    for i in missing:
-        if keys[i] not in cache:
-            cache[keys[i]] = _piece_samples(pieces[i], counts[i])
-    rows = [cache[key] for key in keys]
-    counts = [len(r[0]) for r in rows]  # a NURBS piece sampled by knot span has its own count
-    # Each piece's samples moved to where it starts on the path, all at once (p.s0_mm + s).
-    s = np.repeat([p.s0_mm for p in pieces], counts) + np.concatenate([r[0] for r in rows])
-    kappa = np.concatenate([r[1] for r in rows])
-    # The pieces follow each other: each one's first sample is the previous one's last point.
-    # Keep the larger curvature there, drop the duplicate, then anything not strictly ahead.
-    first = np.cumsum(counts)[:-1]
-    kappa[first - 1] = np.maximum(kappa[first - 1], kappa[first])
-    s, kappa = np.delete(s, first), np.delete(kappa, first)
-    if np.all(np.diff(s) > 1e-12):
-        return s, kappa
-    order = np.lexsort((-kappa, s))  # a degenerate piece: by s, larger curvature first
-    s, kappa = s[order], kappa[order]
-    keep = np.r_[True, np.diff(s) > 1e-12]
-    return s[keep], kappa[keep]
 
 
 def _scale(s: np.ndarray, inp: FeedInput) -> np.ndarray:
