@@ -8,6 +8,7 @@ from collections.abc import Callable
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.errors import DriveError
 from controller.generator.dynamics.precompensation import Precompensator
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory
 from controller.motion.pacing import VirtualPacer, WallPacer
@@ -25,7 +26,7 @@ from controller.motion.types import (
     Outcome,
 )
 from drivers.base import CardStatus, Drive, Feedback
-from drivers.errors import LostCommunicationError
+from drivers.errors import LostCommunicationError, UnderrunError
 
 SETTLE_HOLD_S = 0.02  # encoder equal to the step counter for this long = settled
 
@@ -324,10 +325,25 @@ class MotionController:
             self.last_mm = pos[-1].copy()
             self.state = MotionState.RUNNING if self.state is MotionState.WAITING else self.state
         if len(pos) or end or pause:
-            self.drive.write_frames(self.pulses.frames(cmd), end_of_stream=end or pause)
+            counts = self.pulses.counts
+            try:
+                self.drive.write_frames(self.pulses.frames(cmd), end_of_stream=end or pause)
+            except DriveError as exc:
+                self.pulses.counts = counts  # these frames were never queued
+                self._write_failed(exc)
+                return
         self.sent += len(pos)
         self.sent_eos = self.sent_eos or end
         self.pausing = self.pausing or pause
+
+    def _write_failed(self, exc: DriveError) -> None:
+        if isinstance(exc, LostCommunicationError):
+            self.position_known = False
+        # The card halted since this cycle read its status (an underrun after a stall of
+        # the host, an amplifier fault): as a halt read at the cycle's start, not an
+        # exception out of the loop with no result and no position.
+        self.underruns += int(isinstance(exc, UnderrunError))
+        self._finish(Outcome.FAULT, str(exc))
 
     def _pause_step(self, level: int) -> None:
         """At a program pause or a hold: PAUSED/HELD once the card has run out, RUNNING again
@@ -340,6 +356,8 @@ class MotionController:
             return
         zero_override_lifted = (self.state is MotionState.HELD and not self.holding
                                 and self.override_pct > 0.0)
+        if not (self._resume_requested or zero_override_lifted):
+            self.pacer.idle()
         if self._resume_requested or zero_override_lifted:
             self._resume_requested = False
             self.pausing = False

@@ -39,6 +39,9 @@ class WallPacer:
     def elapsed_s(self) -> float:
         return time.monotonic() - self._start_s
 
+    def idle(self) -> None:
+        """The machine waits for the operator (M0, a hold): wall-clock cycles already sleep."""
+
 
 class VirtualPacer:
     """Each wait() advances simulated time by one cycle by calling `advance(frames)`."""
@@ -68,3 +71,11 @@ class VirtualPacer:
 
     def elapsed_s(self) -> float:
         return self._cycles * self.cycle_s
+
+    def idle(self) -> None:
+        """The machine waits for the operator (M0, a hold): nothing to simulate, so the cycle
+        gives its core back (it spun at 94 % of one while waiting)."""
+        time.sleep(IDLE_SLEEP_S)
+
+
+IDLE_SLEEP_S = 0.001

@@ -36,6 +36,10 @@ class DaemonUnavailable(CncError):
     """No daemon answers on the socket (absent, stopped, or not allowed to connect)."""
 
 
+class NoDaemon(DaemonUnavailable):
+    """Nothing could connect at all: no request reached a daemon, so nothing moved."""
+
+
 class DaemonError(CncError):
     """The daemon refused a request; `code` is its reason (busy, estop, unauthorised...)."""
 
@@ -55,7 +59,7 @@ class DaemonClient:
             self.sock.connect(path)
         except OSError as exc:
             self.sock.close()
-            raise DaemonUnavailable(f"no daemon on {path}: {exc.strerror or exc}") from None
+            raise NoDaemon(f"no daemon on {path}: {exc.strerror or exc}") from None
         self._file = self.sock.makefile("rb")
         self._next_id = 0
 

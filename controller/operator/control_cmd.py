@@ -7,6 +7,7 @@ import argparse
 import json
 import os
 import re
+import signal
 import sys
 import threading
 import time
@@ -19,6 +20,7 @@ from controller.operator.client import (
     default_socket_path,
     socket_argument,
 )
+from controller.operator.run_exit import STOP_SIGNALS
 from controller.operator.run_remote import RemoteOperator
 
 EXIT_REFUSED = 2
@@ -188,7 +190,14 @@ def _stop_on_enter(socket_path: str) -> None:
     threading.Thread(target=wait, daemon=True).start()
 
 
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
 def _follow_job(client: DaemonClient) -> int:
+    """Follow a jog to its end; Ctrl-C, SIGTERM or SIGHUP (a closed terminal) stops it along
+    the path (before, the last two left a continuous jog running to its time-out)."""
+    previous = {sig: signal.signal(sig, _interrupt) for sig in STOP_SIGNALS}
     try:
         for event in client.messages():
             kind = event.get("event")
@@ -200,6 +209,9 @@ def _follow_job(client: DaemonClient) -> int:
     except KeyboardInterrupt:
         RemoteOperator(client.path).request_abort()
         return _follow_job(client)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     return EXIT_REFUSED
 
 

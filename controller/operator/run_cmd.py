@@ -11,17 +11,18 @@ from typing import Any
 
 from controller.config import load_config
 from controller.errors import CncError, ConfigError, NcError, OffsetsError
-from controller.motion.types import MotionProgress, MotionState
+from controller.motion.types import MotionProgress, MotionState, Outcome
 from controller.offsets import ProgramOffsets, load_offsets
 from controller.operator.client import (
     DaemonUnavailable,
+    NoDaemon,
     daemon_answers,
     default_socket_path,
     socket_argument,
 )
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
-from controller.operator.run_from_line import Sequence, run_from_line
+from controller.operator.run_from_line import HomingAborted, Sequence, run_from_line
 from controller.operator.run_keys import KeyControl, read_keys, stdin_fd
 from controller.operator.run_remote import run_on_daemon
 from controller.operator.run_view import JsonView, PlainView, ProgramLines, RichView
@@ -103,10 +104,11 @@ def run(args: argparse.Namespace) -> int:
         view = _view(args, args.program)
         try:
             return run_on_daemon(args, socket_path, view)
-        except DaemonUnavailable as exc:
+        except DaemonUnavailable as exc:  # no daemon at all: rejected; lost mid-job: a fault
             view.close()
-            print(f"cncctl: {exc}", file=sys.stderr)
-            return 3
+            print(f"cncctl: {exc}" + (" (nothing moved)" if isinstance(exc, NoDaemon) else ""),
+                  file=sys.stderr)
+            return EXIT_REJECTED if isinstance(exc, NoDaemon) else 3
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
         offsets = load_offsets(args.offsets, missing_ok=False) \
@@ -140,7 +142,13 @@ def run(args: argparse.Namespace) -> int:
     if not shared_drive:
         runtime.options = options
     fd = stdin_fd()
-    restore_terminal = read_keys(fd, keys.key) if fd is not None else (lambda: None)
+    restore_terminal: list[Any] = [lambda: None]
+
+    def start_keys() -> None:
+        if fd is not None:
+            restore_terminal[0] = read_keys(fd, keys.key)
+    if not (shared_drive and args.from_line is not None and not args.yes):
+        start_keys()  # else once the approach is confirmed (run_from_line)
 
     def on_stop_signal(signum: int, frame: Any) -> None:
         # Never a silent kill: decelerate along the path, then exit 4. SIGTERM is what systemd
@@ -153,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
         if not shared_drive:
             result = runtime.run()
         else:
-            result = run_from_line(args, config, offsets, options, runtime)
+            result = run_from_line(args, config, offsets, options, runtime, start_keys)
             if result is None:
                 view.close()
                 print("cncctl: not confirmed: nothing moved", file=sys.stderr)
@@ -162,6 +170,10 @@ def run(args: argparse.Namespace) -> int:
         view.close()
         print(f"cncctl: {exc} (nothing moved)", file=sys.stderr)
         return EXIT_REJECTED
+    except HomingAborted as exc:
+        view.close()
+        print(f"cncctl: {exc}; the program did not start", file=sys.stderr)
+        return EXIT_CODES[Outcome.ABORTED]
     except NcError as exc:
         view.close()
         print(exc.format(), file=sys.stderr)
@@ -171,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"cncctl: {exc}", file=sys.stderr)
         return 3
     finally:
-        restore_terminal()
+        restore_terminal[0]()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     view.close()

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -15,17 +17,25 @@ from controller.motion.types import MotionResult, Outcome
 from controller.offsets import OffsetTable
 from controller.operator.check_cmd import check_program
 from controller.operator.from_line import approach_program
+from controller.operator.run_exit import STOP_SIGNALS
 from controller.runtime.processes import Runtime, RuntimeOptions, build_drive, open_drive
 from drivers.base import Drive
+from drivers.errors import HomingError
 from drivers.homing import homing_groups
 
 
+class HomingAborted(Exception):
+    """The operator stopped the run (Ctrl-C, SIGTERM, SIGHUP) while the axes were homing."""
+
+
 class Sequence:
-    """The runtime now running (approach, then program): operator requests go to it."""
+    """The runtime now running (approach, then program): operator requests go to it, and an
+    abort asked before it (during the check, the homing or the question) is kept for it."""
 
     def __init__(self) -> None:
         self.current: Runtime | None = None
         self.abort: str | None = None
+        self.drive: Drive | None = None  # open for the whole sequence: homing can be stopped
 
     def request_hold(self) -> None:
         if self.current is not None:
@@ -41,31 +51,54 @@ class Sequence:
 
     def request_abort(self, message: str) -> None:
         self.abort = message
+        if self.drive is not None:
+            self.drive.abort_homing(message)  # a no-op unless homing
         if self.current is not None:
             self.current.request_abort(message)
 
 
-def confirm(args: argparse.Namespace, text: str) -> bool:
-    """The operator confirms the approach (Enter), unless --yes."""
+def _cancel(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def confirm(args: argparse.Namespace, text: str,
+            aborted: Callable[[], bool] = lambda: False) -> bool:
+    """The operator confirms the approach (Enter), unless --yes. Ctrl-C, SIGTERM and SIGHUP
+    cancel it: the run's own handlers only ask for an abort (aborted() tells, for one that
+    came just before the question), which would leave the question waiting and, once
+    answered, the approach moving."""
     print(text, file=sys.stderr, flush=True)
     if args.yes:
         return True
-    print("press Enter to move there, Ctrl-C to cancel", file=sys.stderr, flush=True)
+    previous: dict[int, Any] = {}
     try:
+        for sig in STOP_SIGNALS:  # inside the try: a signal as soon as one is in place
+            previous[sig] = signal.signal(sig, _cancel)
+        if aborted():
+            return False
+        print("press Enter to move there, Ctrl-C to cancel", file=sys.stderr, flush=True)
         return sys.stdin.readline() != ""
     except (KeyboardInterrupt, OSError):
         return False
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def run_from_line(args: argparse.Namespace, config: MachineConfig, offsets: OffsetTable | None,
-                  options: RuntimeOptions, seq: Sequence) -> MotionResult | None:
+                  options: RuntimeOptions, seq: Sequence,
+                  on_confirmed: Callable[[], None] = lambda: None) -> MotionResult | None:
     """On one open drive: homing first (--home), then the program, from line N after an
-    approach (--from-line). None if the operator declined the approach (nothing moved)."""
+    approach (--from-line). None if the operator declined the approach (nothing moved);
+    on_confirmed runs once it is confirmed (the keys are read from then on, not before: a
+    reader of stdin would take the Enter the question waits for). An abort asked before a
+    runtime starts is passed to it, which then stops at once: nothing more moves."""
     drive = build_drive(config, options.virtual_time)
     open_drive(drive)  # a drive that cannot be brought up: exit 2, nothing moved
+    seq.drive = drive
     try:
         if getattr(args, "home", False):
-            home_all(drive, config)
+            _home_all(drive, config, seq)
         start = drive.commanded_xyz_mm()
         if args.from_line is None:
             check_program(args.program, config, start_mm=start, offsets=offsets,
@@ -76,9 +109,11 @@ def run_from_line(args: argparse.Namespace, config: MachineConfig, offsets: Offs
         approach = approach_program(config, start, at.position_mm)
         where = " ".join(f"{n}{v:.3f}" for n, v in zip("XYZ", at.position_mm, strict=False))
         modes = f"{at.system} {at.distance_mode} F{at.feed_mm_s * 60:g}"
-        if not confirm(args, f"cncctl: run from line {args.from_line} ({modes}): a straight "
-                             f"approach to machine {where} first"):
+        question = (f"cncctl: run from line {args.from_line} ({modes}): a straight approach "
+                    f"to machine {where} first")
+        if seq.abort is None and not confirm(args, question, lambda: seq.abort is not None):
             return None
+        on_confirmed()
         shared = replace(options, drive=drive, keep_drive_open=True)
         if approach:
             path = approach_file(approach)
@@ -91,7 +126,17 @@ def run_from_line(args: argparse.Namespace, config: MachineConfig, offsets: Offs
         return _run(seq, args.program, config, replace(shared, start_mm=start, offsets=offsets,
                                                        from_line=args.from_line))
     finally:
+        seq.drive = None
         drive.close()
+
+
+def _home_all(drive: Drive, config: MachineConfig, seq: Sequence) -> None:
+    try:
+        home_all(drive, config)
+    except HomingError as exc:
+        if seq.abort is not None:
+            raise HomingAborted(f"{seq.abort} while homing: {exc}") from exc
+        raise
 
 
 def home_all(drive: Drive, config: MachineConfig) -> None:

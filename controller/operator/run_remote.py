@@ -10,7 +10,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from controller.operator.client import DaemonClient, DaemonError, DaemonUnavailable, daemon_answers
+from controller.operator.client import (
+    DaemonClient,
+    DaemonError,
+    DaemonUnavailable,
+    NoDaemon,
+    daemon_answers,
+)
 from controller.operator.daemon.protocol import MAX_PROGRAM_BYTES
 from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
 from controller.operator.run_from_line import confirm
@@ -30,7 +36,7 @@ def run_on_daemon(args: argparse.Namespace, socket_path: str, view: Any) -> int:
     from_line = getattr(args, "from_line", None)
     if from_line is not None:
         if not daemon_answers(socket_path):  # no question about a motion that cannot happen
-            raise DaemonUnavailable(f"no daemon answers on {socket_path}")
+            raise NoDaemon(f"no daemon answers on {socket_path}")
         if not confirm(args, f"cncctl: run from line {from_line}: the machine first moves in "
                              "a straight line to where the program stands there"):
             print("cncctl: not confirmed: nothing moved", file=sys.stderr)

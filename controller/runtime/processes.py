@@ -125,6 +125,9 @@ class Runtime:
         self.settings = MotionSettings.from_config(config, **self.options.settings)
         self.controller: MotionController | None = None
         self.procs: dict[str, Any] = {}
+        # An abort asked before run() starts the controller (a signal during the check or a
+        # homing before it): the controller is told at once, and nothing moves.
+        self._abort_early: str | None = None
 
     def _generate_fn(self) -> GenerateFn:
         if self.options.optional_stop and self.options.generate_fn is reference_source:
@@ -157,7 +160,6 @@ class Runtime:
 
     def run(self) -> MotionResult:
         t0_s = time.monotonic()
-        self._abort_early: str | None = None
         n_cols = len(self.config.axes) + 2
         ring = RefRing.create(int(self.options.ring_seconds / self.config.sample_period_s), n_cols)
         messages = _Messages(_CTX.Queue())

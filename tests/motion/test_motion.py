@@ -25,6 +25,7 @@ from controller.motion.types import (
     MotionState,
     Outcome,
 )
+from drivers.base import CardStatus
 
 CFG = xy_config()
 T = CFG.sample_period_s
@@ -165,6 +166,25 @@ def test_stalled_host_underruns_and_the_card_latches() -> None:
     result, card, _, _ = run(list(circle_chunks()), inject=stall)
     assert result.outcome is Outcome.FAULT and "underrun" in result.message
     assert result.underruns == 1 and result.late_cycles >= 1
+    accounted(result, card)
+
+
+def test_a_card_halting_between_status_and_write_is_a_fault_with_a_result() -> None:
+    """The card latches (here an underrun, as after the host stalled) after the cycle read its
+    status and before it writes: the write raised UnderrunError out of the loop, and a run
+    ended with no result and no position (1 in 12 stalls from outside, a cncd job's journal
+    left RUNNING). Now it is the same fault as one read at the cycle's start."""
+    def halt_at_next_write(card: object, ctrl: MotionController, pacer: VirtualPacer) -> None:
+        original = card._send_frames  # type: ignore[attr-defined]
+
+        def send(frames: np.ndarray, end_of_stream: bool) -> None:
+            card._latch(CardStatus.UNDERRUN, "card FIFO underrun: frames ran out")  # type: ignore[attr-defined]
+            card._send_frames = original  # type: ignore[attr-defined]
+            original(frames, end_of_stream)
+        card._send_frames = send  # type: ignore[attr-defined]
+    result, card, _, _ = run(list(circle_chunks()), inject=halt_at_next_write)
+    assert result.outcome is Outcome.FAULT and "underrun" in result.message
+    assert result.position_known and result.underruns == 1
     accounted(result, card)
 
 

@@ -78,7 +78,9 @@ def test_from_line_asks_nothing_when_no_daemon_answers(
     code = main(["run", arcs, "--from-line", "2", "--socket",
                  str(tmp_path / "d.sock")])
     err = capsys.readouterr().err
-    assert code == 3 and "no daemon" in err and "first moves" not in err
+    # No daemon: nothing moved, so rejected (2), as the README's exit codes say (was 3).
+    assert code == 2 and "no daemon" in err and "nothing moved" in err
+    assert "first moves" not in err
 
 
 def test_a_lost_position_is_said_plainly_in_the_text_summary(

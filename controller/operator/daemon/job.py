@@ -30,6 +30,7 @@ class Job:
     from_line: int | None = None  # run from this line, after an approach move
     manual_move: bool = False  # a jog: machine coordinates, no offsets
     approach_mm: tuple[float, float, float] | None = None  # where line from_line starts
+    approaching: bool = False  # the approach is moving (its lines are not the program's)
     done: threading.Event = field(default_factory=threading.Event)
 
 

@@ -46,6 +46,20 @@ class State(enum.StrEnum):
     FAULT = "FAULT"
 
 
+def _remove_job_files(state_dir: Path) -> None:
+    """The program copies a crashed daemon left (job-*/program.nc, approach-*.nc: up to
+    64 MiB each, never removed before); this daemon owns the state directory now."""
+    for path in state_dir.glob("job-*"):
+        for inner in path.glob("*") if path.is_dir() else ():
+            inner.unlink(missing_ok=True)
+        try:
+            path.rmdir() if path.is_dir() else None
+        except OSError:
+            pass
+    for path in state_dir.glob("approach-*.nc"):
+        path.unlink(missing_ok=True)
+
+
 class Machine(OperatorCommands):
     """All state changes go through here, under one lock; jobs run in a thread of their own."""
 
@@ -64,6 +78,7 @@ class Machine(OperatorCommands):
         self.journal = Journal(state_dir)
         self.load_offsets()
         self.last_job = self.journal.after_restart()
+        _remove_job_files(state_dir)
         threading.Thread(target=self._journal_loop, name="journal", daemon=True).start()
         if self.last_job.get("state") == "INTERRUPTED":
             log.log(WARNING, f"the last job {self.last_job.get('program')!r} was interrupted "
@@ -337,16 +352,26 @@ class Machine(OperatorCommands):
             fh.write(text)
         try:
             with self._lock:
+                if job.cancel is not None:  # aborted (or e-stop) while checking: no approach
+                    job.emit({"event": "aborted", "message": job.cancel})
+                    self._finish(job, None, None)
+                    return False
                 job.start_mm = start_mm
                 job.runtime = Runtime(approach, self.config, self._options(job))
+                # The journal names the program and the line to run from again, not the
+                # approach's own lines (nor the job before, as it did).
+                job.approaching = True
+                self.journal.start(job.name, job.sha256, job.lines)
+                self.journal.update(last_line=job.from_line)
                 self._set_state(State.RUNNING)
             self.log.log(NOTICE, f"job {job.number}: approach to line {job.from_line}")
             result = job.runtime.run()
         finally:
+            job.approaching = False
             os.unlink(approach)
         if result.outcome is Outcome.DONE:
             return True
-        self._record(job, result)
+        self._record(job, result, line=job.from_line)
         return False
 
     def _options(self, job: Job) -> RuntimeOptions:
@@ -363,13 +388,16 @@ class Machine(OperatorCommands):
         return replace(base, drive=self.drive, keep_drive_open=True, on_progress=progress,
                        start_mm=job.start_mm, optional_stop=job.optional_stop)
 
-    def _record(self, job: Job, result: MotionResult) -> None:
+    def _record(self, job: Job, result: MotionResult, line: int | None = None) -> None:
+        """The job's result into the journal, the log and its connection; line: the program
+        line to record instead of the result's (an approach's lines are not the program's)."""
         summary = result_summary(result)
         if result.extra.get("realtime") == "SCHED_OTHER":
             self.log.warn_once("rt", "the motion thread runs without SCHED_FIFO (no "
                                      "LimitRTPRIO or CAP_SYS_NICE): late cycles are likelier")
         position = summary["final_position_mm"] if result.position_known else None
-        self.journal.update(state=result.outcome.value.upper(), last_line=result.line,
+        self.journal.update(state=result.outcome.value.upper(),
+                            last_line=result.line if line is None else line,
                             position_mm=position, fault=result.message or None)
         self.last_job = dict(self.journal.entry)
         if result.outcome is Outcome.FAULT:
@@ -402,7 +430,7 @@ class Machine(OperatorCommands):
             time.sleep(0.05)
             job = self.job
             p = job.progress if job is not None else None
-            if p is None or self.state is not State.RUNNING or p.line <= 0:
+            if p is None or self.state is not State.RUNNING or p.line <= 0 or job.approaching:
                 continue
             now_s = time.monotonic()
             first = written is None or written[0] != job.number
