@@ -201,3 +201,17 @@ def test_a_stretch_after_a_near_stop_runs_at_the_feed() -> None:
     _, pos, v, _ = _dense(plan.profile)
     assert v[(pos > 6.0) & (pos < 14.0)].min() == pytest.approx(16.666666666666668, rel=1e-9)
     assert plan.profile.duration_s < 1.2
+
+
+def test_a_start_a_rounding_above_the_limit_is_planned() -> None:
+    """A window continues the previous one's cruise, which may lie a rounding above vlim (as
+    every plan may, by LIMIT_TOLERANCE): 58.33333333333334 mm/s at a cap of
+    58.333333333333336 was refused ("start speed above the limit") and a valid program
+    failed. Beyond the tolerance it is still refused."""
+    s = np.linspace(0.0, 15.5, 5001)
+    vlim = np.full(s.shape, 3500.0 / 60.0)
+    v0 = float(np.nextafter(vlim[0], np.inf))
+    plan = plan_feed(s, vlim, 2450.0, v0, 0.0, grid_step_mm=0.0031)
+    assert plan.result is PlanResult.OK
+    too_fast = plan_feed(s, vlim, 2450.0, vlim[0] * (1.0 + 1e-6), 0.0)
+    assert too_fast.result is PlanResult.START_TOO_FAST

@@ -196,3 +196,21 @@ def test_a_slow_window_plans_again_only_its_last_seconds(tmp_path: Path) -> None
     # Once the circle is behind: the new blocks and a tail (at least 5 % of a window's path).
     assert max(planned_s[len(planned_s) // 2:]) < WINDOW_NOMINAL_S + 15.0
     assert np.hypot(*(ref[-1] - [90.0, 0.0])) < 1e-9
+
+
+def test_a_window_continuing_a_cruise_at_the_feed_cap_plans(tmp_path: Path) -> None:
+    """Found by a black-box hunt: feeds over the machine's cap, a window continued at the cap
+    plus a rounding, and `simulate` failed ("feed planning failed: start speed above the
+    limit") on a program `check` had passed."""
+    prog = tmp_path / "caps.nc"
+    prog.write_text("\n".join([
+        "F1335.8", "G1 X-37.8125 Y36.5488", "F3388.7", "G1 X-61.1986 Y64.9995", "F1432.7",
+        "G1 X-82.7123 Y81.7306", "F4918.6", "G1 X-97.0873 Y119.2896", "G1 X-125.6352 Y89.4158",
+        "F535.6", "G1 X-123.3981 Y81.3115", "G1 X-117.5663 Y74.5587", "F1227.7",
+        "G1 X-79.0765 Y106.7405", "F10.0", "G1 X-77.2054 Y104.3224", "F50.0",
+        "G1 X-76.6816 Y103.6687", "F4533.5", "G1 X-79.3771 Y101.9638", "G1 X-111.6516 Y81.5625",
+        "M2", ""]), encoding="utf-8")
+    rep = report(simulate(read_program(str(prog), CFG), CFG, "ph-lookahead"), "caps",
+                 "ph-lookahead", CFG)
+    assert rep["contour_limit_met"]
+    assert rep["max_feed_mm_s"] <= CFG.interpolator.max_feed_mm_s * (1 + 1e-9)

@@ -250,9 +250,13 @@ def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanR
         return PlanResult.INVALID_INPUT
     if np.any(~np.isfinite(vlim)) or np.any(vlim <= 0.0) or v0 < 0.0 or v1 < 0.0:
         return PlanResult.INVALID_INPUT
-    if v0 > vlim[0]:
+    # Within the tolerance every plan keeps to: a look-ahead window continues the cruise of
+    # the one before, which may lie that far above vlim (58.33333333333334 mm/s at a cap of
+    # 58.333333333333336 failed a valid program: "start speed above the limit").
+    tol = LIMIT_TOLERANCE * float(vlim.max())
+    if v0 > vlim[0] + tol:
         return PlanResult.START_TOO_FAST
-    if v1 > vlim[-1]:
+    if v1 > vlim[-1] + tol:
         return PlanResult.END_TOO_FAST
     return None
 
@@ -336,9 +340,10 @@ def _flatten(nodes: _Nodes, k: np.ndarray, curve: LimitCurve) -> PlanResult | No
     if len(k) == 0:
         return None
     m = curve.span_min(nodes.s[k], nodes.s[k + 1])
-    if np.any(m[k == 0] < nodes.cap[0]):
+    slack = LIMIT_TOLERANCE * float(curve.vlim_mm_s.max())  # as _input_error allows the ends
+    if np.any(m[k == 0] < nodes.cap[0] - slack):
         return PlanResult.START_TOO_FAST  # the pinned start speed cannot stay under vlim
-    if np.any(m[k + 1 == len(nodes.s) - 1] < nodes.cap[-1]):
+    if np.any(m[k + 1 == len(nodes.s) - 1] < nodes.cap[-1] - slack):
         return PlanResult.END_TOO_FAST
     np.minimum.at(nodes.cap, k, m)
     np.minimum.at(nodes.cap, k + 1, m)
