@@ -141,3 +141,13 @@ class ContourStats:
         n = max(1, self.n)
         return {"max": self.max_abs_mm * 1e3, "rms": float(np.sqrt(self.sum_sq_mm2 / n)) * 1e3,
                 "mean": self.sum_abs_mm / n * 1e3}
+
+
+def start_gap(first_mm: np.ndarray, start_counts: np.ndarray, pulse_mm: np.ndarray) -> str | None:
+    """Why a program's first reference point cannot start here (more than a pulse from where
+    the machine stands: a jump at start), or None."""
+    here_mm = start_counts * pulse_mm
+    if np.all(np.abs(first_mm - here_mm) <= pulse_mm):
+        return None
+    return (f"reference starts at {first_mm.tolist()} mm but the machine is at "
+            f"{here_mm.tolist()} mm")

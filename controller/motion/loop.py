@@ -10,11 +10,12 @@ import numpy as np
 from controller.config import MachineConfig
 from controller.errors import DriveError
 from controller.generator.dynamics.precompensation import Precompensator
-from controller.motion.checks import ContourStats, FerrorCheck, RefHistory
+from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter
 from controller.motion.recall import SendJournal, Sent, retimer_state, take_back
-from controller.motion.result import build_result
+from controller.motion.requests import OperatorRequests
+from controller.motion.result import build_progress, build_result
 from controller.motion.retime import Retimer
 from controller.motion.source import RefSource, SourceState, pause_index, row_lines
 from controller.motion.stopping import stop_along_path, with_lead_settled
@@ -31,7 +32,7 @@ from drivers.errors import LostCommunicationError, UnderrunError
 SETTLE_HOLD_S = 0.02  # encoder equal to the step counter for this long = settled
 
 
-class MotionController:
+class MotionController(OperatorRequests):
     """One instance runs one program: run() returns a MotionResult, never raises on faults.
 
     Every fault ends in a controlled stop (quintic decel along the buffered path, appended
@@ -50,45 +51,7 @@ class MotionController:
         self.n = len(config.axes)
         self.period_s = config.sample_period_s
         self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
-        self._abort_message: str | None = None
-        self._resume_requested = False
-        self._hold_requested = False
-        self.override_pct = 100.0
         self.retimer = Retimer(config)
-
-    def request_resume(self) -> None:
-        """Operator: continue after a program pause or a feed hold (a flag read by the loop)."""
-        self._resume_requested = True
-
-    def request_hold(self) -> None:
-        """Operator: feed hold, a planned deceleration along the path to a standstill."""
-        self._hold_requested = True
-
-    def set_override_off_lines(self, spans: list[list[int]]) -> None:
-        """M49 ... M48 stretches [first, last] (last -1: to the end): lines run at 100 %."""
-        self.override_off = [(a, b if b >= 0 else 1 << 62) for a, b in spans]
-
-    override_off: list[tuple[int, int]] = []
-    work_origin_mm: tuple[float, ...] = ()  # for the progress reports' work position
-
-    def _override_allowed(self) -> bool:
-        if not self.override_off:
-            return True
-        line = int(row_lines(self.held[:1])[0]) if len(self.held) else self.line
-        return not any(a <= line < b for a, b in self.override_off)
-
-    def set_feed_override(self, percent: float) -> None:
-        """Operator: feed override in % of the planned feed, 0-150 (0 holds; above 100 only
-        as far as the rows ahead allow within Vmax, Amax and the contour limit)."""
-        self.override_pct = min(max(float(percent), 0.0), 150.0)
-
-    def request_abort(self, message: str = "aborted by operator") -> None:
-        """Operator stop (SIGINT handler safe: only sets a flag read by the loop)."""
-        self._abort_message = message
-
-    @property
-    def abort_requested(self) -> bool:
-        return self._abort_message is not None
 
     def _frames(self, ms: float) -> int:
         return max(1, math.ceil(ms * 1e-3 / self.period_s - 1e-9))
@@ -283,12 +246,10 @@ class MotionController:
         """The first reference point must be where the machine is (no jump at start)."""
         if self.sent or len(self.held):
             return True
-        gap = np.abs(rows[0, : self.n] - self.start_cmd * self.pulse_mm)
-        if np.all(gap <= self.pulse_mm):
-            return True
-        self._finish(Outcome.FAULT, f"reference starts at {rows[0, :self.n].tolist()} mm but "
-                     f"the machine is at {(self.start_cmd * self.pulse_mm).tolist()} mm")
-        return False
+        problem = start_gap(rows[0, : self.n], self.start_cmd, self.pulse_mm)
+        if problem is not None:
+            self._finish(Outcome.FAULT, problem)
+        return problem is None
 
     def _send(self, rows: np.ndarray, end: bool, pause: bool = False) -> None:
         """Wanted rows (position, feed, line) out as they are or pre-compensated, a stream's end
@@ -421,18 +382,7 @@ class MotionController:
                                         and self.state is not MotionState.FINISHED):
             return
         self.next_progress_s = now_s + self.settings.progress_every_s
-        total = self.source.total_rows()
-        idx = (self.executed - 1) % self.hist.capacity
-        self.on_progress(MotionProgress(
-            state=self.state, line=self.line,
-            feed_mm_s=float(self.hist.feed_mm_s[idx]) if self.executed else 0.0,
-            ferror_um=float(np.abs(self.ferr.last_mm).max()) * 1e3,
-            fifo_ms=level * self.period_s * 1e3, elapsed_s=now_s,
-            executed_s=self.executed * self.period_s,
-            planned_s=None if total is None else total * self.period_s,
-            override_pct=self.override_pct,
-            position_mm=tuple(float(v) for v in self.last_enc * self.pulse_mm),
-            work_origin_mm=self.work_origin_mm))
+        self.on_progress(build_progress(self, level, now_s))
 
     def _result(self) -> MotionResult:
         return build_result(self)

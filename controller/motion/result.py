@@ -1,4 +1,5 @@
-"""The motion controller's result: outcome, figures and where the machine ended, read back."""
+"""The motion controller's reports: its progress while it runs, and its result (outcome, figures
+and where the machine ended, read back)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from controller.motion.types import MotionResult, Outcome
+from controller.motion.types import MotionProgress, MotionResult, Outcome
 from drivers.errors import LostCommunicationError
 
 
@@ -44,3 +45,19 @@ def build_result(ctrl: Any) -> MotionResult:
         position_known=known,
         time_to_first_motion_s=ctrl.first_motion_s,
     )
+
+
+def build_progress(ctrl: Any, level: int, now_s: float) -> MotionProgress:
+    """Where the run is: state, line, feed, following error, card FIFO (level frames), time."""
+    total = ctrl.source.total_rows()
+    idx = (ctrl.executed - 1) % ctrl.hist.capacity
+    return MotionProgress(
+        state=ctrl.state, line=ctrl.line,
+        feed_mm_s=float(ctrl.hist.feed_mm_s[idx]) if ctrl.executed else 0.0,
+        ferror_um=float(np.abs(ctrl.ferr.last_mm).max()) * 1e3,
+        fifo_ms=level * ctrl.period_s * 1e3, elapsed_s=now_s,
+        executed_s=ctrl.executed * ctrl.period_s,
+        planned_s=None if total is None else total * ctrl.period_s,
+        override_pct=ctrl.override_pct,
+        position_mm=tuple(float(v) for v in ctrl.last_enc * ctrl.pulse_mm),
+        work_origin_mm=ctrl.work_origin_mm)

@@ -62,7 +62,7 @@ def test_memo_tells_segments_apart_by_their_vlim() -> None:
     accel, tol = 500.0, fp.LIMIT_TOLERANCE * 50.0
 
     def plan_round(vlim: np.ndarray, memo: fp._Memo) -> tuple:
-        nodes = fp._Nodes(np.array([0.0, 5.0, 10.0]), v.copy(), np.zeros(n_nodes - 1, np.intp),
+        nodes = fp.Nodes(np.array([0.0, 5.0, 10.0]), v.copy(), np.zeros(n_nodes - 1, np.intp),
                           np.zeros(n_nodes - 1, bool))
         return fp._plan_round(nodes, v, fp.LimitCurve(s, vlim), accel, tol, memo)
 

@@ -10,6 +10,13 @@ from enum import Enum
 import numpy as np
 
 from controller.generator.feed.check import LimitCurve, PhaseArrays, Violations, check_phases
+from controller.generator.feed.nodes import (
+    EFFECTIVE_ACCEL_FACTOR,
+    STAIR_CAP,
+    STAIR_STEP,
+    Nodes,
+    initial_nodes,
+)
 from controller.generator.feed.profile import FeedProfile
 from controller.generator.feed.segments import (
     SegmentPlan,
@@ -19,12 +26,7 @@ from controller.generator.feed.segments import (
 )
 from controller.generator.feed.time_bound import fb_pass_speed_mm_s
 
-# A quintic transition changes v^2 by 16 A d / 15 over a distance d: an "effective" constant
-# acceleration of 8A/15 in the v^2 passes between nodes.
-EFFECTIVE_ACCEL_FACTOR = 8.0 / 15.0
 MAX_SPLIT_DEPTH = 8  # a segment split this often is flattened instead (always safe)
-STAIR_STEP = 0.03  # relative speed step of the staircase where vlim binds
-STAIR_CAP = 0.25  # stair node speed: this many steps below vlim there
 FLATTEN_ROUNDS = 3  # rounds that only flatten, before flattening everything
 MAX_CRUISE_RAISES = 4  # rounds spent lifting cruises that vlim lets rise later on
 MIN_RAISED_CRUISE_S = 0.01  # only cruises at least this long are worth a new node
@@ -58,16 +60,6 @@ class FeedPlan:
     rounds: int = 0
 
 
-@dataclass
-class _Nodes:
-    """Planning nodes: the profile passes node k at s[k] with zero acceleration."""
-
-    s: np.ndarray
-    cap: np.ndarray  # speed ceiling at the node
-    depth: np.ndarray  # per segment (node k to k+1): how often it was split
-    flat: np.ndarray  # per segment: no overshoot above the end speeds
-
-
 def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
               v_start_mm_s: float = 0.0, v_end_mm_s: float = 0.0,
               raise_cruises: bool = True, grid_step_mm: float | None = None) -> FeedPlan:
@@ -93,7 +85,7 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     if bad is not None:
         return FeedPlan(FeedProfile(()), bad)
     curve = LimitCurve(s - s[0], vlim, grid_step_mm)
-    nodes = _initial_nodes(curve, v_start_mm_s, v_end_mm_s, accel_mm_s2)
+    nodes = initial_nodes(curve, v_start_mm_s, v_end_mm_s, accel_mm_s2)
     tol = LIMIT_TOLERANCE * float(vlim.max())
     memo = _memo_for(curve, accel_mm_s2, tol)
     n_rounds = MAX_SPLIT_DEPTH + FLATTEN_ROUNDS + 2
@@ -174,7 +166,7 @@ def _memo_for(curve: LimitCurve, accel: float, tol: float) -> _Memo:
     return m
 
 
-def _plan_round(nodes: _Nodes, v: np.ndarray, curve: LimitCurve, accel: float, tol: float,
+def _plan_round(nodes: Nodes, v: np.ndarray, curve: LimitCurve, accel: float, tol: float,
                 memo: _Memo) -> tuple[PhaseArrays, Violations]:
     """Plan every segment between the nodes and check it against vlim (new segments only)."""
     win = SegmentWindows.build(curve, nodes.s)
@@ -261,49 +253,7 @@ def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanR
     return None
 
 
-def _initial_nodes(curve: LimitCurve, v0: float, v1: float, accel: float) -> _Nodes:
-    """The ends, every local minimum of vlim (both ends of a flat bottom, not its inside), and a
-    staircase of nodes where vlim binds (see _stair_nodes)."""
-    v = curve.vlim_mm_s
-    # Runs of equal values: a run is a bottom when both neighbouring runs are higher.
-    start = np.flatnonzero(np.concatenate(([True], v[1:] != v[:-1])))
-    end = np.append(start[1:] - 1, len(v) - 1)
-    # A run at an end is a bottom if its neighbour is higher.
-    rv = np.concatenate(([np.inf], v[start], [np.inf]))
-    higher_after = rv[1:-1] < rv[2:]
-    is_bottom = (rv[1:-1] < rv[:-2]) & higher_after
-    bottom = np.flatnonzero(is_bottom)
-    # The end of a flat run with a higher one after it (a step up of the feed, F30 then F800
-    # then F3300) is a node too: without it the step is inside a segment, whose one shape
-    # cannot cruise at the lower feed and then rise again, so it waited at the speed before
-    # the steps and crept 70 mm at F30 (139 s instead of 7).
-    knee = np.flatnonzero(higher_after & ~is_bottom & (end > start))
-    idx = np.concatenate((start[bottom], end[bottom], end[knee]))
-    stair, stair_cap = _stair_nodes(curve, v0, v1, accel)
-    cap = np.concatenate((v[idx], stair_cap))
-    idx = np.concatenate((idx, stair))
-    keep = (idx > 0) & (idx < len(v) - 1)
-    idx, order = np.unique(idx[keep], return_index=True)
-    s = np.concatenate(([0.0], curve.s_mm[idx], curve.s_mm[-1:]))
-    cap = np.concatenate(([v0], cap[keep][order], [v1]))
-    n = len(s) - 1
-    return _Nodes(s, cap, np.zeros(n, np.intp), np.zeros(n, bool))
-
-
-def _stair_nodes(curve: LimitCurve, v0: float, v1: float,
-                 accel: float) -> tuple[np.ndarray, np.ndarray]:
-    """Where vlim is gentle enough to bind the v^2 passes at the quintics' mean acceleration
-    8A/15, the profile must follow it as a staircase (one transition per segment): seed nodes
-    where vlim crosses the levels (1+STAIR_STEP)^m, capped STAIR_CAP steps below vlim there."""
-    v = curve.vlim_mm_s
-    u = fb_pass_speed_mm_s(curve.s_mm, v, EFFECTIVE_ACCEL_FACTOR * accel, v0, v1)
-    binding = u >= v * (1.0 - 1e-9)
-    level = np.floor(np.log(v) / np.log1p(STAIR_STEP))
-    i = 1 + np.flatnonzero(binding[1:] & binding[:-1] & (level[1:] != level[:-1]))
-    return i, np.minimum(v[i], v[i - 1]) / (1.0 + STAIR_CAP * STAIR_STEP)
-
-
-def _node_speeds(nodes: _Nodes, accel: float, v0: float, v1: float) -> np.ndarray | PlanResult:
+def _node_speeds(nodes: Nodes, accel: float, v0: float, v1: float) -> np.ndarray | PlanResult:
     """Node speeds reachable by quintic transitions both ways (v^2 passes at 8A/15)."""
     a_eff = EFFECTIVE_ACCEL_FACTOR * accel
     v = fb_pass_speed_mm_s(nodes.s, nodes.cap, a_eff, v0, v1)
@@ -318,7 +268,7 @@ def _node_speeds(nodes: _Nodes, accel: float, v0: float, v1: float) -> np.ndarra
     return v
 
 
-def _repair(nodes: _Nodes, viol: Violations, curve: LimitCurve, tol: float,
+def _repair(nodes: Nodes, viol: Violations, curve: LimitCurve, tol: float,
             last: bool) -> PlanResult | None:
     """Split or flatten every violating segment; a result when a pinned end speed is to blame."""
     bad = np.flatnonzero(viol.excess_mm_s > tol)
@@ -342,7 +292,7 @@ def _repair(nodes: _Nodes, viol: Violations, curve: LimitCurve, tol: float,
     return None
 
 
-def _flatten(nodes: _Nodes, k: np.ndarray, curve: LimitCurve) -> PlanResult | None:
+def _flatten(nodes: Nodes, k: np.ndarray, curve: LimitCurve) -> PlanResult | None:
     """Cap both ends of segment k at min vlim over it: no phase then rises above that minimum."""
     if len(k) == 0:
         return None
@@ -358,13 +308,13 @@ def _flatten(nodes: _Nodes, k: np.ndarray, curve: LimitCurve) -> PlanResult | No
     return None
 
 
-def _raise_cruises(nodes: _Nodes, ph: PhaseArrays, curve: LimitCurve) -> bool:
+def _raise_cruises(nodes: Nodes, ph: PhaseArrays, curve: LimitCurve) -> bool:
     """Add a staircase of nodes inside every long cruise where vlim later rises a stair step
     above it.
 
     A segment's single accelerate-cruise-decelerate shape must cruise under the lowest vlim it
     crosses after its acceleration; when vlim keeps rising beyond, nodes there let the profile
-    step up again (the staircase of _stair_nodes, found after the fact). All the steps are added
+    step up again (the staircase of nodes.py, found after the fact). All the steps are added
     at once, each where vlim passes the last one's cap by a stair step; one per round took a
     round per step. Where vlim at the first step is within BOUND_CRUISE_STEPS of the cruise,
     the cruise is bound by vlim where it starts and the first node is capped at the cruise
@@ -399,7 +349,7 @@ def _raise_steps(vlim: np.ndarray, lo: int, hi: int, v_c: float) -> list[tuple[i
         lo, level = i + 1, cap * (1.0 + STAIR_STEP)
 
 
-def _insert_nodes(nodes: _Nodes, steps: list[tuple[float, float]], h: float) -> bool:
+def _insert_nodes(nodes: Nodes, steps: list[tuple[float, float]], h: float) -> bool:
     """Nodes at the (position, cap) pairs, sorted by position, each unless within 4 grid steps
     of a node or of one added before it; a split segment's depth is copied to its parts, all
     but the last one not flat. All in one insert per array (numpy's per-call cost)."""

@@ -1,7 +1,9 @@
-"""One job of the daemon: the program, where it started, its progress, and its events."""
+"""One job of the daemon: the program, where it started, its progress, and its events; and the
+states the daemon's machine goes through."""
 
 from __future__ import annotations
 
+import enum
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -11,6 +13,15 @@ from controller.motion.types import MotionProgress
 from controller.runtime.processes import Runtime
 
 Emit = Callable[[dict[str, Any]], None]
+
+
+class State(enum.StrEnum):
+    ESTOP = "ESTOP"
+    IDLE = "IDLE"
+    CHECKING = "CHECKING"
+    RUNNING = "RUNNING"
+    HOMING = "HOMING"
+    FAULT = "FAULT"
 
 
 @dataclass
