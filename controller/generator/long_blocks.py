@@ -7,7 +7,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from controller.blocks import ArcBlock, LineBlock
+from controller.blocks import ArcBlock, LineBlock, NurbsBlock
+from controller.geometry.nurbs import Nurbs
+from controller.geometry.nurbs_split import split_at
 
 # A contour line or arc whose nominal time (length over programmed feed) exceeds this is
 # planned as parts of at most this: a look-ahead window holds whole blocks, and one arc of a
@@ -17,6 +19,12 @@ from controller.blocks import ArcBlock, LineBlock
 PART_NOMINAL_S = 10.0
 MAX_PART_SWEEP_RAD = math.pi  # an arc part turns at most half a circle (never a whole one)
 CHUNK_SAMPLES = 20_000  # a straight move or dwell goes out in chunks of at most this
+# A NURBS taking longer than this at its feed (by its control polygon, at most 600 s: the
+# interpreter refuses longer) is planned as parts split at knots where it is smooth: one at
+# F6.2 was one window of 598 s of samples (260 MB). Every NURBS of nc_programs/ and of the
+# benchmarks is far shorter (plans unchanged).
+NURBS_PART_NOMINAL_S = 60.0
+SMOOTH_KNOT_SHARE = 0.5  # a knot is cut only where the curvature is under this share of kappa_th
 
 
 def contour_parts(block: LineBlock | ArcBlock, max_feed_mm_s: float
@@ -50,6 +58,48 @@ def _arc_parts(block: ArcBlock, n: int) -> list[ArcBlock]:
     points[0] = block.start
     points.append(block.end)
     return [replace(block, start=points[i], end=points[i + 1], turns=0) for i in range(n)]
+
+
+def nurbs_parts(block: NurbsBlock, max_feed_mm_s: float,
+                kappa_th_per_mm: float) -> list[NurbsBlock]:
+    """The block itself when its control polygon takes at most NURBS_PART_NOMINAL_S at its
+    feed, else parts of about that split at knots where the curve is smooth (curvature, from
+    both sides, under SMOOTH_KNOT_SHARE of kappa_th: never inside a corner zone). The parts
+    join with the same tangent and curvature as the curve had, so nothing stops between them."""
+    feed = max(min(block.feed_mm_s, max_feed_mm_s), 1e-9)
+    if block.polygon_length_mm / feed <= NURBS_PART_NOMINAL_S:
+        return [block]
+    curve = Nurbs.from_block(block)
+    knots = np.unique(block.knots[(block.knots > curve.u_start) & (block.knots < curve.u_end)])
+    if not knots.size:
+        return [block]
+    kappa = np.maximum(curve.curvature(knots), curve.curvature(np.nextafter(knots, -np.inf)))
+    smooth = knots[kappa < SMOOTH_KNOT_SHARE * kappa_th_per_mm]
+    cuts = _cuts(curve.s_of_u(smooth) - curve.s_of_u(np.array([curve.u_start]))[0], smooth,
+                 NURBS_PART_NOMINAL_S * feed)
+    parts: list[NurbsBlock] = []
+    k, pts, w = block.knots, block.control_points, block.weights
+    for u in cuts:
+        left, (k, pts, w) = split_at(block.degree, k, pts, w, u)
+        parts.append(replace(block, knots=left[0], control_points=left[1], weights=left[2]))
+    parts.append(replace(block, knots=k, control_points=pts, weights=w))
+    return parts
+
+
+def _cuts(s_mm: np.ndarray, u: np.ndarray, budget_mm: float) -> list[float]:
+    """Knots (u, at arc lengths s_mm) to cut at: each the last within budget_mm of the cut
+    before, or the first beyond it where none is within."""
+    cuts: list[float] = []
+    last_mm = 0.0
+    i = 0
+    while i < len(u):
+        j = int(np.searchsorted(s_mm, last_mm + budget_mm, side="right")) - 1
+        j = max(j, i)
+        if j >= len(u) - 1 and s_mm[-1] - last_mm <= budget_mm:
+            break  # the rest fits in one part
+        cuts.append(float(u[j]))
+        last_mm, i = float(s_mm[j]), j + 1
+    return cuts
 
 
 def chunk_bounds(n_samples: int) -> list[tuple[int, int]]:

@@ -23,7 +23,7 @@ from controller.config import MachineConfig
 from controller.errors import PlanningError
 from controller.generator.baselines import FORMULA_FEEDS, plan_formula_run
 from controller.generator.feed.planner import plan_feed
-from controller.generator.long_blocks import chunk_bounds, contour_parts
+from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
 from controller.generator.loop import (
     NURBS_LOOKAHEAD,
     PH_LOOKAHEAD,
@@ -298,7 +298,8 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
 
     for block in blocks:
         if _is_contour_block(block):
-            parts = contour_parts(block, vmax) if not isinstance(block, NurbsBlock) else [block]
+            parts = contour_parts(block, vmax) if not isinstance(block, NurbsBlock) else \
+                nurbs_parts(block, vmax, config.interpolator.kappa_threshold_per_mm)
             for i, part in enumerate(parts):
                 yield from add_contour(part, i == len(parts) - 1)
             continue

@@ -3,10 +3,12 @@ are planned and sent a bounded piece at a time, along the same path."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from nc_helpers import XY_TABLE, XYZ_MILL, blocks_of, motion
@@ -15,13 +17,16 @@ from controller.blocks import ArcBlock, LineBlock, PathControl, Source
 from controller.generator.long_blocks import (
     CHUNK_SAMPLES,
     MAX_PART_SWEEP_RAD,
+    NURBS_PART_NOMINAL_S,
     PART_NOMINAL_S,
     contour_parts,
+    nurbs_parts,
 )
 from controller.generator.plan import WINDOW_NOMINAL_S, plan_program
 
 SRC = Source("t.nc", 3, 3)
 VMAX = XY_TABLE.interpolator.max_feed_mm_s
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _arc(start: tuple, center: tuple, clockwise: bool, turns: int, feed: float) -> ArcBlock:
@@ -127,3 +132,45 @@ def test_a_jump_of_the_reference_is_a_planning_error() -> None:
         check_steps(RefChunk(0.001, jumped, np.zeros(5), line), None, XY_TABLE)
     with pytest.raises(PlanningError):  # from the last point of the chunk before, too
         check_steps(RefChunk(0.001, pos, np.zeros(5), line), np.array([-10.0, 0.0]), XY_TABLE)
+
+
+def _slow_airfoil(tmp_path: Path, feed_mm_min: float) -> list:
+    text = (REPO / "nc_programs" / "naca2415.nc").read_text()
+    return blocks_of(tmp_path, text.replace("F3500", f"F{feed_mm_min:g}"))
+
+
+def test_a_slow_nurbs_is_split_at_smooth_knots_into_parts_of_the_same_curve(
+        tmp_path: Path) -> None:
+    """The airfoil at F6.2 (598 s) was one window of 598 s of samples: 260 MB."""
+    from controller.blocks import NurbsBlock
+    from controller.geometry.nurbs import Nurbs
+    (block,) = [b for b in motion(_slow_airfoil(tmp_path, 6.2)) if isinstance(b, NurbsBlock)]
+    kappa_th = XY_TABLE.interpolator.kappa_threshold_per_mm
+    parts = nurbs_parts(block, VMAX, kappa_th)
+    assert len(parts) >= 10
+    whole = Nurbs.from_block(block)
+    curves = [Nurbs.from_block(p) for p in parts]
+    assert sum(c.length_mm for c in curves) == pytest.approx(whole.length_mm, rel=1e-9)
+    feed = block.feed_mm_s
+    for a, b in zip(curves, curves[1:], strict=False):
+        end, start = a.evaluate([a.u_end], 1), b.evaluate([b.u_start], 1)
+        assert np.allclose(end[0], start[0], atol=1e-9)  # the same point ...
+        ta, tb = end[1, 0] / np.linalg.norm(end[1, 0]), start[1, 0] / np.linalg.norm(start[1, 0])
+        assert float(ta @ tb) > 1.0 - 1e-9  # ... and tangent: nothing stops there
+        assert max(a.curvature([a.u_end])[0], b.curvature([b.u_start])[0]) < 0.5 * kappa_th
+    assert max(c.length_mm / feed for c in curves) <= NURBS_PART_NOMINAL_S * 1.5
+    # Points of each part lie on the whole curve (same parameters: the split keeps them).
+    for c in curves:
+        u = np.linspace(c.u_start, c.u_end, 7)
+        assert np.allclose(c.evaluate(u, 0)[0], whole.evaluate(u, 0)[0], atol=1e-9)
+    fast = dataclasses.replace(block, feed_mm_s=VMAX)  # 1 s at full feed: left whole
+    (whole_block,) = nurbs_parts(fast, VMAX, kappa_th)
+    assert whole_block is fast
+
+
+def test_a_slow_nurbs_is_planned_in_bounded_windows(tmp_path: Path) -> None:
+    steps = list(plan_program(_slow_airfoil(tmp_path, 6.2), XY_TABLE))
+    longest_s = max(len(s.chunk) for s in steps) * XY_TABLE.sample_period_s
+    assert longest_s < NURBS_PART_NOMINAL_S + WINDOW_NOMINAL_S + 5.0  # was 598 s
+    total_s = sum(len(s.chunk) for s in steps) * XY_TABLE.sample_period_s
+    assert total_s == pytest.approx(597.8, rel=1e-3)
