@@ -118,12 +118,13 @@ class JobRunner:
             self.log.log(NOTICE, f"job {job.number}: approach to line {job.from_line}")
             result = job.runtime.run()
         finally:
-            job.approaching = False
             os.unlink(approach)
-        if result.outcome is Outcome.DONE:
-            return True
-        self._record(job, result, line=job.from_line)
-        return False
+        with self._lock:  # the journal loop must not write the approach's lines after this
+            job.progress = None
+            job.approaching = False
+            if result.outcome is not Outcome.DONE:
+                self._record(job, result, line=job.from_line)
+        return result.outcome is Outcome.DONE
 
     def _options(self, job: Job) -> RuntimeOptions:
         base = self.runtime_options()
@@ -147,10 +148,11 @@ class JobRunner:
             self.log.warn_once("rt", "the motion thread runs without SCHED_FIFO (no "
                                      "LimitRTPRIO or CAP_SYS_NICE): late cycles are likelier")
         position = summary["final_position_mm"] if result.position_known else None
-        self.journal.update(state=result.outcome.value.upper(),
-                            last_line=result.line if line is None else line,
-                            position_mm=position, fault=result.message or None)
-        self.last_job = dict(self.journal.entry)
+        with self._lock:  # not interleaved with the journal loop's last-line writes
+            self.journal.update(state=result.outcome.value.upper(),
+                                last_line=result.line if line is None else line,
+                                position_mm=position, fault=result.message or None)
+            self.last_job = dict(self.journal.entry)
         if result.outcome is Outcome.FAULT:
             self.log.log(ERR, f"job {job.number} fault at line {result.line}: "
                               f"{result.message}")

@@ -283,15 +283,18 @@ class Machine(JobRunner, OperatorCommands):
         last_s = 0.0
         while True:
             time.sleep(0.05)
-            job = self.job
-            p = job.progress if job is not None else None
-            if p is None or self.state is not State.RUNNING or p.line <= 0 or job.approaching:
-                continue
-            now_s = time.monotonic()
-            first = written is None or written[0] != job.number
-            if (job.number, p.line) != written and (first or now_s - last_s >= JOURNAL_EVERY_S):
-                self.journal.update(last_line=p.line)
-                written, last_s = (job.number, p.line), now_s
+            with self._lock:  # a job's end (_record) writes the journal under it too
+                job = self.job
+                p = job.progress if job is not None else None
+                if p is None or self.state is not State.RUNNING or p.line <= 0 \
+                        or job.approaching:
+                    continue
+                now_s = time.monotonic()
+                first = written is None or written[0] != job.number
+                if (job.number, p.line) != written and \
+                        (first or now_s - last_s >= JOURNAL_EVERY_S):
+                    self.journal.update(last_line=p.line)
+                    written, last_s = (job.number, p.line), now_s
 
     def _beat(self, *_: object) -> None:
         self.beat_s = time.monotonic()
