@@ -10,6 +10,8 @@ import select
 import signal
 import subprocess
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -18,6 +20,27 @@ from daemon_helpers import CNCCTL, REPO, running_cncd
 from test_homing_jog import switches_config
 
 ARCS = str(REPO / "nc_programs/arcs.nc")
+
+
+@contextmanager
+def _stopped_at_end(proc: subprocess.Popen) -> Iterator[subprocess.Popen]:
+    """The process, killed by its pid at the end if it is still running (a failed test)."""
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _zigzag(path: Path, lines: int, at_mm: float) -> Path:
+    """A long G1 program near (at_mm, at_mm): seconds to check, to read up to a line."""
+    with path.open("w") as fh:
+        fh.write("G21 G90 G64 F3000\n")
+        for i in range(lines):
+            fh.write(f"G1 X{at_mm + (i % 2) * 0.1:.1f} Y{at_mm + (i % 7) * 0.05:.2f}\n")
+        fh.write("M2\n")
+    return path
 
 
 def _no_daemon(tmp_path: Path) -> dict[str, str]:
@@ -49,15 +72,11 @@ def test_sigterm_while_homing_stops_the_homing_and_the_program_never_starts(
     proc = subprocess.Popen([*CNCCTL, "run", str(program), "--config", str(config), "--home"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=_no_daemon(tmp_path), stdin=subprocess.DEVNULL)
-    try:
+    with _stopped_at_end(proc):
         _wait_for(proc, "homing X, Y")
         time.sleep(0.5)
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     assert proc.returncode == 4, err
     assert "SIGTERM" in err and "while homing" in err and "did not start" in err
     assert "done" not in out
@@ -67,25 +86,16 @@ def test_sigterm_while_checking_before_a_confirmed_approach_moves_nothing(
         tmp_path: Path) -> None:
     """`--from-line N --yes` on a long program, SIGTERM while it reads up to line N: the
     abort was dropped when the runtime started, and approach and program ran (exit 0)."""
-    program = tmp_path / "long.nc"
-    with program.open("w") as fh:
-        fh.write("G21 G90 G64 F3000\n")
-        for i in range(150_000):
-            fh.write(f"G1 X{10 + (i % 2) * 0.1:.1f} Y{10 + (i % 7) * 0.05:.2f}\n")
-        fh.write("M2\n")
+    program = _zigzag(tmp_path / "long.nc", 150_000, 10.0)
     proc = subprocess.Popen([*CNCCTL, "run", str(program), "--from-line", "140000", "--yes",
                              "--virtual-time", "--json"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=_no_daemon(tmp_path),
                             stdin=subprocess.DEVNULL)
-    try:
+    with _stopped_at_end(proc):
         time.sleep(1.0)  # reading the program (check, then position at the line)
         assert proc.poll() is None
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     assert proc.returncode == 4, err
     final = json.loads(out.splitlines()[-1])
     assert final["event"] == "aborted" and "SIGTERM" in final["message"]
@@ -150,43 +160,32 @@ def test_a_stop_signal_at_the_question_cancels_it(tmp_path: Path, sig: signal.Si
                             text=True, env=_no_daemon(tmp_path))
     os.close(read)
     try:
-        _wait_for(proc, "Ctrl-C to cancel")
-        proc.send_signal(sig)
-        _, err = proc.communicate(timeout=20)
+        with _stopped_at_end(proc):
+            _wait_for(proc, "Ctrl-C to cancel")
+            proc.send_signal(sig)
+            _, err = proc.communicate(timeout=20)
     finally:
         os.close(write)
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
     assert proc.returncode == 2 and "nothing moved" in err
 
 
 def test_cncd_does_not_approach_for_a_job_aborted_while_checking(tmp_path: Path) -> None:
     """An abort while a from-line job was CHECKING answered CHECKING, the client said
     aborted, and the daemon then made the approach move anyway."""
-    program = tmp_path / "long.nc"
-    with program.open("w") as fh:
-        fh.write("G21 G90 G64 F3000\n")
-        for i in range(400_000):
-            fh.write(f"G1 X{20 + (i % 2) * 0.1:.1f} Y{20 + (i % 7) * 0.05:.2f}\n")
-        fh.write("M2\n")
+    program = _zigzag(tmp_path / "long.nc", 400_000, 20.0)
     with running_cncd(tmp_path) as d:
         d.cncctl("reset")
         before = d.status()["position_mm"]
         run = subprocess.Popen([*CNCCTL, "run", str(program), "--from-line", "390000", "--yes",
                                 "--socket", d.socket_path], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
-        try:
+        with _stopped_at_end(run):
             deadline = time.monotonic() + 20
             while d.status()["state"] != "CHECKING":
                 assert time.monotonic() < deadline
                 time.sleep(0.02)
             assert d.cncctl("abort").returncode == 0
             run.communicate(timeout=60)
-        finally:
-            if run.poll() is None:
-                run.kill()
-                run.wait()
         assert run.returncode == 4
         deadline = time.monotonic() + 20
         while d.status()["state"] != "IDLE":
@@ -208,18 +207,16 @@ def test_a_stop_signal_to_a_continuous_jog_client_stops_the_jog(
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         os.close(read)
         try:
-            deadline = time.monotonic() + 20
-            while d.status()["state"] != "RUNNING":
-                assert time.monotonic() < deadline
-                time.sleep(0.02)
-            time.sleep(0.3)
-            jog.send_signal(sig)
-            jog.communicate(timeout=20)
+            with _stopped_at_end(jog):
+                deadline = time.monotonic() + 20
+                while d.status()["state"] != "RUNNING":
+                    assert time.monotonic() < deadline
+                    time.sleep(0.02)
+                time.sleep(0.3)
+                jog.send_signal(sig)
+                jog.communicate(timeout=20)
         finally:
             os.close(write)
-            if jog.poll() is None:
-                jog.kill()
-                jog.wait()
         deadline = time.monotonic() + 5
         while d.status()["state"] != "IDLE":
             assert time.monotonic() < deadline, "the jog is still moving"
@@ -236,7 +233,7 @@ def test_an_approach_stopped_is_journalled_under_its_program_and_line(tmp_path: 
         run = subprocess.Popen([*CNCCTL, "run", ARCS, "--from-line", "8", "--yes",
                                 "--socket", d.socket_path], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL)
-        try:
+        with _stopped_at_end(run):
             deadline = time.monotonic() + 20
             while "approach to line 8" not in d.log_text():
                 assert time.monotonic() < deadline
@@ -244,10 +241,6 @@ def test_an_approach_stopped_is_journalled_under_its_program_and_line(tmp_path: 
             time.sleep(0.2)
             assert d.cncctl("abort").returncode == 0
             run.communicate(timeout=30)
-        finally:
-            if run.poll() is None:
-                run.kill()
-                run.wait()
         journal = json.loads((d.state_dir / "journal.json").read_text())
         assert journal["program"].endswith("arcs.nc") and journal["last_line"] == 8
         assert journal["state"] == "ABORTED"
