@@ -180,10 +180,11 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
     # which its last grid sample has, once made G1 X10 F3500 then G1 X10 Y1 F1.5 creep the
     # whole first line at F1.5 (440 s).
     stops = np.array(path.stops_at_mm)
-    at_stop = np.flatnonzero(np.isin(s, stops))
-    ending = dict(zip(s[at_stop].tolist(),
-                      feed_limit_mm_s(path, s[at_stop], kappa[at_stop], inp, True).tolist(),
-                      strict=True))
+    near = np.clip(np.searchsorted(s, stops), 0, len(s) - 1)  # the grid sample on the stop
+    near = np.where(np.abs(s[near - (near > 0)] - stops) < np.abs(s[near] - stops),
+                    near - (near > 0), near)
+    ending = dict(zip(path.stops_at_mm,
+                      feed_limit_mm_s(path, stops, kappa[near], inp, True).tolist(), strict=True))
     spikes = spike_stops_mm(path, s, vlim, inp.max_feed_mm_s)
     extra = [x for x in spikes if not _near(x, path.stops_at_mm)]  # a stop already rests there
     cuts = sorted([0.0, *path.stops_at_mm, *extra, path.length_mm])
