@@ -226,7 +226,8 @@ def test_a_stop_signal_to_a_continuous_jog_client_stops_the_jog(
 
 def test_an_approach_stopped_is_journalled_under_its_program_and_line(tmp_path: Path) -> None:
     """The approach of a from-line job was written into the previous job's journal entry (a
-    crash during it then read 'done'); the entry names the program and the line to give."""
+    crash during it then read 'done'); the entry names the program and the line to give, and
+    so does the status meanwhile (it showed the approach's line 2)."""
     with running_cncd(tmp_path) as d:
         d.cncctl("reset")
         assert d.cncctl("jog", "X-5").returncode == 0  # a previous job to be mistaken for
@@ -239,6 +240,7 @@ def test_an_approach_stopped_is_journalled_under_its_program_and_line(tmp_path: 
                 assert time.monotonic() < deadline
                 time.sleep(0.02)
             time.sleep(0.2)
+            assert d.status()["line"] == 8  # the line run from, not the approach's own
             assert d.cncctl("abort").returncode == 0
             run.communicate(timeout=30)
         journal = json.loads((d.state_dir / "journal.json").read_text())

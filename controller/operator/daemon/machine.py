@@ -210,7 +210,10 @@ class Machine(JobRunner, OperatorCommands):
             out: dict[str, Any] = {"state": state, "fault": self.fault,
                                    "program": job.name if job else None,
                                    "job": job.number if job else None}
-        out["line"] = p.line if p else None  # the last job's is in last_job
+            # On the approach of a run from line N: N, not the approach's own lines.
+            approaching = job is not None and job.approaching
+        # The last job's line is in last_job.
+        out["line"] = (job.from_line if approaching else p.line) if p else None
         out["feed_mm_s"] = round(p.feed_mm_s, 3) if p else 0.0
         out["ferror_um"] = round(p.ferror_um, 1) if p else 0.0
         out["feed_override_pct"] = self.feed_override_pct
