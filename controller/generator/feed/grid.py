@@ -49,8 +49,11 @@ def _piece_samples(p: Piece, n: int) -> tuple[np.ndarray, np.ndarray]:
     speed, kappa = _speed_and_kappa(p.curve, u)
     s = _trapezoid_s(u, speed, p.length_mm)
     inner = _inner_knots(p)
-    if inner is not None and not _resolved(p, s, kappa, inner, n):
-        return _knot_span_samples(p, inner, p.length_mm / (n - 1))
+    if inner is None:
+        return s, kappa
+    peak = _knot_kappa(p.curve, inner)
+    if not _resolved(p, s, kappa, peak, n):
+        return _knot_span_samples(p, inner, peak, p.length_mm / (n - 1))
     return s, kappa
 
 
@@ -80,18 +83,18 @@ def _knot_kappa(curve: Curve, knots: np.ndarray) -> np.ndarray:
     return np.maximum(left, right)
 
 
-def _resolved(p: Piece, s: np.ndarray, kappa: np.ndarray, inner: np.ndarray, n: int) -> bool:
+def _resolved(p: Piece, s: np.ndarray, kappa: np.ndarray, peak: np.ndarray, n: int) -> bool:
+    """Whether n even parameters resolve the piece, peak its knots' curvature."""
     if float(np.diff(s).max()) > SPARSE_GAP * p.length_mm / (n - 1):
         return False
-    peak = _knot_kappa(p.curve, inner)
     return not (peak.size and float(peak.max()) > KNOT_KAPPA * float(kappa.max()))
 
 
-def _knot_span_samples(p: Piece, inner: np.ndarray,
+def _knot_span_samples(p: Piece, inner: np.ndarray, peak: np.ndarray,
                        spacing_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """(local s, kappa) of a NURBS piece sampled span by span: each knot span gets even
     parameters at about spacing_mm (at least 8 intervals), its arc length exact from the curve's
-    table, and each knot the larger curvature of its two sides."""
+    table, and each knot the larger curvature of its two sides (peak, _knot_kappa's)."""
     bounds = np.concatenate(([p.u0], inner, [p.u1]))
     s_bounds = p.curve.s_of_u(bounds)
     s_bounds = s_bounds - s_bounds[0]
@@ -108,7 +111,7 @@ def _knot_span_samples(p: Piece, inner: np.ndarray,
     s = np.concatenate((*s_parts, [float(s_bounds[-1])]))
     kappa = np.concatenate((*k_parts, _speed_and_kappa(p.curve, bounds[-1:])[1]))
     at_knot = np.searchsorted(u, inner)
-    kappa[at_knot] = np.maximum(kappa[at_knot], _knot_kappa(p.curve, inner))
+    kappa[at_knot] = np.maximum(kappa[at_knot], peak)
     s *= p.length_mm / s[-1] if s[-1] > 0 else 1.0
     return s, kappa
 

@@ -161,6 +161,21 @@ def _near(x: float, positions: tuple[float, ...] | list[float]) -> bool:
     return any(abs(x - y) <= STOP_MATCH_MM for y in positions)
 
 
+def _limits_ending_at_stops(path: Path, s: np.ndarray, kappa: np.ndarray,
+                            inp: FeedInput) -> dict[float, float]:
+    """vlim at each stop of the path for the section that ends there: under its own piece's
+    feed. The next block's, which the stop's grid sample has, once made G1 X10 F3500 then
+    G1 X10 Y1 F1.5 creep the whole first line at F1.5 (440 s)."""
+    if not path.stops_at_mm:
+        return {}
+    stops = np.array(path.stops_at_mm)
+    near = np.clip(np.searchsorted(s, stops), 0, len(s) - 1)  # the grid sample on the stop
+    before = near - (near > 0)
+    near = np.where(np.abs(s[before] - stops) < np.abs(s[near] - stops), before, near)
+    vlim = feed_limit_mm_s(path, stops, kappa[near], inp, ending=True)
+    return dict(zip(path.stops_at_mm, vlim.tolist(), strict=True))
+
+
 def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None,
                    raise_cruises: bool = True, v_start_mm_s: float = 0.0) -> FeedOutput:
     """Module 3: vlim on a fine grid, then a quintic plan per section, ending at rest.
@@ -176,15 +191,7 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
             cache[key] = limit_samples(path, cache)  # type: ignore[index]
         s, kappa = cache[key]  # type: ignore[index]
     vlim = feed_limit_mm_s(path, s, kappa, inp)
-    # A section ending at a stop brakes to rest under its own piece's feed: the next block's,
-    # which its last grid sample has, once made G1 X10 F3500 then G1 X10 Y1 F1.5 creep the
-    # whole first line at F1.5 (440 s).
-    stops = np.array(path.stops_at_mm)
-    near = np.clip(np.searchsorted(s, stops), 0, len(s) - 1)  # the grid sample on the stop
-    near = np.where(np.abs(s[near - (near > 0)] - stops) < np.abs(s[near] - stops),
-                    near - (near > 0), near)
-    ending = dict(zip(path.stops_at_mm,
-                      feed_limit_mm_s(path, stops, kappa[near], inp, True).tolist(), strict=True))
+    ending = _limits_ending_at_stops(path, s, kappa, inp)
     spikes = spike_stops_mm(path, s, vlim, inp.max_feed_mm_s)
     extra = [x for x in spikes if not _near(x, path.stops_at_mm)]  # a stop already rests there
     cuts = sorted([0.0, *path.stops_at_mm, *extra, path.length_mm])

@@ -73,9 +73,7 @@ class JobRunner:
         if job.approach_mm is not None and not self._approach(job, start_mm):
             return
         with self._lock:
-            if job.cancel is not None:
-                job.emit({"event": "aborted", "message": job.cancel})
-                self._finish(job, None, None)
+            if self._cancelled(job):
                 return
             job.start_mm = start_mm
             job.runtime = Runtime(path, self.config, replace(
@@ -103,9 +101,7 @@ class JobRunner:
             fh.write(text)
         try:
             with self._lock:
-                if job.cancel is not None:  # aborted (or e-stop) while checking: no approach
-                    job.emit({"event": "aborted", "message": job.cancel})
-                    self._finish(job, None, None)
+                if self._cancelled(job):  # no approach either
                     return False
                 job.start_mm = start_mm
                 job.runtime = Runtime(approach, self.config, self._options(job))
@@ -125,6 +121,15 @@ class JobRunner:
             if result.outcome is not Outcome.DONE:
                 self._record(job, result, line=job.from_line)
         return result.outcome is Outcome.DONE
+
+    def _cancelled(self, job: Job) -> bool:
+        """A job aborted (or e-stopped) while checking ends here, nothing moved (under the
+        lock, before its runtime would start)."""
+        if job.cancel is None:
+            return False
+        job.emit({"event": "aborted", "message": job.cancel})
+        self._finish(job, None, None)
+        return True
 
     def _options(self, job: Job) -> RuntimeOptions:
         base = self.runtime_options()
