@@ -15,6 +15,7 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 from controller.errors import DriveError
 from drivers.canopen import cia402 as c
 from drivers.canopen.options import CanopenOptions
+from drivers.canopen.slcan_lines import LineSlcanBus
 
 CAN_ERRORS = (can.CanError, OSError, ValueError)
 # The libraries log what our DriveErrors already say ("Transfer aborted by client", "An error
@@ -40,6 +41,9 @@ def connect(o: CanopenOptions) -> canopen.Network:
     network = canopen.Network()
     network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
     try:
+        if o.interface == "slcan":  # whole lines per read (drivers/canopen/slcan_lines.py)
+            kwargs.pop("interface")
+            network.bus = LineSlcanBus(**kwargs)
         network.connect(**kwargs)
     except (*CAN_ERRORS, ImportError) as exc:
         raise DriveError(f"no CAN adapter at {o.channel} (interface {o.interface}, "

@@ -19,8 +19,9 @@ from drivers.canopen.options import CanopenOptions
 from drivers.sim.fifo import FrameFifo
 
 # TPDO1s are matched to SYNCs in order (CAN keeps the order; a late TPDO1 is still matched
-# right). Only a drive owing more than this many is given up on (it is declared lost after
-# tpdo_timeout_cycles anyway).
+# right). A drive owing more than this many (or tpdo_timeout_cycles) is lost communication:
+# dropping its oldest SYNC instead paired every later TPDO1 with the wrong target, and a host
+# whose reader fell 100 ms behind saw an invented following error of millimetres.
 MIN_PENDING = 64
 RTT_KEEP = 200_000  # round-trip samples kept for link_stats()
 
@@ -54,6 +55,7 @@ class Link:
         self.trace: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.rtt_s: collections.deque[float] = collections.deque(maxlen=RTT_KEEP)
         self.late_tpdos = self.missed_tpdos = self.late_syncs = 0
+        self.bad_lines = getattr(network.bus, "bad_lines", 0)
         self.last_hb_s = [time.monotonic()] * self.n
         self.last_tpdo_cycle = [0] * self.n
         self.emcy_seen = [False] * self.n
@@ -153,11 +155,16 @@ class Link:
                 payloads.append((0x200 + node.id, bytes(data)))
                 self.pending[i].append(k)
                 if len(self.pending[i]) > self.max_pending:
-                    self.pending[i].popleft()
+                    if self.supervising and not self.lost[i]:
+                        self.lost[i] = True
+                        self.latch(CardStatus.LOST_COMM, f"lost {label(node, self.axes[i])}: "
+                                   f"its TPDO1 is {self.max_pending} SYNC cycles behind")
+                    self.pending[i].popleft()  # bounded; after the latch pairing is moot
                     self.missed_tpdos += 1
-            while self.rows and next(iter(self.rows)) < k - self.max_pending:
+            while self.rows and next(iter(self.rows)) < k - self.max_pending - 1:
                 del self.rows[next(iter(self.rows))]
-            self.sync_s.pop(k - self.max_pending - 1, None)
+            self.sync_s.pop(k - self.max_pending - 2, None)
+            self._check_adapter_lines()
             if self.supervising:
                 self._supervise(k)
             self.sync_s[k] = time.monotonic()
@@ -181,6 +188,16 @@ class Link:
         elif self.streaming:
             self.latch(CardStatus.UNDERRUN, "drive FIFO underrun: frames ran out mid-program "
                        f"after frame {self.written - 1}; drives quick-stopped")
+
+    def _check_adapter_lines(self) -> None:
+        """A line from the adapter that could not be read is a frame lost: from then on a
+        TPDO1 may be paired with the wrong SYNC, so it is a fault, never skipped silently."""
+        bad = getattr(self.network.bus, "bad_lines", 0)
+        if bad != self.bad_lines:
+            self.bad_lines = bad
+            self.latch(CardStatus.FAULT, f"corrupt frame from the CAN adapter at "
+                       f"{self.o.channel} ({bad} so far; last: "
+                       f"{getattr(self.network.bus, 'last_bad_line', '')!r})")
 
     def _quick_stop(self) -> None:
         """Any halt: every enabled drive to QUICK STOP ACTIVE (it holds its position)."""

@@ -6,11 +6,12 @@ import os
 import select
 import termios
 import threading
+import time
 import tty
 
 import can
 
-WRITE_WAIT_S = 0.2
+WRITE_WAIT_S = 1.0  # the host read nothing for this long: it is gone, drop whole frames
 VERSION_REPLIES = {"V": b"V1013\r", "v": b"vSTM32\r", "N": b"NA123\r", "F": b"F00\r"}
 
 
@@ -76,19 +77,29 @@ class SlcanPty:
                 pass
 
     def _write(self, data: bytes) -> None:
-        """Back-pressure like USB: wait up to WRITE_WAIT_S for the host to read, then drop."""
+        """One whole line to the host, like a USB adapter's buffer: wait while the host is
+        slow (a starved host reads late, it loses nothing), drop the line only when the host
+        has read nothing for WRITE_WAIT_S, and never cut a line once begun (half a line
+        reached the host as garbage, and a lost TPDO as a wrong pairing)."""
         with self._lock:
-            while data:
+            begun = False
+            deadline_s = time.monotonic() + WRITE_WAIT_S
+            while data and not self._stop.is_set():
                 try:
-                    data = data[os.write(self.master_fd, data):]
+                    written = os.write(self.master_fd, data)
                 except BlockingIOError:
-                    _, ready, _ = select.select([], [self.master_fd], [], WRITE_WAIT_S)
-                    if not ready:
-                        self.dropped += 1  # the host is not reading
-                        return
+                    written = 0
                 except OSError:
                     self.dropped += 1
                     return
+                if written:
+                    data, begun = data[written:], True
+                    deadline_s = time.monotonic() + WRITE_WAIT_S
+                    continue
+                if not begun and time.monotonic() > deadline_s:
+                    self.dropped += 1  # the host is not reading: this frame is lost whole
+                    return
+                select.select([], [self.master_fd], [], 0.05)
 
     def _from_host(self) -> None:
         buf = b""
