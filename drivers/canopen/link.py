@@ -153,14 +153,17 @@ class Link:
                 data = bytearray(node.rpdo[1].data)
                 c.PDO1.pack_into(data, 0, c.PDO1.unpack_from(data)[0], int(targets[i]))
                 payloads.append((0x200 + node.id, bytes(data)))
-                self.pending[i].append(k)
+                if not self.lost[i]:  # a lost drive's late TPDO1s are paired with nothing
+                    self.pending[i].append(k)
                 if len(self.pending[i]) > self.max_pending:
-                    if self.supervising and not self.lost[i]:
+                    self.missed_tpdos += 1
+                    if self.supervising:
                         self.lost[i] = True
+                        self.pending[i].clear()
                         self.latch(CardStatus.LOST_COMM, f"lost {label(node, self.axes[i])}: "
                                    f"its TPDO1 is {self.max_pending} SYNC cycles behind")
-                    self.pending[i].popleft()  # bounded; after the latch pairing is moot
-                    self.missed_tpdos += 1
+                    else:  # bring-up, reset: nothing is supervised or paired yet
+                        self.pending[i].popleft()
             while self.rows and next(iter(self.rows)) < k - self.max_pending - 1:
                 del self.rows[next(iter(self.rows))]
             self.sync_s.pop(k - self.max_pending - 2, None)
