@@ -380,23 +380,40 @@ def test_bad_crc_from_the_card_is_a_lost_link() -> None:
     _bounded(final, 0.400, LINK_S + DETECT_S)
 
 
-def test_a_second_process_on_the_port_is_refused_and_the_job_runs_on() -> None:
+def test_a_second_process_on_the_port_is_refused_and_the_job_runs_on(tmp_path: Path) -> None:
     """A second `cncctl run` or `check` on the port of a moving job used to open it too: its
-    reset emptied the card's FIFO and the table stopped dead, 3 mm off the path."""
+    reset emptied the card's FIFO and the table stopped dead, 3 mm off the path. The job
+    waits at an M0 while the others try (an airfoil of 1.1 s could end before a second
+    process had even started on a loaded machine, and then `check` rightly opened the port)."""
+    program = tmp_path / "m0.nc"
+    program.write_text("G21 G90 G64 F2400\nG1 X5\nM0\nG1 X0\nM2\n")
     with peer() as (port, _):
-        second: list[subprocess.CompletedProcess[str]] = []
-
-        def intrude(event: dict[str, Any]) -> None:
-            if event.get("event") == "progress" and event.get("state") == "running" \
-                    and not second:
-                for command in ("run", "check"):
-                    second.append(subprocess.run(
-                        [*CLI, command, NACA, "--config", "serial", "--drive-option",
-                         f"port={port}"], capture_output=True, text=True, timeout=30, cwd=REPO))
-
-        code, final, err = run_airfoil(port, intrude)
-        assert (code, final["event"]) == (0, "done"), err
+        proc = subprocess.Popen([*CLI, "run", str(program), "--config", "serial", "--json",
+                                 "--drive-option", f"port={port}", "--drive-option",
+                                 f"link_timeout_s={LINK_S}"], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                cwd=REPO)
+        try:
+            assert proc.stdout is not None and proc.stdin is not None
+            while (event := json.loads(proc.stdout.readline()))["event"] != "progress" \
+                    or event["state"] != "paused":
+                assert event["event"] in ("start", "progress"), event
+            second = [subprocess.run([*CLI, command, NACA, "--config", "serial",
+                                      "--drive-option", f"port={port}"], capture_output=True,
+                                     text=True, timeout=60, cwd=REPO)
+                      for command in ("run", "check")]
+            assert proc.poll() is None  # still paused: the port was in use all along
+            proc.stdin.write("\n")
+            proc.stdin.flush()
+            out, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        final = json.loads(out.splitlines()[-1])
+        assert (proc.returncode, final["event"]) == (0, "done"), err
         assert final["underruns"] == 0
+        assert final["final_position_mm"] == {"x": 0.0, "y": 0.0}
         assert [r.returncode for r in second] == [2, 2], [r.stderr for r in second]
         for r in second:
             assert "in use by another controller process" in r.stderr, r.stderr
