@@ -77,6 +77,11 @@ class Drive(ABC):
         self._open_locked(lock, self._open)
         self._is_open = True
 
+    @property
+    def is_open(self) -> bool:
+        """Opened and not closed since (a failed open leaves it closed)."""
+        return self._is_open
+
     def _port_lock(self) -> PortLock | None:
         if self._port_guard is None and self._lock_key() is not None:
             self._port_guard = PortLock(str(self._lock_key()))

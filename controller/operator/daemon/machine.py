@@ -172,6 +172,10 @@ class Machine(JobRunner, OperatorCommands):
         """Clear the drive's latched condition; after a lost link, open it afresh (bring-up,
         position read again, axes to be homed again): the old handle is dead, and a reset over
         it failed until the daemon was restarted."""
+        if not self.drive.is_open:  # an earlier reopen failed: try again, or say why not
+            self.log.log(NOTICE, "reset: the drive is not open: opening it")
+            self.drive.open()
+            return
         try:
             status = self.drive.status()
         except LostCommunicationError:
