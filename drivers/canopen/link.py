@@ -132,6 +132,8 @@ class Link:
             elif -delay_s > self.period_s:  # a whole period late: re-anchor, never burst
                 self.late_syncs += 1
                 next_s = time.monotonic()
+                with self.lock:  # we slept, not the drives: their heartbeat ages exclude it
+                    self.last_hb_s = [t - delay_s for t in self.last_hb_s]
             try:
                 self.cycle()
             except Exception as exc:  # never die silently: the drives would only see silence
@@ -212,11 +214,12 @@ class Link:
     def _supervise(self, k: int) -> None:
         now_s = time.monotonic()
         timeout_s = self.o.heartbeat_timeout_ms * 1e-3
+        behind = getattr(self.network.bus, "behind", lambda: False)()
         for i, node in enumerate(self.nodes):
             if self.lost[i]:
                 continue
             age_s = now_s - self.last_hb_s[i]
-            if age_s > timeout_s:
+            if age_s > timeout_s and not behind:
                 self.lost[i] = True
                 self.latch(CardStatus.LOST_COMM, f"lost {label(node, self.axes[i])}: no "
                            f"heartbeat for {age_s:.2f} s (time-out {timeout_s:.2f} s)")

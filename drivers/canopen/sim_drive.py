@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -298,6 +299,8 @@ class SimDriveSet:
             self.axes.append(SimAxis402(self.network, node_id, axis, cpm,
                                         config.sample_period_s, inject, homing))
         self.master_seen_s: float | None = None
+        self.host_pending: Callable[[], bool] = lambda: False  # frames from the master unread
+        self._last_watch_s = time.monotonic()
         self.syncs = 0
         self.network.subscribe(0x80, self._on_sync)
         self.network.subscribe(0x700 + self.master_id, self._on_master_heartbeat)
@@ -334,7 +337,24 @@ class SimDriveSet:
 
     def _watchdog(self) -> None:
         while not self._stop.wait(WATCHDOG_PERIOD_S):
-            self.check_master()
+            self.watch(time.monotonic())
+
+    def watch(self, now_s: float) -> None:
+        """One look of the heartbeat consumer, with two allowances a real drive does not
+        need: a look that itself came late (this process starved of CPU) does not count the
+        time it slept, and none is made while frames from the master wait unread (they hold
+        its heartbeats: the master is not silent, this simulator is behind)."""
+        overslept_s = now_s - self._last_watch_s - 2 * WATCHDOG_PERIOD_S
+        self._last_watch_s = now_s
+        if overslept_s > 0 and self.master_seen_s is not None:
+            self.master_seen_s += overslept_s
+        if not self.host_pending() and not self._frames_queued():
+            self.check_master(now_s)
+
+    def _frames_queued(self) -> bool:
+        """Frames on the bus not yet handed to our receivers (python-can's virtual bus)."""
+        queue = getattr(self.network.bus, "queue", None)
+        return queue is not None and queue.qsize() > 0
 
     def close(self) -> None:
         self._stop.set()

@@ -27,6 +27,7 @@ def serve(config: MachineConfig, options: dict[str, Any], announce: Callable[[st
     channel = f"cncsim-{os.getpid()}"
     drives = SimDriveSet(config, options, channel=channel)
     adapter = SlcanPty(channel)
+    drives.host_pending = adapter.host_pending
     try:
         adapter.start()
         announce(adapter.path)

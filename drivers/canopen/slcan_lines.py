@@ -77,6 +77,17 @@ class LineSlcanBus(slcanBus):
             return None, False
         return msg, filtered
 
+    def behind(self) -> bool:
+        """Lines or bytes from the adapter not yet handed to the receivers: a heartbeat may be
+        among them, so no drive's heartbeat is judged late now."""
+        with self._line_lock:
+            if self._lines:
+                return True
+        try:
+            return self.serialPortOrig.in_waiting > 0
+        except OSError:
+            return False
+
     def flush(self) -> None:
         with self._line_lock:
             self._lines.clear()

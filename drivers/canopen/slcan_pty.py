@@ -60,6 +60,11 @@ class SlcanPty:
         self._threads = [threading.Thread(target=self._from_host, name="slcan-rx", daemon=True),
                          threading.Thread(target=self._to_host, name="slcan-tx", daemon=True)]
 
+    def host_pending(self) -> bool:
+        """Bytes from the host not yet read: the host is not silent, we are behind."""
+        readable, _, _ = select.select([self.master_fd], [], [], 0)
+        return bool(readable)
+
     def start(self) -> None:
         for thread in self._threads:
             thread.start()

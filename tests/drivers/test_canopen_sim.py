@@ -151,6 +151,26 @@ def test_master_heartbeat_consumer_faults_with_emcy_8130(sim: SimDriveSet) -> No
     assert [(a.state, a.error_code) for a in sim.axes] == [("FAULT", 0x8130)] * 2
 
 
+def test_a_starved_simulator_does_not_invent_a_lost_master_heartbeat(sim: SimDriveSet) -> None:
+    """The master's frames wait unread, or the look itself comes late: the simulated drive is
+    behind, the master is not silent (under load the peer faulted both drives with 0x8130)."""
+    for a in sim.axes:
+        a.consumer_id, a.consumer_ms = sim.master_id, 300
+        enable(a)
+    sim.master_seen_s, sim._last_watch_s = 1.0, 1.0
+    sim.watch(1.5)  # woke 0.5 s late: the sleep is not the master's silence
+    assert all(a.state == "OPERATION ENABLED" for a in sim.axes)
+    sim.host_pending = lambda: True
+    for now_s in (1.51, 1.52, 1.9):
+        sim._last_watch_s = now_s - 0.01
+        sim.watch(now_s)
+    assert all(a.state == "OPERATION ENABLED" for a in sim.axes)
+    sim.host_pending = lambda: False
+    sim._last_watch_s = 1.9
+    sim.watch(1.91)
+    assert [(a.state, a.error_code) for a in sim.axes] == [("FAULT", 0x8130)] * 2
+
+
 # -- backend + simulated drives (threads on the virtual bus) ------------------------------
 def test_bringup_writes_the_objects_and_close_leaves_drives_disabled() -> None:
     with bus() as (sims, drive):

@@ -182,3 +182,18 @@ def test_a_garbled_adapter_line_latches_a_fault() -> None:
     link.cycle()
     assert CardStatus.FAULT in link.status
     assert "corrupt frame from the CAN adapter" in "; ".join(link.messages)
+
+
+def test_a_drive_heartbeat_is_not_judged_late_while_the_reader_is_behind() -> None:
+    """Its heartbeat may be among the frames not yet read: judging then invented a lost
+    drive on a loaded host; once the reader has caught up, a silent drive is lost."""
+    link = _link()
+    behind = [True]
+    link.network.bus = SimpleNamespace(bad_lines=0, behind=lambda: behind[0])
+    link.last_hb_s = [time.monotonic() - 1.0] * link.n
+    link.last_tpdo_cycle = [link.cycle_no + 1] * link.n
+    link.cycle()
+    assert link.status == CardStatus.OK
+    behind[0] = False
+    link.cycle()
+    assert CardStatus.LOST_COMM in link.status and "no heartbeat" in "; ".join(link.messages)
