@@ -11,6 +11,7 @@ from typing import Any
 import yaml
 
 from controller.errors import ConfigError
+from controller.servo_poles import pole_problem
 from controller.yaml_strict import Section, StrictLoader
 
 DEFAULT_CONFIG_NAME = "xy_table"
@@ -146,7 +147,11 @@ class MachineConfig:
 
 
 def _read_servo(sec: Section) -> ServoParams:
-    values = {k: sec.float(k, above=0.0) for k in ("a0", "a1", "a2", "a3", "a4", "b0", "b1", "b2")}
+    values = {k: sec.float(k, above=0.0, maxval=1e30)
+              for k in ("a0", "a1", "a2", "a3", "a4", "b0", "b1", "b2")}
+    if not 0.5 <= values["b0"] / values["a0"] <= 2.0:  # a position loop tracks: b0 = a0
+        raise ConfigError(sec.path, sec._key("b0"), f"b0 / a0 = {values['b0'] / values['a0']:.3g}: "
+                          "a position loop's static gain must be near 1 (b0 = a0)")
     sec.finish()
     return ServoParams(**values)
 
@@ -244,7 +249,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
     """Build a MachineConfig from parsed YAML; any mistake is a ConfigError naming the key."""
     top = Section(data, path, "")
     name = top.str("name")
-    period = top.float("sample_period_s", above=0.0, maxval=0.1)
+    period = top.float("sample_period_s", minval=1e-4, maxval=0.1)
     axes_sec = top.mapping("axes")
     for axis_name in axes_sec:
         if axis_name not in ("x", "y", "z"):
@@ -266,6 +271,11 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         allow_unhomed=top.bool("allow_unhomed", False),
     )
     top.finish()
+    _check_plan_sizes(cfg, path)
+    for axis in axes:
+        problem = pole_problem(axis.servo, period)
+        if problem is not None:
+            raise ConfigError(path, f"axes.{axis.name}.servo", problem)
     if cfg.interpolator.servo_precompensation:
         for axis in axes[:2]:
             if abs(axis.servo.a0 - axis.servo.b0) > 1e-9 * axis.servo.a0:
@@ -273,6 +283,21 @@ def parse_config(data: Any, path: str) -> MachineConfig:
                                   f"needs a0 = b0 on axes.{axis.name}.servo (a loop without "
                                   "steady position error)")
     return cfg
+
+
+MAX_RAMP_S = 60.0  # Vmax / Amax: a ramp of minutes is a typo (1e-9 planned 1.4 TiB of ramp)
+
+
+def _check_plan_sizes(cfg: MachineConfig, path: str) -> None:
+    """Limits whose ratio sets how long a plan's ramps are, and so its memory."""
+    ip = cfg.interpolator
+    for name, value_mm_s in (("max_feed_mm_min", ip.max_feed_mm_s),
+                             ("rapid_feed_mm_min", ip.rapid_feed_mm_s)):
+        ramp_s = value_mm_s / ip.max_accel_mm_s2
+        if ramp_s > MAX_RAMP_S:
+            raise ConfigError(path, "interpolator.max_accel_mm_s2", f"reaching {name} takes "
+                              f"{ramp_s:.3g} s at {ip.max_accel_mm_s2:g} mm/s^2 (at most "
+                              f"{MAX_RAMP_S:g} s)")
 
 
 def builtin_config_path(name: str) -> Path | None:
@@ -313,4 +338,7 @@ def load_config(explicit: str | None = None) -> MachineConfig:
         raise ConfigError(str(path), "<file>", f"cannot read: {exc}") from exc
     except yaml.YAMLError as exc:
         raise ConfigError(str(path), "<file>", f"not valid YAML: {exc}") from exc
+    except RecursionError:  # PyYAML's parser recurses per level, before any limit of ours
+        raise ConfigError(str(path), "<file>", "nested too deeply: not a machine "
+                          "configuration") from None
     return parse_config(data, str(path))

@@ -133,17 +133,57 @@ def number_text(text: str) -> bool:
     return True
 
 
+MAX_NODES = 20_000  # a machine config has a few hundred; aliases counted as what they expand to
+MAX_DEPTH = 32
+
+
 class StrictLoader(yaml.SafeLoader):
     """SafeLoader that refuses a key given twice in one mapping (PyYAML keeps the last one:
-    a second `max_feed_mm_s:` further down would silently win)."""
+    a second `max_feed_mm_s:` further down would silently win), a key that is not a plain
+    scalar, and a document larger or deeper than a config can be once its aliases are
+    expanded (a 1.4 kB "billion laughs" grew to gigabytes), before building anything."""
+
+    def construct_document(self, node: yaml.Node) -> Any:
+        size = _expanded_size(node, {}, 0)
+        if size > MAX_NODES:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"{size:.3g} values once its aliases are expanded (at most "
+                f"{MAX_NODES}): not a machine configuration", node.start_mark)
+        return super().construct_document(node)
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
         seen: set = set()
         for key_node, _ in node.value:
+            if not isinstance(key_node, yaml.ScalarNode):
+                raise yaml.constructor.ConstructorError(
+                    "while reading a mapping", node.start_mark,
+                    "a key must be a name or a number, not a list or mapping",
+                    key_node.start_mark)
             key = self.construct_object(key_node, deep=True)  # type: ignore[no-untyped-call]
-            if isinstance(key, str | int | float | bool) and key in seen:
+            if key in seen:
                 raise yaml.constructor.ConstructorError(
                     "while reading a mapping", node.start_mark,
                     f"the key {key!r} is given twice", key_node.start_mark)
             seen.add(key)
         return super().construct_mapping(node, deep=deep)
+
+
+def _expanded_size(node: yaml.Node, memo: dict[int, float], depth: int) -> float:
+    """Values under node with every alias expanded (an alias is the node it names, so it is
+    counted once per use; memo keeps this linear in the text)."""
+    if depth > MAX_DEPTH:
+        raise yaml.constructor.ConstructorError(
+            None, None, f"nested more than {MAX_DEPTH} levels deep: not a machine "
+            "configuration", node.start_mark)
+    known = memo.get(id(node))
+    if known is not None:
+        return known
+    if isinstance(node, yaml.MappingNode):
+        children = [n for pair in node.value for n in pair]
+    elif isinstance(node, yaml.SequenceNode):
+        children = list(node.value)
+    else:
+        children = []
+    size = 1.0 + sum(_expanded_size(child, memo, depth + 1) for child in children)
+    memo[id(node)] = size
+    return size

@@ -41,12 +41,14 @@ class SimCard(Drive):
         super().__init__(config, **options)
         self.period_s = config.sample_period_s
         self.realtime = bool(options.get("realtime", True))
-        self.max_pulses = int(options.get("max_pulses_per_frame", 127))
+        self.max_pulses = int(_option(options, "max_pulses_per_frame", 127, 1, 32767))
         start_mm = np.asarray(options.get("start_mm", np.zeros(self.n_axes)), dtype=float)
-        self._fifo = FrameFifo(int(options.get("fifo_frames", 256)), self.n_axes)
-        # The plant may differ from the planner's model (issue 17: a real table never is it).
-        plant = mismatched_config(config, float(options.get("plant_pole_pct", 0.0)),
-                                  float(options.get("plant_gain_pct", 0.0)))
+        self._fifo = FrameFifo(int(_option(options, "fifo_frames", 256, 16, 1_000_000)),
+                               self.n_axes)
+        # The plant may differ from the planner's model (issue 17: a real table never is it);
+        # within -50..+100 % it stays a stable, damped loop.
+        plant = mismatched_config(config, _option(options, "plant_pole_pct", 0.0, -50, 100),
+                                  _option(options, "plant_gain_pct", 0.0, -50, 100))
         self._axes = SimAxes(plant, np.rint(start_mm / self.pulse_mm).astype(np.int64))
         self._switches = SimSwitches(self.n_axes, options, self._axes.actual_mm.copy(), "sim")
         self._homing_run: SimAxesHoming | None = None
@@ -288,3 +290,14 @@ class SimCard(Drive):
     def restore_comm(self) -> None:
         self._comm_ok = True
 
+
+def _option(options: dict[str, Any], key: str, default: float, lo: float, hi: float) -> float:
+    """A numeric drive option within [lo, hi], or a DriveError naming it."""
+    value = options.get(key, default)
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise DriveError(f"sim: drive option {key}: {value!r} is not a number") from None
+    if not lo <= number <= hi:
+        raise DriveError(f"sim: drive option {key}: {value!r} is not in [{lo:g}, {hi:g}]")
+    return number

@@ -84,3 +84,43 @@ def test_a_folder_is_not_a_config(tmp_path: Path) -> None:
         load_config(str(tmp_path))
     with pytest.raises(ConfigError, match="no such configuration file"):
         load_config(str(tmp_path / "nope.yaml"))
+
+
+# -- hostile and nonsensical configs: a ConfigError naming the key, never a crash ----------
+LAUGHS = "".join(f"l{i}: &l{i} [{', '.join([f'*l{i - 1}'] * 9) if i else 'x'}]\n"
+                 for i in range(9))
+
+
+@pytest.mark.parametrize("text, match", [
+    ("extra: " + "[" * 5000 + "]" * 5000 + "\n" + BASE, "nested"),  # was RecursionError
+    ("? [a, b]\n: 1\n" + BASE, "a key must be a name or a number"),  # was TypeError
+    (LAUGHS + BASE, "once its aliases are expanded"),  # was 1.8 GB and on
+    ("x: " + "[" * 40 + "]" * 40 + "\n" + BASE, "nested more than 32 levels"),
+])
+def test_documents_no_config_can_be_are_refused_before_they_are_built(
+        tmp_path: Path, text: str, match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        _load(tmp_path, text)
+
+
+def test_an_alias_a_config_may_use_still_loads(tmp_path: Path) -> None:
+    text = BASE.replace("servo: {a0", "servo: &s {a0", 1)
+    assert text != BASE
+    _load(tmp_path, text)
+
+
+@pytest.mark.parametrize("old, new, match", [
+    ("sample_period_s: 0.001", "sample_period_s: 1.0e-9", "sample_period_s: must be >= "),
+    ("a0: 1.938e+9", "a0: 1.0e+300", r"axes\.x\.servo\.a0: must be <= 1e\+30"),
+    ("max_accel_mm_s2: 2450.0", "max_accel_mm_s2: 1.0e-9",
+     r"interpolator\.max_accel_mm_s2: reaching max_feed_mm_min takes"),
+    ("a3: 698.4", "a3: 1.0", r"axes\.x\.servo: unstable: poles .*79\.2[+-]473\.3j"),
+    ("a3: 698.4", "a3: 250.0", r"axes\.x\.servo: damping 0\.078 below 0\.1"),
+    ("b0: 1.938e+9", "b0: 1.938e+6", r"axes\.x\.servo\.b0: b0 / a0 = 0\.001"),
+])
+def test_a_machine_no_plan_can_serve_is_refused_naming_the_key(
+        tmp_path: Path, old: str, new: str, match: str) -> None:
+    text = BASE.replace(old, new, 1)
+    assert text != BASE
+    with pytest.raises(ConfigError, match=match):
+        _load(tmp_path, text)

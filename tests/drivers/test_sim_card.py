@@ -165,3 +165,15 @@ def test_the_card_can_run_a_plant_off_the_model(pole_pct: float, gain_pct: float
     lag_mm = (fb.commanded_counts[-1, 0] - fb.encoder_counts[-1, 0]) * 0.001
     p = mismatched(xy_config().axis("x").servo, pole_pct, gain_pct)
     assert lag_mm == pytest.approx(58.0 * (p.a1 - p.b1) / p.a0, abs=0.0011)
+
+
+@pytest.mark.parametrize("key, value", [("plant_pole_pct", 1e300), ("plant_gain_pct", "x"),
+                                        ("fifo_frames", 0), ("max_pulses_per_frame", -1)])
+def test_a_drive_option_out_of_range_names_itself(key: str, value: object) -> None:
+    """plant_pole_pct 1e300 was an OverflowError deep in the servo model."""
+    from controller.config import load_config
+    from drivers.errors import DriveError
+    from drivers.sim.card import SimCard
+
+    with pytest.raises(DriveError, match=f"sim: drive option {key}: "):
+        SimCard(load_config("xy_table"), realtime=False, **{key: value})
