@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
@@ -28,36 +29,39 @@ SMOOTH_KNOT_SHARE = 0.5  # a knot is cut only where the curvature is under this 
 
 
 def contour_parts(block: LineBlock | ArcBlock, max_feed_mm_s: float
-                  ) -> list[LineBlock | ArcBlock]:
-    """The block itself when short, else equal parts of at most PART_NOMINAL_S each."""
+                  ) -> Iterator[LineBlock | ArcBlock]:
+    """The block itself when short, else equal parts of at most PART_NOMINAL_S each, made as
+    they are taken (a list of the two million half turns of `G2 P1000000` filled memory)."""
     feed = max(min(block.feed_mm_s, max_feed_mm_s), 1e-9)
     n = math.ceil(block.length_mm / feed / PART_NOMINAL_S)
     if n <= 1:
-        return [block]
+        return iter([block])
     if isinstance(block, LineBlock):
         return _line_parts(block, n)
     return _arc_parts(block, max(n, math.ceil(abs(block.sweep_rad) / MAX_PART_SWEEP_RAD)))
 
 
-def _line_parts(block: LineBlock, n: int) -> list[LineBlock]:
+def _line_parts(block: LineBlock, n: int) -> Iterator[LineBlock]:
     start, end = np.array(block.start), np.array(block.end)
-    points = [tuple(float(c) for c in start + (end - start) * (i / n)) for i in range(n)]
-    points.append(block.end)
-    return [replace(block, start=points[i], end=points[i + 1])  # type: ignore[arg-type]
-            for i in range(n)]
+    before = block.start
+    for i in range(1, n + 1):
+        after = block.end if i == n else tuple(float(c) for c in start + (end - start) * (i / n))
+        yield replace(block, start=before, end=after)  # type: ignore[arg-type]
+        before = after
 
 
-def _arc_parts(block: ArcBlock, n: int) -> list[ArcBlock]:
+def _arc_parts(block: ArcBlock, n: int) -> Iterator[ArcBlock]:
     cx, cy = block.center
     r = block.radius_mm
     a0 = math.atan2(block.start[1] - cy, block.start[0] - cx)
     sweep = block.sweep_rad
     z = block.start[2]
-    points = [(cx + r * math.cos(a0 + sweep * i / n), cy + r * math.sin(a0 + sweep * i / n), z)
-              for i in range(n)]
-    points[0] = block.start
-    points.append(block.end)
-    return [replace(block, start=points[i], end=points[i + 1], turns=0) for i in range(n)]
+    before = block.start
+    for i in range(1, n + 1):
+        after = block.end if i == n else (cx + r * math.cos(a0 + sweep * i / n),
+                                          cy + r * math.sin(a0 + sweep * i / n), z)
+        yield replace(block, start=before, end=after, turns=0)
+        before = after
 
 
 def nurbs_parts(block: NurbsBlock, max_feed_mm_s: float,
@@ -102,6 +106,6 @@ def _cuts(s_mm: np.ndarray, u: np.ndarray, budget_mm: float) -> list[float]:
     return cuts
 
 
-def chunk_bounds(n_samples: int) -> list[tuple[int, int]]:
-    """[i0, i1) ranges of at most CHUNK_SAMPLES covering n_samples."""
-    return [(i, min(i + CHUNK_SAMPLES, n_samples)) for i in range(0, n_samples, CHUNK_SAMPLES)]
+def chunk_bounds(n_samples: int) -> Iterator[tuple[int, int]]:
+    """[i0, i1) ranges of at most CHUNK_SAMPLES covering n_samples, made as they are taken."""
+    return ((i, min(i + CHUNK_SAMPLES, n_samples)) for i in range(0, n_samples, CHUNK_SAMPLES))

@@ -299,9 +299,12 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
     for block in blocks:
         if _is_contour_block(block):
             parts = contour_parts(block, vmax) if not isinstance(block, NurbsBlock) else \
-                nurbs_parts(block, vmax, config.interpolator.kappa_threshold_per_mm)
-            for i, part in enumerate(parts):
-                yield from add_contour(part, i == len(parts) - 1)
+                iter(nurbs_parts(block, vmax, config.interpolator.kappa_threshold_per_mm))
+            part = next(parts)
+            for after in parts:  # one part ahead: the last one is known without a list
+                yield from add_contour(part, False)
+                part = after
+            yield from add_contour(part, True)
             continue
         yield from flush()
         # A long move or dwell comes in chunks, each timed on from the one before (emit may

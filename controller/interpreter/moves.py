@@ -94,8 +94,9 @@ class MotionMixin:
         if end == self.pos:
             return  # a zero-length move changes nothing
         feed = self.rapid_mm_s if rapid else self.feed_mm_s
-        self.out.append(LineBlock(self.pos, end, feed, rapid, self.path_control,
-                                  self._src(lineno)))
+        block = LineBlock(self.pos, end, feed, rapid, self.path_control, self._src(lineno))
+        _within_a_day(block.length_mm, self._capped(feed), "F")
+        self.out.append(block)
         self.pos = end
 
     def _arc(self, clockwise: bool, end: tuple[float, float, float], vals: dict[str, float],
@@ -117,9 +118,14 @@ class MotionMixin:
             cx, cy = center_ijk(sx, sy, ex, ey, *self._center(vals), inch)
         else:
             raise WordError(g_name(20 if clockwise else 30), "arc needs I J (centre) or R")
-        self.out.append(ArcBlock(self.pos, end, (cx, cy), clockwise, turns, self.feed_mm_s,
-                                 self.path_control, self._src(lineno)))
+        block = ArcBlock(self.pos, end, (cx, cy), clockwise, turns, self.feed_mm_s,
+                         self.path_control, self._src(lineno))
+        _within_a_day(block.length_mm, self._capped(self.feed_mm_s), "P" if turns else "F")
+        self.out.append(block)
         self.pos = end
+
+    def _capped(self, feed_mm_s: float) -> float:
+        return min(feed_mm_s, self.config.interpolator.max_feed_mm_s)
 
     def _turns(self, vals: dict[str, float]) -> int:
         p = vals.get("P", 1.0)
@@ -247,3 +253,15 @@ def _xy_flags(vals: dict[str, float]) -> bool:
         raise WordError("X" if "X" in vals else "Y",
                         "NURBS control point needs both X and Y")
     return "X" in vals
+
+
+MAX_BLOCK_S = 86_400.0  # one block of a day's motion or dwell: a typo, or a job for no machine
+
+
+def _within_a_day(length_mm: float, feed_mm_s: float, word: str) -> None:
+    """A move that takes over MAX_BLOCK_S at its feed is refused by the check (it planned
+    without end: an arc of 1e6 turns at F1.5 took 120 years and all memory)."""
+    if length_mm > feed_mm_s * MAX_BLOCK_S:
+        raise WordError(word, f"this move of {length_mm:.6g} mm takes "
+                              f"{length_mm / feed_mm_s:.3g} s at {feed_mm_s * 60:g} mm/min: "
+                              f"more than {MAX_BLOCK_S / 3600:g} h in one block")

@@ -17,7 +17,7 @@ from controller.errors import NcError
 from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
 from controller.interpreter.frames import AXIS_CODES, OffsetsMixin
 from controller.interpreter.line_state import LineState
-from controller.interpreter.moves import MotionMixin
+from controller.interpreter.moves import MAX_BLOCK_S, MotionMixin
 from controller.offsets import OffsetTable, ProgramOffsets
 
 MM_PER_INCH = 25.4
@@ -244,6 +244,9 @@ class InterpState(MotionMixin, OffsetsMixin):
             raise WordError("G4", "G4 dwell needs P (seconds)")
         if vals["P"] < 0:
             raise WordError("P", "G4 dwell time must not be negative")
+        if vals["P"] > MAX_BLOCK_S:
+            raise WordError("P", f"G4 dwell of {vals['P']:.6g} s is longer than "
+                                 f"{MAX_BLOCK_S / 3600:g} h")
         self.out.append(DwellBlock(vals["P"], self.pos, self._src(lineno)))
 
     def finish_program(self, lineno: int) -> None:

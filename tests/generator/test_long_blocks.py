@@ -35,7 +35,7 @@ def _arc(start: tuple, center: tuple, clockwise: bool, turns: int, feed: float) 
 
 def test_a_short_block_is_left_as_it_is() -> None:
     line = LineBlock((0.0, 0.0, 0.0), (10.0, 0.0, 0.0), 10.0, False, PathControl(), SRC)
-    assert contour_parts(line, VMAX) == [line] and contour_parts(line, VMAX)[0] is line
+    assert list(contour_parts(line, VMAX)) == [line] and next(contour_parts(line, VMAX)) is line
 
 
 @settings(max_examples=200, deadline=None)
@@ -44,7 +44,7 @@ def test_a_short_block_is_left_as_it_is() -> None:
 def test_line_parts_follow_the_line_end_to_end(x0: float, y0: float, x1: float, y1: float,
                                                feed: float) -> None:
     line = LineBlock((x0, y0, 1.0), (x1, y1, 1.0), feed, False, PathControl(), SRC)
-    parts = contour_parts(line, VMAX)
+    parts = list(contour_parts(line, VMAX))
     assert parts[0].start == line.start and parts[-1].end == line.end
     assert all(a.end == b.start for a, b in zip(parts, parts[1:], strict=False))
     nominal = [p.length_mm / min(feed, VMAX) for p in parts]
@@ -62,7 +62,7 @@ def test_arc_parts_turn_as_the_arc_does(r: float, a0: float, clockwise: bool, tu
     center = (5.0, -3.0)
     start = (center[0] + r * math.cos(a0), center[1] + r * math.sin(a0), 0.0)
     arc = _arc(start, center, clockwise, turns, feed)
-    parts = contour_parts(arc, VMAX)
+    parts = list(contour_parts(arc, VMAX))
     assert parts[0].start == arc.start and parts[-1].end == arc.end
     assert all(a.end == b.start for a, b in zip(parts, parts[1:], strict=False))
     assert math.isclose(sum(p.sweep_rad for p in parts), arc.sweep_rad, rel_tol=1e-9)
@@ -111,7 +111,7 @@ def test_the_chunks_of_a_slow_z_move_join_without_a_step(tmp_path: Path) -> None
 
 def test_blocks_of_a_long_program_keep_their_line(tmp_path: Path) -> None:
     blocks = motion(blocks_of(tmp_path, "G21 G90 F60\nG1 X20\nM2\n"))
-    parts = contour_parts(blocks[0], VMAX)  # 20 s at 1 mm/s: two parts
+    parts = list(contour_parts(blocks[0], VMAX))  # 20 s at 1 mm/s: two parts
     assert len(parts) == 2 and {p.source.first_line for p in parts} == {2}
 
 
@@ -174,3 +174,45 @@ def test_a_slow_nurbs_is_planned_in_bounded_windows(tmp_path: Path) -> None:
     assert longest_s < NURBS_PART_NOMINAL_S + WINDOW_NOMINAL_S + 5.0  # was 598 s
     total_s = sum(len(s.chunk) for s in steps) * XY_TABLE.sample_period_s
     assert total_s == pytest.approx(597.8, rel=1e-3)
+
+
+def test_an_arc_of_a_million_turns_starts_at_once_in_bounded_memory(tmp_path: Path) -> None:
+    """Three hours of a 0.2 mm circle: its two million half-turn parts were a list made
+    before the first sample (gigabytes); now the first seconds plan in a few megabytes."""
+    import itertools
+    import tracemalloc
+
+    from controller.interpreter.program import read_program
+
+    path = tmp_path / "turns.nc"
+    path.write_text("G21 G90 F3000\nG1 X0.2\nG2 X0.2 Y0 I-0.1 J0 P1000000\nM2\n")
+    tracemalloc.start()
+    try:
+        steps = list(itertools.islice(plan_program(read_program(str(path), XY_TABLE),
+                                                   XY_TABLE), 40))
+        peak_mb = tracemalloc.get_traced_memory()[1] / 1e6
+    finally:
+        tracemalloc.stop()
+    assert sum(len(s.chunk) for s in steps) > 1000
+    assert peak_mb < 200, peak_mb
+
+
+@pytest.mark.parametrize("text, word", [
+    ("G21 G90\nG4 P99999999999999999999\nM2\n", "2:4: error: G4 dwell of 1e+20 s"),
+    ("G21 G90\nG2 X0 Y0 I-0.4 J-15.18 P1000000 F1.5\nM2\n", "2:24: error: this move of"),
+    ("G21 G90 F1\nG1 X149\nG1 X-149\nG1 X149 Y0.001\nM2\n", None),  # 5 h of moves: fine
+])
+def test_check_refuses_a_block_of_more_than_a_day(tmp_path: Path, text: str,
+                                                   word: str | None) -> None:
+    """The dwell passed `check`, then the generator grew to its memory limit."""
+    from controller.errors import NcError
+    from controller.interpreter.program import read_program
+
+    path = tmp_path / "long.nc"
+    path.write_text(text)
+    if word is None:
+        list(read_program(str(path), XY_TABLE))
+        return
+    with pytest.raises(NcError) as err:
+        list(read_program(str(path), XY_TABLE))
+    assert word in err.value.format()
