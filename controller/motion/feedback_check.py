@@ -1,0 +1,65 @@
+"""Feedback a drive could not have given: an encoder jump or a position off the travel."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.config import MachineConfig
+from drivers.base import Feedback
+
+# An axis overshoots its commanded speed while it catches up with a step of the reference;
+# twice its maximum velocity in one period, plus two pulses of quantisation, is more than any
+# axis of the config can move. (A bit flip on the slcan link read 8388.608 mm in one period.)
+JUMP_SPEED_FACTOR = 2.0
+JUMP_SLACK_PULSES = 2
+
+
+@dataclass(frozen=True)
+class ImplausibleFeedback:
+    axis: str
+    message: str
+    seq: int
+
+
+class FeedbackCheck:
+    """Per frame and axis: the encoder moves at most what the axis can move in one period, and
+    stays within the travel widened by the axis's following-error limit at full speed."""
+
+    def __init__(self, config: MachineConfig, start_counts: np.ndarray) -> None:
+        self.names = config.axis_names
+        self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
+        vmax_mm_s = np.array([a.max_velocity_mm_s for a in config.axes])
+        self.max_step_counts = (JUMP_SPEED_FACTOR * vmax_mm_s * config.sample_period_s
+                                / self.pulse_mm + JUMP_SLACK_PULSES)
+        slack_mm = np.array([max(a.ferror_mm, a.min_ferror_mm) for a in config.axes])
+        travel = np.array([a.travel_mm for a in config.axes])
+        self.lo_counts = (travel[:, 0] - slack_mm) / self.pulse_mm
+        self.hi_counts = (travel[:, 1] + slack_mm) / self.pulse_mm
+        self.last = np.asarray(start_counts, dtype=np.int64).copy()
+
+    def check(self, fb: Feedback) -> ImplausibleFeedback | None:
+        if not len(fb):
+            return None
+        enc = fb.encoder_counts
+        step = np.abs(np.diff(np.vstack([self.last, enc]), axis=0))
+        self.last = enc[-1].copy()
+        jumps = step > self.max_step_counts
+        if jumps.any():
+            row, axis = (int(v) for v in np.argwhere(jumps)[0])
+            return ImplausibleFeedback(self.names[axis], (
+                f"{self.names[axis].upper()} axis encoder jumped "
+                f"{step[row, axis] * self.pulse_mm[axis]:.3f} mm in one period (at most "
+                f"{self.max_step_counts[axis] * self.pulse_mm[axis]:.3f} mm is possible): "
+                "corrupt feedback; the position is unknown"), int(fb.seq[row]))
+        off = (enc < self.lo_counts) | (enc > self.hi_counts)
+        if off.any():
+            row, axis = (int(v) for v in np.argwhere(off)[0])
+            return ImplausibleFeedback(self.names[axis], (
+                f"{self.names[axis].upper()} axis encoder reads "
+                f"{enc[row, axis] * self.pulse_mm[axis]:.3f} mm, off its travel "
+                f"[{self.lo_counts[axis] * self.pulse_mm[axis]:.3f}, "
+                f"{self.hi_counts[axis] * self.pulse_mm[axis]:.3f}] mm: corrupt feedback; the "
+                "position is unknown"), int(fb.seq[row]))
+        return None

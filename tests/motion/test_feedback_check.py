@@ -1,0 +1,55 @@
+"""Feedback no drive could have given is caught: an encoder jump, a position off the travel."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from controller.config import load_config
+from controller.motion.feedback_check import FeedbackCheck
+from drivers.base import Feedback
+
+CONFIG = load_config("xy_table")
+
+
+def _fb(rows: list[list[int]], seq0: int = 0) -> Feedback:
+    enc = np.array(rows, dtype=np.int64)
+    return Feedback(np.arange(seq0, seq0 + len(rows)), enc.copy(), enc)
+
+
+def test_a_bit_flip_on_the_link_is_implausible() -> None:
+    """8388.608 mm in one period: what a flipped bit 23 read on the slcan link."""
+    check = FeedbackCheck(CONFIG, np.array([1000, 2000]))
+    assert check.check(_fb([[1058, 2000], [1116, 2000]])) is None  # 58 mm/s: fine
+    trip = check.check(_fb([[1116, 2000 + (1 << 23)]], seq0=2))
+    assert trip is not None and trip.axis == "y" and trip.seq == 2
+    assert "jumped 8388.608 mm in one period" in trip.message and "unknown" in trip.message
+
+
+def test_a_position_off_the_travel_is_implausible() -> None:
+    check = FeedbackCheck(CONFIG, np.array([149_900, 0]))
+    trip = check.check(_fb([[149_950, 0], [150_000, 0], [150_050, 0]] + [
+        [150_050 + 50 * i, 0] for i in range(1, 200)]))
+    assert trip is not None and trip.axis == "x" and "off its travel" in trip.message
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-1.0, 1.0), min_size=1, max_size=300))
+def test_any_motion_within_the_axis_limits_passes(accels: list[float]) -> None:
+    """Every sequence of steps an axis can make (up to its max velocity, with the servo's
+    overshoot) inside the travel passes."""
+    vmax = CONFIG.axes[0].max_velocity_mm_s
+    step_max = vmax * CONFIG.sample_period_s / CONFIG.axes[0].pulse_mm  # counts per period
+    steps = np.clip(np.cumsum(accels), -1.0, 1.0) * step_max * 1.5
+    x = np.rint(np.cumsum(steps)).astype(np.int64)
+    check = FeedbackCheck(CONFIG, np.array([0, 0]))
+    assert check.check(_fb([[int(v), 0] for v in x])) is None
+
+
+@pytest.mark.parametrize("name", ["canopen", "serial", "xyz_mill"])
+def test_every_shipped_machine_builds_its_check(name: str) -> None:
+    config = load_config(name)
+    check = FeedbackCheck(config, np.zeros(len(config.axes), dtype=np.int64))
+    assert check.check(_fb([[0] * len(config.axes)])) is None
