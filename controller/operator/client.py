@@ -113,3 +113,41 @@ def daemon_answers(path: str) -> bool:
         return True
     except (DaemonUnavailable, DaemonError, OSError):
         return False
+
+
+def estop_socket_path(control_socket_path: str) -> str:
+    """cncd's e-stop socket beside its control socket: /run/cncd/cncd.sock ->
+    /run/cncd/cncd-estop.sock (a connection to it is an e-stop; see daemon/estop_socket.py)."""
+    head, tail = os.path.split(control_socket_path)
+    stem, dot, suffix = tail.rpartition(".")
+    name = f"{stem}-estop.{suffix}" if dot and stem else f"{tail}-estop"
+    return os.path.join(head, name)
+
+
+def request_estop(control_socket_path: str, timeout_s: float = 2.0) -> dict[str, Any] | None:
+    """E-stop through the e-stop socket: the daemon's reply, or None when it has none (then
+    ask on the control socket). Needs no free connection slot and sends nothing."""
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
+    sock.settimeout(timeout_s)
+    try:
+        try:
+            sock.connect(estop_socket_path(control_socket_path))
+        except (FileNotFoundError, ConnectionRefusedError):
+            return None
+        except OSError as exc:
+            raise DaemonUnavailable(f"e-stop socket: {exc.strerror or exc}") from None
+        try:
+            line = sock.makefile("rb").readline()
+        except OSError as exc:
+            raise DaemonUnavailable(f"e-stop socket: no answer: {exc}") from None
+    finally:
+        sock.close()
+    try:
+        reply = json.loads(line) if line else None
+    except ValueError:
+        reply = None
+    if reply is None:
+        raise DaemonUnavailable("e-stop socket: the daemon hung up without an answer")
+    if not reply.get("ok"):
+        raise DaemonError(reply.get("error", "error"), reply.get("message", ""))
+    return reply

@@ -18,6 +18,7 @@ from controller.operator.client import (
     DaemonError,
     DaemonUnavailable,
     default_socket_path,
+    request_estop,
     socket_argument,
 )
 from controller.operator.run_exit import STOP_SIGNALS
@@ -84,6 +85,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     path = args.socket if args.socket is not None else default_socket_path()
     try:
+        if args.command == "estop":  # the e-stop socket needs no free connection slot
+            reply = request_estop(path)
+            if reply is not None:
+                print(f"cncctl estop: {reply['state']}")
+                return 0
         with DaemonClient(path) as client:
             return _COMMANDS[args.command](client, args)
     except DaemonUnavailable as exc:

@@ -15,8 +15,9 @@ from pathlib import Path
 
 from controller.config import MachineConfig, load_config
 from controller.errors import CncError
-from controller.operator.client import default_socket_path
+from controller.operator.client import default_socket_path, estop_socket_path
 from controller.operator.daemon.access import AccessPolicy, bind_socket, socket_gid
+from controller.operator.daemon.estop_socket import EstopSocket
 from controller.operator.daemon.log import ERR, INFO, NOTICE, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.notify import run_watchdog, sd_notify
@@ -89,6 +90,9 @@ class Daemon:
                              self.config.service.max_connections)
         self.log.listeners.append(lambda event: self.server.publish("log", {  # type: ignore
             "event": "log", **event}))
+        estop = EstopSocket(estop_socket_path(self.socket_path), gid, policy, self.log,
+                            self._estop)
+        estop.start()
         threading.Thread(target=run_watchdog, args=(self._healthy, self.stop, self._unhealthy),
                          name="watchdog", daemon=True).start()
         sd_notify(f"READY=1\nSTATUS={self.machine.state.value}\nMAINPID={os.getpid()}")
@@ -97,11 +101,16 @@ class Daemon:
         try:
             self.server.serve(self._keep_going)
         finally:
+            estop.close()
             listener.close()
             try:
                 os.unlink(self.socket_path)
             except OSError:
                 pass
+
+    def _estop(self, reason: str) -> str:
+        self.machine.estop(reason)
+        return self.machine.state.value
 
     def _keep_going(self) -> bool:
         if not self.stop.is_set():

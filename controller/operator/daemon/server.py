@@ -26,6 +26,7 @@ from controller.operator.daemon.protocol import (
 )
 
 READ_TIMEOUT_S = 10.0  # a request begun (partial line or program) must be complete by then
+NEW_GRACE_S = 1.0  # a connection this young may have its request unread yet: evicted last
 IDLE_TIMEOUT_S = 300.0  # a connection with nothing pending and no subscription is closed
 MAX_OUTPUT_BYTES = 4 << 20  # a subscriber this far behind is dropped (never blocks the daemon)
 _RECV_BYTES = 1 << 16
@@ -39,10 +40,16 @@ class Conn:
     out: bytearray = field(default_factory=bytearray)
     topics: set[str] = field(default_factory=set)
     last_s: float = field(default_factory=time.monotonic)
+    admitted_s: float = field(default_factory=time.monotonic)
+    request_s: float | None = None  # when the request now being received began
     run: tuple[Request, bytearray] | None = None  # a run request waiting for its program
     discard: int = 0  # program bytes still to skip after a refused run
     closing: bool = False  # close once `out` is sent
     following: bool = False  # receives the events of the job it started
+
+    @property
+    def receiving(self) -> bool:
+        return self.run is not None or bool(self.discard) or bool(self.reader.pending)
 
     @property
     def idle(self) -> bool:
@@ -145,10 +152,23 @@ class Server:
         self.sel.register(sock, selectors.EVENT_READ, conn)
 
     def _evict_idle(self, all_of_them: bool = False) -> bool:
+        """Make room for a newcomer (or every idle one, out of descriptors). Whatever other
+        clients do, a slot is found: first an idle connection past its grace, then one whose
+        request has been arriving longest (a trickle), then the subscriber quiet longest,
+        then a young idle one; never one following the job it started. (Subscribers were
+        never evicted: 64 silent ones locked `estop` and `status` out.)"""
+        now = time.monotonic()
         idle = sorted((c for c in self.conns if c.idle and not c.out), key=lambda c: c.last_s)
-        for conn in idle if all_of_them else idle[:1]:
-            self._close(conn)
-        return bool(idle)
+        if all_of_them:
+            for conn in idle:
+                self._close(conn)
+            return bool(idle)
+        ranked = sorted((c for c in self.conns if not c.following),
+                        key=lambda c: _eviction_rank(c, now))
+        if not ranked:
+            return False
+        self._close(ranked[0])
+        return True
 
     def _service(self, conn: Conn, mask: int) -> None:
         if mask & selectors.EVENT_WRITE:
@@ -164,9 +184,13 @@ class Server:
                 self._close(conn)
                 return
             conn.last_s = time.monotonic()
+            if conn.request_s is None:
+                conn.request_s = conn.last_s  # a request's deadline runs from its first byte
             try:
                 conn.reader.feed(data)
                 self._consume(conn)
+                if not conn.receiving:
+                    conn.request_s = None
             except ProtocolError as exc:  # framing lost: answer, then hang up
                 self._send(conn, reply_error(None, exc.code, exc.message))
                 conn.closing = True
@@ -346,8 +370,9 @@ class Server:
         now = time.monotonic()
         for conn in list(self.conns):
             quiet_s = now - conn.last_s
-            busy = conn.run is not None or conn.discard or conn.reader.pending
-            if busy and quiet_s > READ_TIMEOUT_S:
+            # The whole request must arrive within READ_TIMEOUT_S of its first byte: a byte
+            # every 5 s used to restart the clock and hold a slot for ever.
+            if conn.receiving and now - (conn.request_s or now) > READ_TIMEOUT_S:
                 self._send(conn, reply_error(None, "timeout", f"request not completed within "
                                                               f"{READ_TIMEOUT_S:.0f} s"))
                 conn.closing = True
@@ -363,6 +388,18 @@ class Server:
             except (KeyError, ValueError):
                 pass
             conn.sock.close()
+
+
+def _eviction_rank(conn: Conn, now: float) -> tuple[int, float]:
+    """Lower goes first (see Server._evict_idle)."""
+    young = now - conn.admitted_s < NEW_GRACE_S
+    if conn.idle and not conn.out and not young:
+        return 0, conn.last_s
+    if conn.receiving:
+        return 1, conn.request_s or now
+    if conn.topics:
+        return 2, conn.last_s
+    return 3, conn.admitted_s
 
 
 def _send_now(sock: socket.socket, data: bytes) -> None:

@@ -1,0 +1,89 @@
+"""Whatever other clients do, e-stop, abort and status get through (real cncd, real sockets)."""
+
+from __future__ import annotations
+
+import json
+import socket
+import time
+from pathlib import Path
+
+import yaml
+from daemon_helpers import REPO, running_cncd
+
+from controller.operator.client import estop_socket_path
+
+
+def _config(tmp_path: Path, max_connections: int) -> Path:
+    data = yaml.safe_load((REPO / "config/xy_table.yaml").read_text())
+    data["service"] = {"max_connections": max_connections}
+    path = tmp_path / "machine.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _subscriber(path: str) -> socket.socket:
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    sock.connect(path)
+    sock.sendall(b'{"id": 1, "cmd": "subscribe", "topics": ["state"]}\n')
+    sock.settimeout(5.0)
+    assert json.loads(sock.makefile("rb").readline())["ok"]
+    return sock
+
+
+def test_silent_subscribers_at_the_cap_lock_out_neither_estop_nor_status(tmp_path: Path) -> None:
+    """16 subscribers that then say nothing fill a cap of 16: `estop` answered
+    too-many-connections, then Broken pipe, for as long as they stayed."""
+    with running_cncd(tmp_path, "--config", str(_config(tmp_path, 16))) as d:
+        assert d.cncctl("reset").returncode == 0
+        hogs = [_subscriber(d.socket_path) for _ in range(16)]
+        try:
+            status = d.cncctl("status", "--json")
+            assert status.returncode == 0, status.stderr
+            assert json.loads(status.stdout)["state"] == "IDLE"
+            estop = d.cncctl("estop")
+            assert estop.returncode == 0 and estop.stdout.strip() == "cncctl estop: ESTOP", \
+                estop.stderr
+            assert d.status()["state"] == "ESTOP"
+        finally:
+            for sock in hogs:
+                sock.close()
+
+
+def test_the_estop_socket_needs_no_request_and_no_slot(tmp_path: Path) -> None:
+    with running_cncd(tmp_path, "--config", str(_config(tmp_path, 4))) as d:
+        assert d.cncctl("reset").returncode == 0
+        hogs = [_subscriber(d.socket_path) for _ in range(4)]
+        try:
+            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+                sock.settimeout(5.0)
+                sock.connect(estop_socket_path(d.socket_path))  # nothing sent
+                reply = json.loads(sock.makefile("rb").readline())
+            assert reply == {"ok": True, "state": "ESTOP"}
+            assert "e-stop socket" in d.log_text()
+        finally:
+            for sock in hogs:
+                sock.close()
+
+
+def test_a_trickled_request_times_out_whole(tmp_path: Path) -> None:
+    """One byte every 0.5 s restarted the 10 s request time-out at each byte; the whole
+    request must now be complete 10 s after its first byte."""
+    with running_cncd(tmp_path) as d:
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+            sock.connect(d.socket_path)
+            sock.setblocking(False)
+            t0 = time.monotonic()
+            reply = b""
+            while b"\n" not in reply and time.monotonic() - t0 < 25:
+                try:
+                    sock.send(b" ")
+                except OSError:
+                    break
+                time.sleep(0.5)
+                try:
+                    reply += sock.recv(4096)
+                except BlockingIOError:
+                    pass
+            took_s = time.monotonic() - t0
+        assert b'"timeout"' in reply, reply
+        assert 9.5 < took_s < 15.0
