@@ -11,6 +11,7 @@ from controller.config import MachineConfig
 from controller.errors import DriveError
 from controller.generator.dynamics.precompensation import Precompensator
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
+from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter
 from controller.motion.recall import SendJournal, Sent, retimer_state, take_back
@@ -70,6 +71,8 @@ class MotionController(OperatorRequests):
         self.last_enc = start_enc
         self.pulses = PulseCounter(self.pulse_mm, start_cmd)
         self.ferr = FerrorCheck(self.config, start_cmd)
+        self.fbcheck = FeedbackCheck(self.config, start_enc)
+        self.feedback_corrupt = False
         self.contour = ContourStats(self.pulse_mm)
         self.hist = RefHistory(2 * self.drive.fifo_capacity() + 1024, self.n, self.period_s)
         self.prev_mm = self.last_mm = start_cmd * self.pulse_mm
@@ -108,7 +111,7 @@ class MotionController(OperatorRequests):
             self.position_known = False
             self._finish(Outcome.FAULT, str(exc))
             return
-        fb = self._own_numbers(fb)
+        fb = self._plausible(self._own_numbers(fb))
         self._account(fb)
         if status.halted:
             self.underruns += int(CardStatus.UNDERRUN in status)
@@ -138,6 +141,21 @@ class MotionController(OperatorRequests):
         if not self.seq0:
             return fb
         return Feedback(fb.seq - self.seq0, fb.commanded_counts, fb.encoder_counts)
+
+    def _plausible(self, fb: Feedback) -> Feedback:
+        """Feedback up to the first row no drive could have given; from there on none is
+        believed: the run stops as a fault with the position unknown (homing needed). A
+        flipped bit once read as 'Y axis following error 8388.608 mm' with the position
+        'known' at 232 mm on a 150 mm axis."""
+        if self.feedback_corrupt:
+            return Feedback(fb.seq[:0], fb.commanded_counts[:0], fb.encoder_counts[:0])
+        bad = self.fbcheck.check(fb)
+        if bad is None:
+            return fb
+        self.feedback_corrupt, self.position_known = True, False
+        self._begin_stop(Outcome.FAULT, bad.message)
+        keep = int(np.searchsorted(fb.seq, bad.seq))
+        return Feedback(fb.seq[:keep], fb.commanded_counts[:keep], fb.encoder_counts[:keep])
 
     def _account(self, fb: Feedback) -> None:
         if not len(fb):

@@ -15,9 +15,11 @@ def _read_position(ctrl: Any) -> tuple[np.ndarray | None, np.ndarray, bool]:
     """(card step counter or None, encoder counts, known?) -- last known if the card is mute."""
     try:
         cmd, enc = ctrl.drive.position_counts()
-        return cmd, enc, True
     except LostCommunicationError:
         return None, ctrl.last_enc, False
+    if ctrl.feedback_corrupt:  # the drive's reading is what was not believed: the last one was
+        return cmd, ctrl.last_enc, False
+    return cmd, enc, True
 
 
 def build_result(ctrl: Any) -> MotionResult:

@@ -262,3 +262,24 @@ def test_program_without_motion_ends_at_once() -> None:
     result, _, rec, _ = run([])
     assert result.outcome is Outcome.DONE and result.motion_time_s == 0.0
     assert len(rec.commanded()) == 0
+
+
+def test_corrupt_feedback_is_a_fault_with_the_position_unknown() -> None:
+    """A flipped bit of the encoder reading (as on a noisy CAN link) read as 'Y axis
+    following error 8388.608 mm' with the position 'known' at 232 mm on a 150 mm axis."""
+    def flip(card: object, *_: object) -> None:
+        real = card.feedback  # type: ignore[attr-defined]
+
+        def flipped() -> object:
+            fb = real()
+            if len(fb):
+                fb.encoder_counts[-1, 1] += 1 << 23
+                card.feedback = real  # type: ignore[attr-defined]  (one bad reading)
+            return fb
+        card.feedback = flipped  # type: ignore[attr-defined]
+
+    result, card, _, _ = run(list(circle_chunks()), inject=flip)
+    assert result.outcome is Outcome.FAULT, result.message
+    assert "Y axis encoder jumped 8388.6" in result.message and "unknown" in result.message
+    assert not result.position_known
+    assert abs(result.final_position_mm["y"]) < 20.0  # the last believed reading, on the circle
