@@ -136,6 +136,8 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
     homed = s.get("homed") or {}
     if homed and not all(homed.values()):
         print("  not homed: " + " ".join(k.upper() for k, v in homed.items() if not v))
+    for problem in s.get("state_problems") or []:
+        print(f"  state directory: {problem}", flush=True)
     last = s.get("last_job") or {}
     if last.get("program"):
         print(f"  last job {last['program']!r}: {last.get('state', '?').lower()} at line "

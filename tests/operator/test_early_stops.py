@@ -252,11 +252,12 @@ def test_an_approach_stopped_is_journalled_under_its_program_and_line(tmp_path: 
 
 
 def test_a_crashed_daemons_job_files_are_removed_at_start(tmp_path: Path) -> None:
-    from controller.operator.daemon.machine import _remove_job_files
+    from controller.operator.daemon.machine import LEFTOVER_PREFIXES
+    from controller.operator.daemon.state_dir import StateDir
     job = tmp_path / "job-abc123"
     job.mkdir()
     (job / "program.nc").write_text("G1 X1\n")
     (tmp_path / "approach-xyz.nc").write_text("G1 X1\n")
     (tmp_path / "journal.json").write_text("{}")
-    _remove_job_files(tmp_path)
+    StateDir(tmp_path).remove_leftovers(LEFTOVER_PREFIXES)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["journal.json"]

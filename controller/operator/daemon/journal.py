@@ -4,37 +4,43 @@ that it survives a restart (LinuxCNC's POSITION_FILE stance: shown, never acted 
 from __future__ import annotations
 
 import json
-import os
 import time
-from pathlib import Path
 from typing import Any
+
+from controller.operator.daemon.state_dir import StateDir, StateFileError
 
 JOURNAL_NAME = "journal.json"
 
 
 class Journal:
-    """One small JSON file, replaced atomically (write, fsync, rename) at each update."""
+    """One small JSON file in the state directory, replaced atomically at each update. One
+    that cannot be read (a link, not a regular file, not a JSON object) is kept aside under a
+    new name and reported in `problem`, never silently replaced."""
 
-    def __init__(self, state_dir: Path) -> None:
-        self.path = state_dir / JOURNAL_NAME
+    def __init__(self, state: StateDir) -> None:
+        self.state = state
+        self.problem: str | None = None
         self.entry: dict[str, Any] = self._read()
 
     def _read(self) -> dict[str, Any]:
         try:
-            data = json.loads(self.path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+            raw = self.state.read(JOURNAL_NAME)
+            if raw is None:
+                return {}
+            data = json.loads(raw.decode("utf-8"))
+            if not isinstance(data, dict):
+                raise ValueError("not a JSON object")
+            return data
+        except (StateFileError, ValueError) as exc:
+            kept = self.state.keep_aside(JOURNAL_NAME)
+            self.problem = (f"the job journal {JOURNAL_NAME} could not be read ({exc}); kept "
+                            f"as {kept}: the last job before it is not known")
             return {}
-        return data if isinstance(data, dict) else {}
 
     def update(self, **fields: Any) -> None:
         self.entry = {**self.entry, **fields, "updated": round(time.time(), 3)}
-        tmp = self.path.with_suffix(".tmp")
         try:
-            with open(tmp, "w", encoding="utf-8") as fh:
-                json.dump(self.entry, fh, indent=1)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, self.path)
+            self.state.write_atomic(JOURNAL_NAME, json.dumps(self.entry, indent=1).encode())
         except OSError:
             pass  # a full disk must not stop a running job; the journal is advisory
 

@@ -20,6 +20,7 @@ from controller.operator.daemon.journal import Journal
 from controller.operator.daemon.log import ERR, NOTICE, WARNING, EventLog
 from controller.operator.daemon.operations import OperatorCommands
 from controller.operator.daemon.protocol import ProtocolError
+from controller.operator.daemon.state_dir import StateDir
 from controller.runtime.processes import RuntimeOptions
 from drivers.base import CardStatus, Drive
 from drivers.errors import LostCommunicationError
@@ -29,18 +30,7 @@ MOTION_STALL_S = 1.0  # no motion-loop cycle for this long while running: unheal
 CHECK_STALL_S = 2.0  # no checked block for this long while checking: unhealthy
 
 
-def _remove_job_files(state_dir: Path) -> None:
-    """The program copies a crashed daemon left (job-*/program.nc, approach-*.nc: up to
-    64 MiB each, never removed before); this daemon owns the state directory now."""
-    for path in state_dir.glob("job-*"):
-        for inner in path.glob("*") if path.is_dir() else ():
-            inner.unlink(missing_ok=True)
-        try:
-            path.rmdir() if path.is_dir() else None
-        except OSError:
-            pass
-    for path in state_dir.glob("approach-*.nc"):
-        path.unlink(missing_ok=True)
+LEFTOVER_PREFIXES = ("job-", "approach-", ".journal.json.", ".offsets.json.")
 
 
 class Machine(JobRunner, OperatorCommands):
@@ -58,10 +48,16 @@ class Machine(JobRunner, OperatorCommands):
         self.job: Job | None = None
         self._jobs = 0
         self.beat_s = time.monotonic()  # last sign of life of the check or the motion loop
-        self.journal = Journal(state_dir)
+        self.state_files = StateDir(state_dir)  # checked: owned by us, written by no one else
+        self.state_problems: list[str] = []  # state files kept aside at start-up, reported
+        self.journal = Journal(self.state_files)
         self.load_offsets()
         self.last_job = self.journal.after_restart()
-        _remove_job_files(state_dir)
+        # The program copies a crashed daemon left (up to 64 MiB each): links not followed.
+        self.state_files.remove_leftovers(LEFTOVER_PREFIXES)
+        self.state_problems += [p for p in (self.journal.problem,) if p]
+        for problem in self.state_problems:
+            log.log(ERR, f"state directory: {problem}")
         threading.Thread(target=self._journal_loop, name="journal", daemon=True).start()
         if self.last_job.get("state") == "INTERRUPTED":
             log.log(WARNING, f"the last job {self.last_job.get('program')!r} was interrupted "
@@ -226,6 +222,7 @@ class Machine(JobRunner, OperatorCommands):
         out.update(self.offsets_status())
         out["last_homing"] = self.last_homing
         out["last_job"] = self.last_job
+        out["state_problems"] = list(self.state_problems)
         return out
 
     def healthy(self) -> str | None:

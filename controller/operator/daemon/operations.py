@@ -3,6 +3,7 @@ home, and the work offset table (kept in the state directory across restarts).""
 
 from __future__ import annotations
 
+import json
 import threading
 from pathlib import Path
 from typing import Any
@@ -10,11 +11,12 @@ from typing import Any
 from controller.config import MachineConfig
 from controller.motion.types import MotionState
 from controller.offsets import (
+    OffsetsError,
     OffsetTable,
     describe,
-    load_offsets,
-    save_offsets,
+    from_json,
     select,
+    to_json,
     to_program_mm,
     with_g92,
     with_system,
@@ -23,6 +25,7 @@ from controller.operator.daemon import manual
 from controller.operator.daemon.job import Emit, Job
 from controller.operator.daemon.log import NOTICE, EventLog
 from controller.operator.daemon.protocol import ProtocolError
+from controller.operator.daemon.state_dir import StateDir, StateFileError
 
 OFFSETS_FILE = "offsets.json"
 SYSTEMS = ("G54", "G55", "G56", "G57", "G58", "G59")
@@ -34,6 +37,8 @@ class OperatorCommands:
     config: MachineConfig
     log: EventLog
     state_dir: Path
+    state_files: StateDir
+    state_problems: list[str]
     job: Job | None
     _lock: threading.RLock
     offsets: OffsetTable
@@ -97,16 +102,29 @@ class OperatorCommands:
     feed_override_pct = 100.0
 
     # -- work offsets -----------------------------------------------------------------------
-    def _offsets_path(self) -> Path:
-        return self.state_dir / OFFSETS_FILE
-
     def load_offsets(self) -> None:
-        """The table kept across restarts; a damaged file is refused at start-up (named)."""
-        self.offsets = load_offsets(self._offsets_path())
+        """The table kept across restarts. One that cannot be read (a link, a FIFO, not a
+        table) is kept aside under a new name and reported: the work offsets are then all
+        zero, which status says until they are set again."""
+        try:
+            raw = self.state_files.read(OFFSETS_FILE)
+            self.offsets = OffsetTable() if raw is None else from_json(
+                json.loads(raw.decode("utf-8")))
+        except (StateFileError, ValueError) as exc:
+            kept = self.state_files.keep_aside(OFFSETS_FILE)
+            self.offsets = OffsetTable()
+            self.state_problems.append(
+                f"the work offset table {OFFSETS_FILE} could not be read ({exc}); kept as "
+                f"{kept}: the work offsets are all zero until set again")
 
     def store_offsets(self, table: OffsetTable, why: str) -> None:
         with self._lock:
-            save_offsets(self._offsets_path(), table)
+            try:
+                self.state_files.write_atomic(OFFSETS_FILE, (json.dumps(
+                    to_json(table), indent=2) + "\n").encode())
+            except OSError as exc:
+                raise OffsetsError(str(self.state_files.path / OFFSETS_FILE), "cannot write the "
+                                   f"offset table: {exc.strerror or exc}") from None
             self.offsets = table
         self.log.log(NOTICE, f"work offsets ({why}): {describe(table)}")
 
