@@ -87,3 +87,45 @@ def test_a_trickled_request_times_out_whole(tmp_path: Path) -> None:
             took_s = time.monotonic() - t0
         assert b'"timeout"' in reply, reply
         assert 9.5 < took_s < 15.0
+
+
+def _rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    raise AssertionError("no VmRSS")
+
+
+def test_programs_being_sent_are_bounded_in_total_and_kept_out_of_memory(tmp_path: Path
+                                                                         ) -> None:
+    """Two 64 MiB programs may arrive at once, not a third; what arrives is spooled to a
+    file (16 trickled programs held 1.36 GB of the daemon's locked memory)."""
+    size = 64 * 1024 * 1024
+    with running_cncd(tmp_path) as d:
+        assert d.cncctl("reset").returncode == 0
+        rss0_mb = _rss_mb(d.proc.pid)
+        senders = []
+        try:
+            for _ in range(2):
+                sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+                sock.connect(d.socket_path)
+                sock.sendall(json.dumps({"id": 1, "cmd": "run", "name": "big.nc",
+                                         "program_bytes": size}).encode() + b"\n")
+                chunk = b"(" + b"x" * ((1 << 20) - 3) + b")\n"
+                for _ in range(48):  # 48 MiB each, the rest never comes
+                    sock.sendall(chunk)
+                senders.append(sock)
+            time.sleep(0.5)
+            third = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            third.connect(d.socket_path)
+            third.settimeout(5.0)
+            third.sendall(json.dumps({"id": 7, "cmd": "run", "name": "c.nc",
+                                      "program_bytes": 1000}).encode() + b"\n")
+            reply = json.loads(third.makefile("rb").readline())
+            third.close()
+            assert reply["ok"] is False and reply["error"] == "busy", reply
+            assert "at most at once" in reply["message"]
+            assert _rss_mb(d.proc.pid) - rss0_mb < 40, (rss0_mb, _rss_mb(d.proc.pid))
+        finally:
+            for sock in senders:
+                sock.close()

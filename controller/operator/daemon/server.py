@@ -9,14 +9,14 @@ import selectors
 import socket
 import struct
 import time
-from dataclasses import dataclass, field
 from typing import Any
 
 from controller.operator.daemon.access import AccessPolicy
+from controller.operator.daemon.connections import Conn, Upload, eviction_rank
 from controller.operator.daemon.log import ERR, INFO, WARNING, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.protocol import (
-    LineReader,
+    MAX_PROGRAM_BYTES,
     ProtocolError,
     Request,
     encode,
@@ -26,36 +26,10 @@ from controller.operator.daemon.protocol import (
 )
 
 READ_TIMEOUT_S = 10.0  # a request begun (partial line or program) must be complete by then
-NEW_GRACE_S = 1.0  # a connection this young may have its request unread yet: evicted last
 IDLE_TIMEOUT_S = 300.0  # a connection with nothing pending and no subscription is closed
+MAX_UPLOADS_BYTES = 2 * MAX_PROGRAM_BYTES  # programs being received at once, all clients
 MAX_OUTPUT_BYTES = 4 << 20  # a subscriber this far behind is dropped (never blocks the daemon)
 _RECV_BYTES = 1 << 16
-
-
-@dataclass(eq=False)
-class Conn:
-    sock: socket.socket
-    uid: int
-    reader: LineReader = field(default_factory=LineReader)
-    out: bytearray = field(default_factory=bytearray)
-    topics: set[str] = field(default_factory=set)
-    last_s: float = field(default_factory=time.monotonic)
-    admitted_s: float = field(default_factory=time.monotonic)
-    request_s: float | None = None  # when the request now being received began
-    run: tuple[Request, bytearray] | None = None  # a run request waiting for its program
-    discard: int = 0  # program bytes still to skip after a refused run
-    closing: bool = False  # close once `out` is sent
-    following: bool = False  # receives the events of the job it started
-
-    @property
-    def receiving(self) -> bool:
-        return self.run is not None or bool(self.discard) or bool(self.reader.pending)
-
-    @property
-    def idle(self) -> bool:
-        """Nothing owed either way: may be closed to make room for another client."""
-        return (not self.topics and not self.following and self.run is None
-                and not self.reader.pending)
 
 
 class Server:
@@ -164,7 +138,7 @@ class Server:
                 self._close(conn)
             return bool(idle)
         ranked = sorted((c for c in self.conns if not c.following),
-                        key=lambda c: _eviction_rank(c, now))
+                        key=lambda c: eviction_rank(c, now))
         if not ranked:
             return False
         self._close(ranked[0])
@@ -203,12 +177,12 @@ class Server:
                 if conn.discard:
                     return
             if conn.run is not None:
-                request, text = conn.run
-                text += conn.reader.take(request.fields["program_bytes"] - len(text))
-                if len(text) < request.fields["program_bytes"]:
+                request, upload = conn.run
+                upload.add(conn.reader.take(upload.size - upload.received))
+                if upload.received < upload.size:
                     return
                 conn.run = None
-                self._start_run(conn, request, bytes(text))
+                self._start_run(conn, request, upload.text())
                 continue
             line = conn.reader.next_line()
             if line is None:
@@ -250,7 +224,13 @@ class Server:
                 # Refused at once: the program text that follows is skipped unread.
                 conn.discard = request.fields["program_bytes"]
                 raise
-            conn.run = (request, bytearray())
+            size = request.fields["program_bytes"]
+            uploading = sum(c.run[1].size for c in self.conns if c.run is not None)
+            if uploading + size > MAX_UPLOADS_BYTES:
+                conn.discard = size
+                raise ProtocolError("busy", f"programs being sent take {uploading} bytes; "
+                                            f"{MAX_UPLOADS_BYTES} at most at once: try again")
+            conn.run = (request, Upload(size))
         elif cmd in ("abort", "estop"):
             getattr(self.machine, cmd)(f"{'aborted' if cmd == 'abort' else 'e-stop'} by "
                                        f"operator ({who})")
@@ -381,6 +361,9 @@ class Server:
                 self._close(conn)
 
     def _close(self, conn: Conn) -> None:
+        if conn.run is not None:
+            conn.run[1].close()
+            conn.run = None
         if conn in self.conns:
             self.conns.discard(conn)
             try:
@@ -388,18 +371,6 @@ class Server:
             except (KeyError, ValueError):
                 pass
             conn.sock.close()
-
-
-def _eviction_rank(conn: Conn, now: float) -> tuple[int, float]:
-    """Lower goes first (see Server._evict_idle)."""
-    young = now - conn.admitted_s < NEW_GRACE_S
-    if conn.idle and not conn.out and not young:
-        return 0, conn.last_s
-    if conn.receiving:
-        return 1, conn.request_s or now
-    if conn.topics:
-        return 2, conn.last_s
-    return 3, conn.admitted_s
 
 
 def _send_now(sock: socket.socket, data: bytes) -> None:
