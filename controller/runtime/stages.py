@@ -77,10 +77,23 @@ def _die_with_parent(parent_pid: int) -> None:
 
 
 PR_SET_PDEATHSIG = 1
+# Each producer's memory ceiling (RLIMIT_DATA: its heap and anonymous mappings, not the
+# shared libraries): a planning bug then ends one job with MemoryError, not the PC. Plans of
+# the longest programs take under 150 MB; the unit caps the whole service (MemoryMax).
+PRODUCER_MEMORY_BYTES = 2 << 30
+
+
+def memory_ceiling(limit_bytes: int = PRODUCER_MEMORY_BYTES) -> None:
+    """Lower RLIMIT_DATA to limit_bytes (never raise it above what was inherited)."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_DATA)
+    cap = limit_bytes if hard == resource.RLIM_INFINITY else min(limit_bytes, hard)
+    if soft == resource.RLIM_INFINITY or soft > cap:
+        resource.setrlimit(resource.RLIMIT_DATA, (cap, hard))
 
 
 def _child_setup(parent_pid: int) -> int:
     _die_with_parent(parent_pid)
+    memory_ceiling()
     # Ctrl-C goes to the whole process group: only the motion process decides how to stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # Best effort: on a loaded machine the producers keep the reference ring ahead of the card

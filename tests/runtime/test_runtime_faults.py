@@ -177,3 +177,18 @@ def test_a_failed_stream_is_waited_for_once() -> None:
         assert q.empty_waits == 1
     finally:
         ring.close()
+
+
+def test_a_producer_has_a_memory_ceiling() -> None:
+    """A planning bug ends one job with MemoryError, not the PC (a 1e20 s dwell once grew
+    the generator to 4 GB)."""
+    import subprocess
+    import sys
+
+    code = ("import resource\nfrom controller.runtime.stages import memory_ceiling\n"
+            "memory_ceiling(256 << 20)\n"
+            "print(resource.getrlimit(resource.RLIMIT_DATA)[0])\n"
+            "try:\n    b = bytearray(512 << 20)\nexcept MemoryError:\n    print('refused')\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.stdout.split() == [str(256 << 20), "refused"], done.stderr
