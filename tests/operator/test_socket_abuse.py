@@ -129,3 +129,40 @@ def test_programs_being_sent_are_bounded_in_total_and_kept_out_of_memory(tmp_pat
         finally:
             for sock in senders:
                 sock.close()
+
+
+def test_abort_during_a_long_check_ends_it_at_once_and_status_answers_meanwhile(
+        tmp_path: Path) -> None:
+    """The check ran in the daemon's job thread: a 60 MB comment-only program withheld the
+    watchdog for 4 s, and an abort answered ok while the job stayed CHECKING for 21 s."""
+    from daemon_helpers import raw, start_run
+
+    program = tmp_path / "comments.nc"
+    with program.open("w") as fh:
+        fh.write("G21 G90\n")
+        line = "(" + "x" * 70 + ")\n"
+        for _ in range(800_000):  # 58 MB of comments: seconds of check
+            fh.write(line)
+        fh.write("G1 X1 F600\nM2\n")
+    with running_cncd(tmp_path) as d:
+        assert d.cncctl("reset").returncode == 0
+        run = start_run(d, program)
+        try:
+            deadline = time.monotonic() + 60
+            while d.status()["state"] != "CHECKING":
+                assert time.monotonic() < deadline and run.poll() is None
+                time.sleep(0.02)
+            t0 = time.monotonic()
+            status = raw(d.socket_path, b'{"id": 1, "cmd": "status"}\n')  # not stalled
+            assert status[0]["state"] == "CHECKING"
+            assert raw(d.socket_path, b'{"id": 2, "cmd": "abort"}\n')[0]["ok"]
+            while d.status()["state"] != "IDLE":
+                assert time.monotonic() - t0 < 5.0, "the check went on after the abort"
+                time.sleep(0.02)
+            out, err = run.communicate(timeout=30)
+        finally:
+            if run.poll() is None:
+                run.kill()
+                run.wait()
+        assert run.returncode == 4 and "aborted" in out + err, (out, err)
+        assert d.status()["position_mm"] == {"x": 0.0, "y": 0.0}

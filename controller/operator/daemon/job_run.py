@@ -10,10 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from controller.errors import NcError
-from controller.interpreter.program import position_at_line
 from controller.motion.types import MotionProgress, MotionResult, Outcome
-from controller.offsets import ProgramOffsets
-from controller.operator.check_cmd import check_program
+from controller.operator.daemon.check_process import CheckCancelled, check_in_child
 from controller.operator.daemon.job import Job, State, progress_event
 from controller.operator.daemon.log import ERR, INFO, NOTICE
 from controller.operator.from_line import approach_program
@@ -56,14 +54,14 @@ class JobRunner:
         self.log.log(INFO, f"job {job.number}: checking {job.name!r} ({job.sha256[:12]})")
         start_mm = self._start_mm()
         offsets = None if job.manual_move else self.offsets
-        track = ProgramOffsets()
         try:
-            if job.from_line is not None:  # lines before it are read from where it stands
-                at = position_at_line(path, self.config, job.from_line, start_mm, offsets)
-                job.approach_mm = at.position_mm
-            check_program(path, self.config, on_block=self._beat, offsets=offsets,
-                          start_mm=start_mm, from_line=job.from_line, track=track,
-                          summary=False)
+            checked = check_in_child(path, self.config, offsets, start_mm, job.from_line,
+                                     lambda: job.cancel is not None, self._beat)
+            job.approach_mm = checked.approach_mm
+        except CheckCancelled:
+            with self._lock:
+                self._cancelled(job)
+            return
         except NcError as exc:
             message = NcError(job.name, exc.line, exc.col, exc.word, exc.message).format()
             self.log.log(NOTICE, f"job {job.number} rejected: {message}")
@@ -78,7 +76,7 @@ class JobRunner:
             job.start_mm = start_mm
             job.runtime = Runtime(path, self.config, replace(
                 self._options(job), offsets=offsets, from_line=job.from_line,
-                override_off_lines=track.override_off_lines))
+                override_off_lines=checked.override_off_lines))
             job.runtime.set_feed_override(self.feed_override_pct)
             self.journal.start(job.name, job.sha256, job.lines)
             self._beat()
@@ -87,7 +85,7 @@ class JobRunner:
                   "drive": self.config.drive.backend, "job": job.number})
         result = job.runtime.run()
         if result.outcome is Outcome.DONE and not job.manual_move:
-            self.store_offsets(track.table, f"left by {job.name}")
+            self.store_offsets(checked.table, f"left by {job.name}")
         self._record(job, result)
 
     def _approach(self, job: Job, start_mm: tuple[float, float, float]) -> bool:
