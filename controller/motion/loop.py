@@ -327,10 +327,34 @@ class MotionController(OperatorRequests):
             self.holding = False
             self.state = MotionState.RUNNING
 
+    def _asked(self) -> str:
+        """The stop under way when nothing went wrong yet (a fault then names it too)."""
+        if self.holding:
+            return f"feed hold at line {self.line}"
+        if self.pausing:
+            return f"program pause at line {self.line}"
+        return "program end" if self.sent_eos else ""
+
+    def _then_fault(self, message: str) -> None:
+        """A fault during a stop (abort, e-stop, hold, program end) is a fault: it says what
+        was asked and what happened (an abort's fault was reported as an abort, and the
+        daemon went IDLE on a faulted drive)."""
+        asked = self.message if self.outcome is not None else self._asked()
+        if asked and message in asked:
+            return
+        self.outcome = Outcome.FAULT
+        self.message = f"{asked}; then {message}" if asked else message
+
     def _begin_stop(self, outcome: Outcome, message: str) -> None:
         if self.outcome is not None:
-            return  # the first reason is the one reported
-        self.outcome, self.message = outcome, message
+            # The first reason stays; a fault during an abort's stop makes it a fault.
+            if outcome is Outcome.FAULT and self.outcome is not Outcome.FAULT:
+                self._then_fault(message)
+            return
+        if outcome is Outcome.FAULT:
+            self._then_fault(message)
+        else:
+            self.outcome, self.message = outcome, message
         if self.sent_eos or self.pausing or not self.sent or self.pending_tail is not None:
             self.state = MotionState.SETTLING if self.sent else MotionState.FINISHED
             return
@@ -369,10 +393,10 @@ class MotionController(OperatorRequests):
             self._finish(self.outcome or Outcome.DONE, self.message)
 
     def _finish(self, outcome: Outcome, message: str) -> None:
-        if self.outcome is None or self.outcome is Outcome.DONE:
+        if outcome is Outcome.FAULT and message:
+            self._then_fault(message)
+        elif self.outcome is None or self.outcome is Outcome.DONE:
             self.outcome, self.message = outcome, message
-        elif outcome is Outcome.FAULT and message and message not in self.message:
-            self.message = f"{self.message}; then {message}"
         self.state = MotionState.FINISHED
 
     # -- reporting ------------------------------------------------------------------------

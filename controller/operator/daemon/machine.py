@@ -119,6 +119,8 @@ class Machine(JobRunner, OperatorCommands):
                 self._set_state(State.FAULT)
             elif self.state is not State.ESTOP:
                 self._set_state(State.IDLE)
+            if self.state is State.ESTOP and self.last_homing:
+                failure = failure or self.last_homing  # the e-stop's word, said at once
             self.last_homing = failure or "done"
 
     last_homing: str | None = None
@@ -132,22 +134,36 @@ class Machine(JobRunner, OperatorCommands):
                                              "home`; the config's allow_unhomed permits runs "
                                              "without)")
 
+    def require_position(self, what: str) -> None:
+        """Refuse a jog or a homing while the drive cannot say where the machine is."""
+        try:
+            self.drive.position_counts()
+        except CncError as exc:
+            raise ProtocolError("position-unknown", f"cannot {what}: the position is unknown "
+                                f"({exc}): `cncctl reset` opens the drive again, then "
+                                "`cncctl home`") from None
+
     def position_text(self) -> str:
         pos = self._position_mm() or {}
         return " ".join(f"{k.upper()}{v:.3f}" for k, v in pos.items())
 
-    def abort(self, reason: str) -> None:
+    def abort(self, reason: str) -> str:
+        """Stop the job along the path; the state it leads to (IDLE, or the latched ESTOP;
+        the reply said RUNNING while a held job stopped)."""
         with self._lock:
             job = self.job
             if job is None:
                 raise ProtocolError("not-running", "no job is running")
             self._stop_job(job, reason)
+            return self.state.value if self.state is State.ESTOP else State.IDLE.value
 
     def estop(self, reason: str) -> None:
         with self._lock:
             self.fault = reason
             if self.state is State.HOMING:
                 self.drive.abort_homing(reason)
+                # Said at once: `cncctl home` printed "None" while the homing thread ended.
+                self.last_homing = f"aborted by the e-stop ({reason})"
             self._set_state(State.ESTOP)
             if self.job is not None:
                 self._stop_job(self.job, reason)

@@ -227,9 +227,11 @@ class Server:
                 conn.discard = request.fields["program_bytes"]
                 raise
             conn.run = (request, bytearray())
-        elif cmd in ("abort", "estop"):
-            getattr(self.machine, cmd)(f"{'aborted' if cmd == 'abort' else 'e-stop'} by "
-                                       f"operator ({who})")
+        elif cmd == "abort":
+            state = self.machine.abort(f"aborted by operator ({who})")
+            self._send(conn, reply_ok(rid, state=state))
+        elif cmd == "estop":
+            self.machine.estop(f"e-stop by operator ({who})")
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
         elif cmd == "hold":
             self.machine.hold()
