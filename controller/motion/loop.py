@@ -10,6 +10,7 @@ import numpy as np
 from controller.config import MachineConfig
 from controller.errors import DriveError
 from controller.generator.dynamics.precompensation import Precompensator
+from controller.motion import estop
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter
@@ -62,6 +63,7 @@ class MotionController(OperatorRequests):
         while self.state is not MotionState.FINISHED:
             self.pacer.wait()
             self._cycle()
+        estop.disable_drives(self)  # after an e-stop's stop: category 1
         return self._result()
 
     def _setup(self) -> None:
@@ -97,6 +99,7 @@ class MotionController(OperatorRequests):
         self.journal = SendJournal()  # what each send changed (a hold takes frames back)
         self.recalled_frames = 0
         self.pending_tail: tuple | None = None  # a stream's end at rest still to go out
+        self.estop_reason: str | None = None  # the e-stop under way (then disable)
         self.precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
                                         for a in self.config.axes], self.period_s, self.last_mm)
                         if self.config.interpolator.servo_precompensation else None)
@@ -115,6 +118,7 @@ class MotionController(OperatorRequests):
             self._finish(Outcome.FAULT, self.drive.fault_message())
             return
         self._supervise(fb)
+        estop.check(self, level)
         self._operator_requests(level)
         if self.pending_tail is not None:
             self._send_tail(level)  # a stream's last frames, the lead settling: nothing first
@@ -327,23 +331,8 @@ class MotionController(OperatorRequests):
             self.holding = False
             self.state = MotionState.RUNNING
 
-    def _asked(self) -> str:
-        """The stop under way when nothing went wrong yet (a fault then names it too)."""
-        if self.holding:
-            return f"feed hold at line {self.line}"
-        if self.pausing:
-            return f"program pause at line {self.line}"
-        return "program end" if self.sent_eos else ""
-
     def _then_fault(self, message: str) -> None:
-        """A fault during a stop (abort, e-stop, hold, program end) is a fault: it says what
-        was asked and what happened (an abort's fault was reported as an abort, and the
-        daemon went IDLE on a faulted drive)."""
-        asked = self.message if self.outcome is not None else self._asked()
-        if asked and message in asked:
-            return
-        self.outcome = Outcome.FAULT
-        self.message = f"{asked}; then {message}" if asked else message
+        estop.then_fault(self, message)
 
     def _begin_stop(self, outcome: Outcome, message: str) -> None:
         if self.outcome is not None:
