@@ -125,6 +125,12 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
         print(f"  job {s['job']} {s['program']!r} line {s['line']}  feed "
               f"{s['feed_mm_s']:.1f} mm/s  following error {s['ferror_um']:.0f} um")
     print(f"  feed override {s.get('feed_override_pct', 100.0):g} %")
+    if s.get("drives") == "disabled":
+        print("  drives disabled (e-stop): `cncctl reset` enables them")
+    elif s.get("drives"):
+        print("  drives enabled")
+    if s.get("estop_input"):
+        print("  e-stop input open (tripped): close it, then `cncctl reset`")
     print(f"  position {where}")
     work = s.get("work_position_mm") or {}
     if work:
