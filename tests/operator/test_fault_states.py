@@ -35,9 +35,10 @@ def _slow_program(tmp_path: Path) -> Path:
 
 
 @contextmanager
-def _serial_peer(tmp_path: Path) -> Iterator[tuple[subprocess.Popen, Path]]:
+def _serial_peer(tmp_path: Path, *options: str) -> Iterator[tuple[subprocess.Popen, Path]]:
     """`cncctl simdrive serial` in its own process and a config on its pty; killed by pid."""
-    proc = subprocess.Popen([*CNCCTL, "simdrive", "serial"], stdout=subprocess.PIPE,
+    words = [w for o in options for w in ("--option", o)]
+    proc = subprocess.Popen([*CNCCTL, "simdrive", "serial", *words], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, bufsize=0, cwd=REPO)
     try:
         ready, _, _ = select.select([proc.stdout], [], [], 20.0)
