@@ -101,5 +101,5 @@ def test_three_axis_status_round_trips() -> None:
     s = p.Status(0, 0, 512, p.ST_DRIVE_FAULT, 2, 0x2310, 1, 0, (1, 2, -3), (4, -5, 6),
                  (0, 0, 0), (0, 1, -1))
     data = p.encode_status(s)
-    assert len(data) == 3 + 14 + 3 * 12 + 2
+    assert len(data) == 3 + 14 + 3 * 12 + 1 + 2  # ..., the axes, the io byte, the CRC
     assert p.decode(data) == s
