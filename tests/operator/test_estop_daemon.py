@@ -85,7 +85,8 @@ def test_the_serial_cards_estop_input_estops_an_idle_machine(tmp_path: Path) -> 
     trip = tmp_path / "estop-input"
     with _serial_peer(tmp_path, f"estop_input_file={trip}") as (_, config), \
             running_cncd(tmp_path, "--config", str(config)) as d:
-        d.cncctl("reset")
+        reset = d.cncctl("reset")
+        assert reset.returncode == 0, reset.stderr
         assert d.status()["drives"] == "enabled"
         trip.touch()
         status = _wait_state(d, "ESTOP")
