@@ -74,6 +74,7 @@ class Drive(ABC):
     # -- public API -----------------------------------------------------------------------
     def open(self) -> None:
         self._homed_axes = set()  # a drive just opened is unhomed until home() succeeds
+        self._disabled = False  # and enabled by its bring-up (a reset after a lost link)
         lock = self._port_lock()
         self._open_locked(lock, self._open)
         self._is_open = True
