@@ -31,14 +31,16 @@ class SimCard(Drive):
     in that true frame; default each axis's homing home_mm, null: no switch), index_pitch_mm
     (1.0, encoder index marks at its multiples) and homed_at_start (false). E-stop input:
     estop_input_file (a path: the input reads tripped while that file exists, so that a
-    test in another process can trip it; trip_estop_input() does it in-process).
+    test in another process can trip it; trip_estop_input() does it in-process);
+    drive_fault_file (a path: X's amplifier faults, latched, once that file exists).
     Card rule (hostmot2 watchdog): an empty FIFO mid-program stops the card and latches
     UNDERRUN until reset(); an empty FIFO after an end-of-stream frame is simply idle.
     """
 
     OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm",
                          "plant_pole_pct", "plant_gain_pct", "true_start_mm", "home_switch_mm",
-                         "index_pitch_mm", "homed_at_start", "estop_input_file"})
+                         "index_pitch_mm", "homed_at_start", "estop_input_file",
+                         "drive_fault_file"})
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
@@ -65,6 +67,7 @@ class SimCard(Drive):
         self._comm_ok = True
         self._estop_file = options.get("estop_input_file")
         self._estop_tripped = False  # the in-process e-stop input (test hook)
+        self._fault_file = options.get("drive_fault_file")
         self.frames_clocked = 0  # every period since open, idle ones included
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -132,6 +135,9 @@ class SimCard(Drive):
 
     def _read_status(self) -> CardStatus:
         self._check_comm()
+        if self._fault_file is not None and CardStatus.FAULT not in self._status \
+                and os.path.exists(str(self._fault_file)):
+            self.inject_drive_fault(0)  # the test's fault, from another process
         with self._lock:
             return self._status
 
