@@ -55,9 +55,12 @@ def _begin(ctrl: Any, reason: str, level: int) -> None:
         ctrl.state = MotionState.FINISHED  # nothing moved
         return
     accel = ctrl.config.interpolator.max_accel_mm_s2
-    if ctrl.state is MotionState.STOPPING:  # an abort's stop: faster, along its own rows
-        ctrl.pending_stop = stop_along_path(ctrl.prev_mm, ctrl.last_mm, ctrl.pending_stop,
-                                            accel, ctrl.period_s, amax_stop_distances_mm)
+    if ctrl.state is MotionState.STOPPING:
+        # An abort's stop: its rows not yet sent are re-timed at Amax along themselves. Once
+        # all are sent (the stream has ended) nothing is added: the card stops where they end.
+        if len(ctrl.pending_stop) and not ctrl.sent_eos:
+            ctrl.pending_stop = stop_along_path(ctrl.prev_mm, ctrl.last_mm, ctrl.pending_stop,
+                                                accel, ctrl.period_s, amax_stop_distances_mm)
         return
     ends_at_rest = ctrl.sent_eos or ctrl.pausing or ctrl.pending_tail is not None
     if ctrl.state in (MotionState.WAITING, MotionState.RUNNING) and not ends_at_rest:

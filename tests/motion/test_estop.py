@@ -62,3 +62,28 @@ def test_the_estop_stops_sooner_than_an_abort() -> None:
     assert abort.outcome is Outcome.ABORTED  # type: ignore[attr-defined]
     # The abort stops behind the card's FIFO with a jerk-limited quintic (15 v / 8 A):
     assert estop_frames < abort_frames - 20
+
+
+def test_an_estop_during_an_abort_never_goes_past_the_aborts_stop() -> None:
+    """Asked just after an abort, or once its stop is in the card: the abort's stop is
+    already queued (it fits in the FIFO at once), so the e-stop ends where it ends, never
+    past it (an extension after the stream's end would move the table on), and then
+    disables the drives."""
+    ends = []
+    for delay_cycles in (1, 80):
+        def inject(card: object, ctrl: MotionController, pacer: object,
+                   delay: int = delay_cycles) -> None:
+            ctrl.request_abort()
+            for _ in range(delay):
+                pacer.wait()  # type: ignore[attr-defined]
+                ctrl._cycle()
+            ctrl.request_estop("e-stop by operator")
+        result, card, rec, _ = run(list(circle_chunks()), inject=inject, at_s=0.4)
+        assert result.outcome is Outcome.ABORTED
+        assert result.message == "aborted by operator; then e-stop by operator"
+        on_circle(result, tol_mm=0.002)
+        assert_smooth(rec.commanded(), np.zeros(2), CFG)
+        assert card.disabled  # type: ignore[attr-defined]
+        ends.append(rec.commanded()[-1].tolist())
+    _, abort, _, executed = _stop_after("abort")
+    assert ends == [executed[-1].tolist()] * 2
