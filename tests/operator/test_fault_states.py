@@ -142,23 +142,24 @@ def test_an_embedded_run_at_m0_with_its_input_at_the_end_aborts(tmp_path: Path) 
 
 
 def test_a_drive_fault_during_an_abort_latches_fault_naming_both(tmp_path: Path) -> None:
-    """Amax 50 mm/s^2 from 50 mm/s: the abort's stop lasts 1.9 s, and the drive faults 0.3 s
+    """Amax 50 mm/s^2 from 40 mm/s: the abort's stop lasts 1.5 s, and the drive faults 0.3 s
     into it. It was recorded as the abort, cncd went IDLE, and the next jog faulted at once."""
     data = yaml.safe_load((REPO / "config/xy_table.yaml").read_text())
     data["interpolator"]["max_accel_mm_s2"] = 50.0
+    data["axes"]["x"]["travel_mm"] = [-1000.0, 1000.0]  # 13 s at 40 mm/s: aborted at speed
     fault = tmp_path / "drive-fault"
     data["drive"] = {"backend": "sim", "options": {"drive_fault_file": str(fault)}}
     config = tmp_path / "slow_stops.yaml"
     config.write_text(yaml.safe_dump(data))
     program = tmp_path / "long.nc"
-    program.write_text("G21 G90 G64 G1 X140 F3000\nM2\n")  # 1.9 s to 50 mm/s, 1 s at it
+    program.write_text("G21 G90 G64 G1 X600 F2400\nM2\n")  # 1.5 s to 40 mm/s, 13 s at it
     with running_cncd(tmp_path, "--config", str(config)) as d:
         d.cncctl("reset")
         run = start_run(d, program)
         try:
             wait_moving(run, after_s=2.0)
             assert d.cncctl("abort").returncode == 0
-            time.sleep(0.3)  # the stop is under way (it has 1.9 s to go)
+            time.sleep(0.3)  # the stop is under way (it has 1.5 s to go)
             fault.touch()
             out, err = run.communicate(timeout=30)
         finally:
