@@ -68,11 +68,13 @@ class Drive(ABC):
         self._is_open = False
         self._homed_axes: set[int] = set()  # axes homed on this open drive (host side)
         self._homing = False  # a home() is running: write_frames is refused
+        self._disabled = False  # disable() powered the axes off: until reset()
         self._port_guard: PortLock | None = None  # held while open (see _lock_key)
 
     # -- public API -----------------------------------------------------------------------
     def open(self) -> None:
         self._homed_axes = set()  # a drive just opened is unhomed until home() succeeds
+        self._disabled = False  # and enabled by its bring-up (a reset after a lost link)
         lock = self._port_lock()
         self._open_locked(lock, self._open)
         self._is_open = True
@@ -108,6 +110,9 @@ class Drive(ABC):
         self._require_open()
         if self._homing:
             raise DriveError("frames refused: a homing sequence is running")
+        if self._disabled:
+            raise DriveError("frames refused: the drives are disabled (e-stop); reset() "
+                             "enables them")
         self._send_frames(frames.astype(np.int64), end_of_stream)
 
     def fifo_level(self) -> int:
@@ -153,9 +158,33 @@ class Drive(ABC):
         return self._fault_message()
 
     def reset(self) -> None:
-        """Clear latched flags and discard queued frames (a rising-edge reset)."""
+        """Clear latched flags and discard queued frames (a rising-edge reset); after
+        disable(), enable the axes again. Refused while the e-stop input is tripped."""
         self._require_open()
+        if self._estop_input():
+            raise DriveError("the e-stop input is tripped: release it, then reset")
         self._reset()
+        if self._disabled:
+            self._enable()
+            self._disabled = False
+
+    def disable(self) -> None:
+        """The second half of a category 1 stop, once the axes stand still: power them off
+        (CiA 402: quick stop, then disable voltage; the serial card's DISABLE; the sim card
+        releases its axes). Queued frames are dropped and new ones refused until reset()."""
+        self._require_open()
+        self._disable()
+        self._disabled = True
+
+    @property
+    def disabled(self) -> bool:
+        """True from disable() until reset() enabled the axes again."""
+        return self._disabled
+
+    def estop_input(self) -> bool:
+        """The e-stop input (a digital input on the drive or card): True while tripped. A
+        drive not open reads False (nothing to stop)."""
+        return self._is_open and self._estop_input()
 
     def home(self, axes: Sequence[int], timeout_s: float = 60.0) -> None:
         """Run the homing sequence of these axes (indices in config.axes order) on the device,
@@ -173,6 +202,9 @@ class Drive(ABC):
         if not timeout_s > 0:
             raise HomingError(f"homing time-out must be positive, got {timeout_s!r}")
         names = ", ".join(self.config.axes[i].name.upper() for i in wanted)
+        if self._disabled:
+            raise HomingError(f"cannot home {names}: the drives are disabled (e-stop); "
+                              "reset() first")
         if self._read_status().halted:
             raise HomingError(f"cannot home {names}: the drive is halted "
                               f"({self._fault_message()}); reset() first")
@@ -308,6 +340,18 @@ class Drive(ABC):
     @abstractmethod
     def _reset(self) -> None:
         """Backend hook."""
+
+    @abstractmethod
+    def _disable(self) -> None:
+        """Backend hook: drop queued frames and power the axes off (they stand still)."""
+
+    def _enable(self) -> None:  # noqa: B027 (optional hook: most resets enable by themselves)
+        """Backend hook, after _reset() following disable(): power the axes again."""
+        return None
+
+    def _estop_input(self) -> bool:
+        """Backend hook; the default: a drive without an e-stop input."""
+        return False
 
     def _close(self) -> None:  # noqa: B027 (optional hook: most backends have nothing to close)
         return None

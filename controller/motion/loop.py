@@ -10,6 +10,7 @@ import numpy as np
 from controller.config import MachineConfig
 from controller.errors import DriveError
 from controller.generator.dynamics.precompensation import Precompensator
+from controller.motion import estop
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.pacing import VirtualPacer, WallPacer
@@ -63,6 +64,7 @@ class MotionController(OperatorRequests):
         while self.state is not MotionState.FINISHED:
             self.pacer.wait()
             self._cycle()
+        estop.disable_drives(self)  # after an e-stop's stop: category 1
         return self._result()
 
     def _setup(self) -> None:
@@ -100,6 +102,7 @@ class MotionController(OperatorRequests):
         self.journal = SendJournal()  # what each send changed (a hold takes frames back)
         self.recalled_frames = 0
         self.pending_tail: tuple | None = None  # a stream's end at rest still to go out
+        self.estop_reason: str | None = None  # the e-stop under way (then disable)
         self.precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
                                         for a in self.config.axes], self.period_s, self.last_mm)
                         if self.config.interpolator.servo_precompensation else None)
@@ -118,6 +121,7 @@ class MotionController(OperatorRequests):
             self._finish(Outcome.FAULT, self.drive.fault_message())
             return
         self._supervise(fb)
+        estop.check(self, level)
         self._operator_requests(level)
         if self.pending_tail is not None:
             self._send_tail(level)  # a stream's last frames, the lead settling: nothing first
@@ -345,10 +349,19 @@ class MotionController(OperatorRequests):
             self.holding = False
             self.state = MotionState.RUNNING
 
+    def _then_fault(self, message: str) -> None:
+        estop.then_fault(self, message)
+
     def _begin_stop(self, outcome: Outcome, message: str) -> None:
         if self.outcome is not None:
-            return  # the first reason is the one reported
-        self.outcome, self.message = outcome, message
+            # The first reason stays; a fault during an abort's stop makes it a fault.
+            if outcome is Outcome.FAULT and self.outcome is not Outcome.FAULT:
+                self._then_fault(message)
+            return
+        if outcome is Outcome.FAULT:
+            self._then_fault(message)
+        else:
+            self.outcome, self.message = outcome, message
         if self.sent_eos or self.pausing or not self.sent or self.pending_tail is not None:
             self.state = MotionState.SETTLING if self.sent else MotionState.FINISHED
             return
@@ -387,10 +400,10 @@ class MotionController(OperatorRequests):
             self._finish(self.outcome or Outcome.DONE, self.message)
 
     def _finish(self, outcome: Outcome, message: str) -> None:
-        if self.outcome is None or self.outcome is Outcome.DONE:
+        if outcome is Outcome.FAULT and message:
+            self._then_fault(message)
+        elif self.outcome is None or self.outcome is Outcome.DONE:
             self.outcome, self.message = outcome, message
-        elif outcome is Outcome.FAULT and message and message not in self.message:
-            self.message = f"{self.message}; then {message}"
         self.state = MotionState.FINISHED
 
     # -- reporting ------------------------------------------------------------------------

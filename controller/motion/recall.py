@@ -72,11 +72,12 @@ def restore_retimer(retimer: Any, state: dict[str, Any]) -> None:
         setattr(retimer, name, value)
 
 
-def take_back(loop: Any, level: int) -> None:
+def take_back(loop: Any, level: int, keep_frames: int | None = None) -> None:
     """A hold or a lower override on a MotionController: take back the frames queued beyond
     the low-water mark (where the drive can), undoing their sends, so the new ramp starts
-    there instead of behind the whole FIFO. The ramp is planned from the state restored."""
-    keep = loop._frames(loop.settings.low_water_ms)
+    there instead of behind the whole FIFO. The ramp is planned from the state restored.
+    keep_frames: fewer frames kept than the low-water mark (the e-stop's)."""
+    keep = loop._frames(loop.settings.low_water_ms) if keep_frames is None else keep_frames
     undo = loop.journal.newest_within(level - keep)
     total = sum(e.frames for e in undo)
     if not undo or loop.drive.recall_frames(total, keep) != total:

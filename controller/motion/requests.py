@@ -47,6 +47,13 @@ class OperatorRequests:
         """Operator stop (SIGINT handler safe: only sets a flag read by the loop)."""
         self._abort_message = message
 
+    estop_message: str | None = None
+
+    def request_estop(self, message: str = "e-stop") -> None:
+        """Operator e-stop (category 1): the fastest stop along the path within Amax, then
+        the drives disabled until reset (a flag read by the loop)."""
+        self.estop_message = message
+
     @property
     def abort_requested(self) -> bool:
-        return self._abort_message is not None
+        return self._abort_message is not None or self.estop_message is not None

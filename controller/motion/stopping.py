@@ -4,6 +4,7 @@ and, pre-compensated, the frames that let the lead die away at a standstill."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -28,6 +29,18 @@ def stop_distances_mm(v0_mm_s: float, accel_mm_s2: float, period_s: float) -> np
     binom = np.array([math.comb(6, i) for i in k], dtype=float)
     basis = binom * tau[:, None] ** k * (1.0 - tau[:, None]) ** (6 - k)
     return basis @ coeff
+
+
+def amax_stop_distances_mm(v0_mm_s: float, accel_mm_s2: float, period_s: float) -> np.ndarray:
+    """Distance travelled at samples k = 1..n of a stop at constant deceleration A: the
+    e-stop's, the fastest the drives allow (v0 / A, half the quintic's 15 v0 / (8 A)); its
+    jerk is not limited. The last entry is the full stop distance v0^2 / (2 A)."""
+    if v0_mm_s <= 0.0:
+        return np.zeros(0)
+    stop_s = v0_mm_s / accel_mm_s2
+    n = max(1, math.ceil(stop_s / period_s - 1e-9))
+    t_s = np.minimum(np.arange(1, n + 1) * period_s, stop_s)
+    return v0_mm_s * t_s - 0.5 * accel_mm_s2 * t_s**2
 
 
 def _rest_index(points_mm: np.ndarray, period_s: float) -> int | None:
@@ -62,18 +75,21 @@ def _along_polyline(points_mm: np.ndarray, s_mm: np.ndarray,
 
 
 def stop_along_path(prev_mm: np.ndarray, last_mm: np.ndarray, ahead_mm: np.ndarray,
-                    accel_mm_s2: float, period_s: float) -> np.ndarray:
+                    accel_mm_s2: float, period_s: float,
+                    distances: Callable[[float, float, float], np.ndarray] = stop_distances_mm
+                    ) -> np.ndarray:
     """Rows to append after `last_mm` (already sent, reached from `prev_mm`) to stop on the path.
 
     ahead_mm are the buffered reference points not yet sent. If the original reference
     comes to rest within them it already stops within the limits: those rows are used as
     they are. Otherwise the decel is re-timed along them, extended straight along the last
     direction when they are too short. Never a position jump: row 0 is one sample after last.
+    distances: the deceleration profile (the quintic; amax_stop_distances_mm for an e-stop).
     """
     pts = np.vstack([prev_mm[None, :], last_mm[None, :], ahead_mm.reshape(-1, last_mm.size)])
     rest = _rest_index(pts[1:], period_s)
     v0 = float(np.linalg.norm(last_mm - prev_mm)) / period_s
-    s = stop_distances_mm(v0, accel_mm_s2, period_s)
+    s = distances(v0, accel_mm_s2, period_s)
     if rest is not None:
         to_rest_mm = float(np.sum(np.linalg.norm(np.diff(pts[1: rest + 2], axis=0), axis=1)))
         if rest <= s.size or (s.size and to_rest_mm <= s[-1]):

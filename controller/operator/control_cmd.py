@@ -13,6 +13,7 @@ import threading
 import time
 from typing import Any
 
+from controller.motion.types import Outcome
 from controller.operator.client import (
     DaemonClient,
     DaemonError,
@@ -21,11 +22,14 @@ from controller.operator.client import (
     request_estop,
     socket_argument,
 )
-from controller.operator.run_exit import STOP_SIGNALS
-from controller.operator.run_remote import RemoteOperator
+from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
+from controller.operator.run_remote import FINAL_EVENTS, RemoteOperator
 
-EXIT_REFUSED = 2
-EXIT_NO_DAEMON = 3
+# The README's exit codes everywhere: 0 done, 2 rejected (nothing moved), 3 fault, 4 aborted.
+EXIT_REFUSED = EXIT_REJECTED
+EXIT_NO_DAEMON = EXIT_REJECTED  # no daemon answered: nothing moved (it was 3, "fault")
+EXIT_FAULT = EXIT_CODES[Outcome.FAULT]
+EXIT_ABORTED = EXIT_CODES[Outcome.ABORTED]
 
 
 def socket_help() -> str:
@@ -127,6 +131,12 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
         print(f"  job {s['job']} {s['program']!r} line {s['line']}  feed "
               f"{s['feed_mm_s']:.1f} mm/s  following error {s['ferror_um']:.0f} um")
     print(f"  feed override {s.get('feed_override_pct', 100.0):g} %")
+    if s.get("drives") == "disabled":
+        print("  drives disabled (e-stop): `cncctl reset` enables them")
+    elif s.get("drives"):
+        print("  drives enabled")
+    if s.get("estop_input"):
+        print("  e-stop input open (tripped): close it, then `cncctl reset`")
     print(f"  position {where}")
     work = s.get("work_position_mm") or {}
     if work:
@@ -152,15 +162,25 @@ def _simple(client: DaemonClient, args: argparse.Namespace) -> int:
     return 0
 
 
+HOME_WORD_S = 10.0  # after an e-stop, the homing thread's own word is this late at most
+
+
 def _home(client: DaemonClient, args: argparse.Namespace) -> int:
+    """Home, then say how it ended: 0 done, 3 failed, 4 aborted by an e-stop (it exited 1,
+    and printed "None" when an e-stop came before the homing had said its word)."""
     client.request("home", axes=[a.upper() for a in args.axes])
-    while (status := client.request("status"))["state"] == "HOMING":
+    deadline_s = time.monotonic() + HOME_WORD_S
+    while (status := client.request("status"))["state"] == "HOMING" or (
+            status.get("last_homing") is None and time.monotonic() < deadline_s):
         time.sleep(0.1)
     homed = status.get("homed", {})
-    print(f"cncctl home: {status.get('last_homing')}; homed "
+    word = status.get("last_homing") or "ended without a word (see `cncctl log`)"
+    print(f"cncctl home: {word}; homed "
           + " ".join(f"{k.upper()}={'yes' if v else 'no'}" for k, v in homed.items()))
     _print_status(status, False)
-    return 0 if status.get("last_homing") == "done" else 1
+    if word == "done":
+        return 0
+    return EXIT_ABORTED if status["state"] == "ESTOP" else EXIT_FAULT
 
 
 JOG = re.compile(r"^([XYZxyz])([+-])(\d+\.?\d*|\.\d+)?$")
@@ -181,17 +201,19 @@ def _jog(client: DaemonClient, args: argparse.Namespace) -> int:
     reply = client.request("jog", **fields)
     print(f"cncctl jog: {reply['message']}" + (" (Enter or Ctrl-C stops it)"
                                                if number is None else ""), flush=True)
+    released = threading.Event()
     if number is None:
-        _stop_on_enter(client.path)
-    return _follow_job(client)
+        _stop_on_enter(client.path, released)
+    return _follow_job(client, continuous=number is None, released=released)
 
 
-def _stop_on_enter(socket_path: str) -> None:
+def _stop_on_enter(socket_path: str, released: threading.Event) -> None:
     """A continuous jog ends when released: Enter (or Ctrl-C, handled by _follow_job)."""
     def wait() -> None:
         try:
             fd = sys.stdin.fileno()
             if os.read(fd, 1):
+                released.set()
                 RemoteOperator(socket_path).request_abort()
         except (OSError, ValueError):
             pass
@@ -202,25 +224,37 @@ def _interrupt(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt
 
 
-def _follow_job(client: DaemonClient) -> int:
+def _follow_job(client: DaemonClient, continuous: bool = False,
+                released: threading.Event | None = None) -> int:
     """Follow a jog to its end; Ctrl-C, SIGTERM or SIGHUP (a closed terminal) stops it along
-    the path (before, the last two left a continuous jog running to its time-out)."""
+    the path (before, the last two left a continuous jog running to its time-out). Exit as a
+    run: 0 done, 2 rejected, 3 fault (a jog that moved, then faulted, exited 2: "nothing
+    moved"), 4 aborted; a continuous jog released (Enter) or timed out ends as asked: 0."""
     previous = {sig: signal.signal(sig, _interrupt) for sig in STOP_SIGNALS}
     try:
         for event in client.messages():
             kind = event.get("event")
-            if kind in ("done", "aborted", "fault", "rejected"):
+            if kind in FINAL_EVENTS or kind == "rejected":
                 where = event.get("final_position_mm")
-                print(f"cncctl: {kind}" + (f": {event['message']}" if event.get("message")
-                                           else "") + (f" at {where}" if where else ""))
-                return 0 if kind in ("done", "aborted") else EXIT_REFUSED
+                message = event.get("message") or ""
+                print(f"cncctl: {kind}" + (f": {message}" if message else "")
+                      + (f" at {where}" if where else ""))
+                if kind == "rejected":
+                    return EXIT_REFUSED
+                if kind == "aborted" and continuous and (
+                        (released is not None and released.is_set())
+                        or "jog time-out" in message):
+                    return 0
+                return FINAL_EVENTS[kind]
     except KeyboardInterrupt:
         RemoteOperator(client.path).request_abort()
         return _follow_job(client)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    return EXIT_REFUSED
+    print("cncctl: the daemon hung up before the jog ended (see `cncctl status`)",
+          file=sys.stderr)
+    return EXIT_FAULT
 
 
 AXIS_VALUE = re.compile(r"^([XYZxyz])([-+]?(\d+\.?\d*|\.\d+))$")

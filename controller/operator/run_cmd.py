@@ -98,9 +98,36 @@ def _daemon_socket(args: argparse.Namespace) -> str | None:
     return path if os.path.exists(path) and daemon_answers(path) else None
 
 
+# Options of an embedded run that a daemon cannot honour: it owns the drive, its config and
+# its offset table, and runs in real time. They were dropped without a word (a --virtual-time
+# dry run moved the serial drive in real time); now the run is refused, nothing sent.
+_NOT_THROUGH_DAEMON = (
+    ("virtual_time", "--virtual-time", "the daemon's drive runs in real time"),
+    ("config", "--config", "the daemon runs with its own config (cncd --config)"),
+    ("drive_option", "--drive-option", "the daemon's drive is set in its config"),
+    ("home", "--home", "home through the daemon first: `cncctl home`"),
+    ("offsets", "--offsets", "the daemon keeps its own table: `cncctl offset`"),
+)
+
+
+def _refused_by_daemon(args: argparse.Namespace, socket_path: str) -> str | None:
+    """Why this run cannot go through the daemon as asked (None: it can)."""
+    given = [(flag, why) for attr, flag, why in _NOT_THROUGH_DAEMON if getattr(args, attr, None)]
+    if not given:
+        return None
+    reasons = "; ".join(f"{flag}: {why}" for flag, why in given)
+    return (f"cncctl: a cncd answers on {socket_path} and cannot honour {reasons}. Nothing "
+            "was sent and nothing moved. Leave the option out to run through the daemon, or "
+            "stop cncd (or point CNCD_SOCKET where none answers) for an embedded run")
+
+
 def run(args: argparse.Namespace) -> int:
     socket_path = _daemon_socket(args)
     if socket_path is not None:
+        refusal = _refused_by_daemon(args, socket_path)
+        if refusal is not None:
+            print(refusal, file=sys.stderr)
+            return EXIT_REJECTED
         view = _view(args, args.program)
         try:
             return run_on_daemon(args, socket_path, view)
@@ -137,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
     if shared_drive:
         runtime = Sequence()
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
-                                                  flush=True))
+                                                  flush=True), abort_at_pause_without_keys=True)
     options = replace(options, on_progress=_Announcer(view.progress, keys).progress)
     if not shared_drive:
         runtime.options = options
@@ -146,7 +173,9 @@ def run(args: argparse.Namespace) -> int:
 
     def start_keys() -> None:
         if fd is not None:
-            restore_terminal[0] = read_keys(fd, keys.key)
+            restore_terminal[0] = read_keys(fd, keys.key, keys.closed)
+        else:
+            keys.closed()  # no standard input at all: nothing can resume an M0
     if not (shared_drive and args.from_line is not None and not args.yes):
         start_keys()  # else once the approach is confirmed (run_from_line)
 

@@ -24,16 +24,25 @@ class Operable(Protocol):
 
     def set_feed_override(self, percent: float) -> None: ...
 
+    def request_abort(self, message: str) -> None: ...
+
 
 class KeyControl:
     """Turns key presses into operator requests; remembers what the machine is doing so that
     space can mean hold or resume. Keys: ' ' hold/resume, '\\n' resume, '+' '-' override."""
 
-    def __init__(self, target: Operable, say: Callable[[str], None]) -> None:
+    def __init__(self, target: Operable, say: Callable[[str], None],
+                 abort_at_pause_without_keys: bool = False) -> None:
         self.target, self.say = target, say
         self.override_pct = 100.0
         self.holding = False
         self.state: MotionState | None = None
+        # Embedded runs: the keys are the only way on from an M0, so a standard input at its
+        # end aborts the job there (it waited for ever); through cncd, `cncctl resume` can.
+        self.abort_at_pause_without_keys = abort_at_pause_without_keys
+        self.keys_closed = False
+        self._resumed = False  # Enter came during this pause (its resume is on its way)
+        self._aborted = False
 
     def key(self, ch: str) -> None:
         if ch == " ":
@@ -56,13 +65,34 @@ class KeyControl:
 
     def _resume(self) -> None:
         self.holding = False
+        self._resumed = True
         self.target.request_resume()
 
+    def closed(self) -> None:
+        """Standard input is at its end: no key will come."""
+        self.keys_closed = True
+        self._abort_if_stuck(None)
+
     def progress(self, p: MotionProgress) -> None:
+        if p.state is MotionState.PAUSED and self.state is not MotionState.PAUSED:
+            self._resumed = False  # a new pause: a resume must come after it
         self.state = p.state
+        self._abort_if_stuck(p.line)
+
+    def _abort_if_stuck(self, line: int | None) -> None:
+        if not (self.abort_at_pause_without_keys and self.keys_closed and not self._aborted
+                and self.state is MotionState.PAUSED and not self._resumed):
+            return
+        self._aborted = True
+        where = f" at line {line}" if line is not None else ""
+        message = (f"standard input closed while paused{where} (M0): nothing can resume "
+                   "the job; aborted")
+        self.say(message)
+        self.target.request_abort(message)
 
 
-def read_keys(fd: int, on_key: Callable[[str], None]) -> Callable[[], None]:
+def read_keys(fd: int, on_key: Callable[[str], None],
+              on_end: Callable[[], None] | None = None) -> Callable[[], None]:
     """Read keys from fd in a thread (cbreak mode on a terminal: a key at a time, Ctrl-C still
     a signal); returns a function restoring the terminal. os.read on the descriptor, not
     sys.stdin: a thread blocked in sys.stdin holds its buffer's lock, which a forked child
@@ -82,6 +112,8 @@ def read_keys(fd: int, on_key: Callable[[str], None]) -> Callable[[], None]:
                     on_key(ch)
         except (OSError, ValueError):
             pass
+        if on_end is not None:
+            on_end()  # at the end of input (or unreadable): no key will come
     threading.Thread(target=reader, name="run-keys", daemon=True).start()
 
     def restore() -> None:

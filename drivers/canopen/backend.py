@@ -250,6 +250,32 @@ class CanopenDrive(Drive):
             link.quick_stopped = False
         self._enabled_since_bringup()
 
+    # -- e-stop ---------------------------------------------------------------------------
+    def _disable(self) -> None:
+        """Quick stop, then disable voltage (CiA 402 transitions 11 and 12): every drive
+        ends in SWITCH ON DISABLED, the power stage off; reset() walks them back to
+        OPERATION ENABLED. Supervision pauses: leaving OPERATION ENABLED is asked for."""
+        link = self._check_comm()
+        with link.lock:
+            link.supervising = False
+            link.discarded += link.fifo.clear()
+            link.streaming = False
+            link.quick_stopped = True
+        for node, axis in zip(self._nodes, self.axes, strict=True):
+            if c.state_of(bringup.wait_statusword(node, axis)) == "OPERATION ENABLED":
+                node.controlword = c.CW_QUICK_STOP
+                bringup.wait_statusword(node, axis)
+            node.controlword = c.CW_DISABLE_VOLTAGE
+        for node, axis in zip(self._nodes, self.axes, strict=True):
+            bringup.wait_statusword(node, axis)
+
+    def _estop_input(self) -> bool:
+        link = self._link  # each drive's input rides in its TPDO1 statusword (bit 14)
+        if link is None:
+            return False
+        with link.lock:
+            return any(sw & c.SW_ESTOP_INPUT for sw in link.statusword)
+
     # -- bench and probe ------------------------------------------------------------------
     def link_stats(self) -> dict[str, float | int]:
         """SYNC -> TPDO1 round trip (ms: p50, p99, max), late/missed TPDOs, late SYNCs; after

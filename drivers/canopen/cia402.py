@@ -74,6 +74,9 @@ SW_FOLLOWS_COMMAND = 0x1000  # CSP: drive follows the command value
 SW_FOLLOWING_ERROR = 0x2000  # CSP: following error
 SW_HOMING_ATTAINED = 0x1000  # homing mode: bit 12
 SW_HOMING_ERROR = 0x2000  # homing mode: bit 13
+# Manufacturer-specific bit 14: the drive's e-stop input is open. Drives map a digital input
+# to it (their statusword-bit configuration); it rides in TPDO1, so the host sees it every T.
+SW_ESTOP_INPUT = 0x4000
 
 
 def state_of(statusword: int) -> str:

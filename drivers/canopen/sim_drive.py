@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -35,6 +36,7 @@ class Injections:
     lag_after_s: float = 0.0
     silent_after_s: float | None = None
     sdo_abort_index: int | None = None
+    estop_input_file: str | None = None  # the e-stop input is open while this file exists
 
 
 class SimAxis402:
@@ -164,6 +166,8 @@ class SimAxis402:
             sw |= c.SW_FOLLOWS_COMMAND
         if abs(self.ref - self.position) > self.window:
             sw |= c.SW_FOLLOWING_ERROR
+        if self.inject.estop_input_file and os.path.exists(self.inject.estop_input_file):
+            sw |= c.SW_ESTOP_INPUT
         return sw
 
     def fault(self, code: int) -> None:
@@ -259,14 +263,16 @@ class SimAxis402:
 class SimDriveSet:
     """The simulated drives of a machine on one CAN bus (in-process python-can `virtual` by
     default). Options (strict): drive_fault_after_s, drive_fault_code, lag_mm, lag_after_s,
-    silent_after_s, sdo_abort_index, fault_axis (x); times count from the first enable.
+    silent_after_s, sdo_abort_index, fault_axis (x); times count from the first enable;
+    estop_input_file (every drive's e-stop input is open while that file exists).
     Homing (mode 6): true_start_mm, home_switch_mm (default: at the home offset the master
     writes; null: no switch), index_pitch_mm (drivers/sim/switches.py) and search_limit_mm
     (default: the travel + 10 %: then statusword bit 13)."""
 
     OPTIONS = frozenset({"drive_fault_after_s", "drive_fault_code", "lag_mm", "lag_after_s",
                          "silent_after_s", "sdo_abort_index", "fault_axis", "true_start_mm",
-                         "home_switch_mm", "index_pitch_mm", "search_limit_mm"})
+                         "home_switch_mm", "index_pitch_mm", "search_limit_mm",
+                         "estop_input_file"})
 
     def __init__(self, config: MachineConfig, options: dict[str, Any] | None = None,
                  channel: str = "cncsim", interface: str = "virtual",
@@ -294,6 +300,7 @@ class SimDriveSet:
                                                      layout.counts_per_mm, strict=True)):
             inject = _injections(options) if axis.name == fault_axis else Injections(
                 sdo_abort_index=_opt_int(options, "sdo_abort_index"))
+            inject.estop_input_file = options.get("estop_input_file")
             homing = SimHoming402(axis, i, cpm, config.sample_period_s, self.switches,
                                   search_limit_mm)
             self.axes.append(SimAxis402(self.network, node_id, axis, cpm,

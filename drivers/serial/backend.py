@@ -371,6 +371,17 @@ class SerialCard(Drive):
         with self._cond:
             self._rows = []
 
+    def _disable(self) -> None:
+        """DISABLE: the card drops its FIFO and turns its amplifiers off until a RESET."""
+        self._check_link()
+        self._sync(self._request(p.encode_disable, "disable"))
+        with self._cond:
+            self._rows = []
+
+    def _estop_input(self) -> bool:
+        s = self._last  # the card reports its input in every status frame (io byte)
+        return s is not None and bool(s.io & p.IO_ESTOP_INPUT)
+
     # -- measurements -----------------------------------------------------------------------
     def link_stats(self) -> dict[str, Any]:
         """Round trip = a status request written by this process -> its reply decoded by the

@@ -20,6 +20,7 @@ T_RESET = 0x10  # clear latched flags, discard the FIFO, answer with a status fr
 T_STATUS_REQUEST = 0x11  # answer with a status frame now
 T_END = 0x12  # end of stream after the samples already sent (no new sample)
 T_HOME = 0x13  # run the homing sequence of the axes in a mask (answered with a status frame)
+T_DISABLE = 0x14  # e-stop: discard the FIFO, amplifiers off until a RESET (answered by status)
 T_STATUS = 0x80  # card -> host status report
 
 FLAG_END_OF_STREAM = 0x01  # sample flag: the last frame of a program
@@ -35,6 +36,10 @@ ST_HOME_FAILED = 0x20  # the last HOME failed (fault_axis, fault_code = HOME_*);
 #                        cleared by the next HOME or a RESET
 ST_HOMING = 0x40  # not latched: a homing sequence is running
 ST_EXECUTED = 0x80  # not latched: the last clock tick executed sample exec_seq
+
+# The status frame's io byte (not latched: what is true now).
+IO_DISABLED = 0x01  # amplifiers off (a DISABLE frame, until a RESET with the input closed)
+IO_ESTOP_INPUT = 0x02  # the card's e-stop input is open (tripped)
 
 # fault_code of ST_HOME_FAILED (a drive fault during homing is ST_DRIVE_FAULT instead)
 HOME_NOT_FOUND = 1  # no switch within the search limit
@@ -53,7 +58,9 @@ _HEADER = 3  # sync, type, len
 _CRC = 2
 _SAMPLE_FIXED = 3  # seq u16, flags u8
 _CONTROL_LEN = 2  # token u16
-_STATUS_FIXED = struct.calcsize("<HHHBBHHH")  # 14 bytes
+_STATUS_FMT = "<HHHBBHHH"
+_STATUS_FIXED = struct.calcsize(_STATUS_FMT)  # 14 bytes, then the axes, then the io byte
+_STATUS_TAIL = 1  # io
 _STATUS_AXIS = struct.calcsize("<iihh")  # 12 bytes per axis
 _HOME_FIXED = struct.calcsize("<HB")  # token, axis mask
 _HOME_AXIS_FMT = "<bBIIIiiI"
@@ -75,6 +82,11 @@ class Sample:
 
 @dataclass(frozen=True)
 class Reset:
+    token: int = 0
+
+
+@dataclass(frozen=True)
+class Disable:
     token: int = 0
 
 
@@ -105,6 +117,7 @@ class Status:
     encoder: tuple[int, ...]  # encoder counts, int32
     commanded_delta: tuple[int, ...]  # int16
     encoder_delta: tuple[int, ...]  # int16
+    io: int = 0  # IO_* bits
 
 
 @dataclass(frozen=True)
@@ -128,8 +141,8 @@ class Home:
     axes: tuple[HomeAxis, ...]  # one per axis
 
 
-Frame = Sample | Reset | StatusRequest | End | Status | Home
-_CONTROL = {T_RESET: Reset, T_STATUS_REQUEST: StatusRequest, T_END: End}
+Frame = Sample | Reset | StatusRequest | End | Status | Home | Disable
+_CONTROL = {T_RESET: Reset, T_STATUS_REQUEST: StatusRequest, T_END: End, T_DISABLE: Disable}
 
 
 def crc16(data: bytes) -> int:
@@ -175,6 +188,10 @@ def encode_end(token: int = 0) -> bytes:
     return _wrap(HOST_SYNC, T_END, struct.pack("<H", token % SEQ_MOD))
 
 
+def encode_disable(token: int = 0) -> bytes:
+    return _wrap(HOST_SYNC, T_DISABLE, struct.pack("<H", token % SEQ_MOD))
+
+
 def encode_home(token: int, mask: int, axes: tuple[HomeAxis, ...] | list[HomeAxis]) -> bytes:
     _check_axes(len(axes))
     payload = struct.pack("<HB", token % SEQ_MOD, mask & ((1 << len(axes)) - 1))
@@ -193,13 +210,13 @@ def encode_status(s: Status) -> bytes:
     _check_axes(n)
     if not (len(s.encoder) == len(s.commanded_delta) == len(s.encoder_delta) == n):
         raise ProtocolError("status: per-axis fields must have one value per axis")
-    payload = struct.pack("<HHHBBHHH", s.reply_to % SEQ_MOD, s.fifo_level, s.fifo_capacity,
+    payload = struct.pack(_STATUS_FMT, s.reply_to % SEQ_MOD, s.fifo_level, s.fifo_capacity,
                           s.latched, s.fault_axis, s.fault_code, s.rx_seq % SEQ_MOD,
                           s.exec_seq % SEQ_MOD)
     for i in range(n):
         payload += struct.pack("<iihh", s.commanded[i], s.encoder[i],
                                _clamp16(s.commanded_delta[i]), _clamp16(s.encoder_delta[i]))
-    return _wrap(CARD_SYNC, T_STATUS, payload)
+    return _wrap(CARD_SYNC, T_STATUS, payload + bytes((s.io & 0xFF,)))
 
 
 def encode(frame: Frame) -> bytes:
@@ -211,6 +228,8 @@ def encode(frame: Frame) -> bytes:
         return encode_status_request(frame.token)
     if isinstance(frame, End):
         return encode_end(frame.token)
+    if isinstance(frame, Disable):
+        return encode_disable(frame.token)
     if isinstance(frame, Home):
         return encode_home(frame.token, frame.mask, frame.axes)
     return encode_status(frame)
@@ -229,7 +248,7 @@ def _plausible(sync: int, ftype: int, length: int) -> bool:
         if ftype == T_HOME:
             return any(length == _HOME_FIXED + n * _HOME_AXIS for n in AXES_ALLOWED)
         return ftype in _CONTROL and length == _CONTROL_LEN
-    return ftype == T_STATUS and any(length == _STATUS_FIXED + n * _STATUS_AXIS
+    return ftype == T_STATUS and any(length == _STATUS_FIXED + n * _STATUS_AXIS + _STATUS_TAIL
                                      for n in AXES_ALLOWED)
 
 
@@ -249,11 +268,11 @@ def decode_payload(ftype: int, payload: bytes) -> Frame:
         blocks = [struct.unpack_from(_HOME_AXIS_FMT, payload, _HOME_FIXED + i * _HOME_AXIS)
                   for i in range(n)]
         return Home(token, mask, tuple(HomeAxis(b[0], bool(b[1] & 1), *b[2:]) for b in blocks))
-    fixed = struct.unpack("<HHHBBHHH", payload[:_STATUS_FIXED])
-    n = (len(payload) - _STATUS_FIXED) // _STATUS_AXIS
+    fixed = struct.unpack(_STATUS_FMT, payload[:_STATUS_FIXED])
+    n = (len(payload) - _STATUS_FIXED - _STATUS_TAIL) // _STATUS_AXIS
     axes = [struct.unpack_from("<iihh", payload, _STATUS_FIXED + i * _STATUS_AXIS)
             for i in range(n)]
-    return Status(*fixed, *(tuple(a[k] for a in axes) for k in range(4)))
+    return Status(*fixed, *(tuple(a[k] for a in axes) for k in range(4)), io=payload[-1])
 
 
 def decode(data: bytes) -> Frame:

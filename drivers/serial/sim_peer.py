@@ -42,8 +42,10 @@ PEER_OPTIONS: dict[str, Any] = {
     "home_switch_mm": None,  # each axis's switch (default: where HOME says home is; null: none)
     "index_pitch_mm": 1.0,  # encoder index marks at multiples of this
     "homing_fault_after_s": None,  # drive_fault_axis faults this long into a HOME
+    "estop_input_file": None,  # a path: the e-stop input is open while this file exists
 }
 LIST_OPTIONS = ("start_mm", "true_start_mm", "home_switch_mm")
+TEXT_OPTIONS = ("estop_input_file",)
 
 
 def check_options(options: dict[str, Any]) -> dict[str, Any]:
@@ -55,6 +57,11 @@ def check_options(options: dict[str, Any]) -> dict[str, Any]:
     merged = PEER_OPTIONS | options
     for key, value in merged.items():
         if key in LIST_OPTIONS or value is None:
+            continue
+        if key in TEXT_OPTIONS:
+            if not isinstance(value, str) or not value:
+                raise DriveError(f"serial simdrive: option {key!r} must be a path, "
+                                 f"got {value!r}")
             continue
         if isinstance(value, bool) or not isinstance(value, int | float) or value < 0:
             raise DriveError(f"serial simdrive: option {key!r} must be a number >= 0, "
@@ -88,6 +95,7 @@ class PeerCard:
         self.home_aborted = False
         self.decoder = p.Decoder(p.HOST_SYNC)
         self.latched = 0
+        self.disabled = False  # amplifiers off: a DISABLE frame, until a RESET
         self.fault_axis = self.fault_code = 0
         self.expect_seq: int | None = None  # None after power-up or reset: any seq is accepted
         self.rx_seq = self.exec_seq = p.SEQ_MOD - 1
@@ -129,6 +137,16 @@ class PeerCard:
             self.fault_axis = self.fault_code = 0
             self.expect_seq = None
             self.streaming = False
+            self.disabled = self.disabled and self.estop_input()  # the input must be closed
+            self.send_status(frame.token)
+        elif isinstance(frame, p.Disable):
+            if self.homing is not None:
+                self.homing.halt("aborted by a DISABLE")
+                self.home_aborted = True
+            self.fifo.clear()
+            self.expect_seq = None
+            self.streaming = False
+            self.disabled = True
             self.send_status(frame.token)
         elif isinstance(frame, p.StatusRequest):
             self.send_status(frame.token)
@@ -143,8 +161,8 @@ class PeerCard:
         drop = self.opt["drop_frame_after_frames"]
         if drop is not None and self.samples_rx == drop + 1:
             return  # lost on the wire
-        if self.latched & p.ST_LATCHED:
-            return  # halted: nothing is queued until a reset
+        if self.latched & p.ST_LATCHED or self.disabled:
+            return  # halted, or the amplifiers off: nothing is queued until a reset
         if self.expect_seq is not None and s.seq != self.expect_seq:
             self.latched |= p.ST_SEQ_GAP
             return
@@ -266,6 +284,11 @@ class PeerCard:
         return (after is not None and self.first_rx_s is not None
                 and time.monotonic() - self.first_rx_s >= float(after))
 
+    def estop_input(self) -> bool:
+        """The card's e-stop input: open (True) while the option's file exists."""
+        path = self.opt["estop_input_file"]
+        return path is not None and os.path.exists(path)
+
     def send_status(self, reply_to: int = 0) -> None:
         if self._after("silent_after_s"):
             return
@@ -278,7 +301,9 @@ class PeerCard:
             exec_seq=self.exec_seq, commanded=tuple(int(c) for c in cur_cmd),
             encoder=tuple(int(e) for e in cur_enc),
             commanded_delta=tuple(int(c) for c in cur_cmd - self.prev_cmd),
-            encoder_delta=tuple(int(e) for e in cur_enc - self.prev_enc))
+            encoder_delta=tuple(int(e) for e in cur_enc - self.prev_enc),
+            io=(p.IO_DISABLED if self.disabled else 0)
+            | (p.IO_ESTOP_INPUT if self.estop_input() else 0))
         data = p.encode_status(status)
         if self._after("corrupt_status_after_s"):
             data = data[:-1] + bytes([data[-1] ^ 0xFF])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from typing import Any
@@ -28,14 +29,18 @@ class SimCard(Drive):
     mismatched). Homing (drivers/sim/homing.py): true_start_mm (list, where the table really
     is at power-up; default start_mm), home_switch_mm (list, where each axis's home switch is,
     in that true frame; default each axis's homing home_mm, null: no switch), index_pitch_mm
-    (1.0, encoder index marks at its multiples) and homed_at_start (false).
+    (1.0, encoder index marks at its multiples) and homed_at_start (false). E-stop input:
+    estop_input_file (a path: the input reads tripped while that file exists, so that a
+    test in another process can trip it; trip_estop_input() does it in-process);
+    drive_fault_file (a path: X's amplifier faults, latched, once that file exists).
     Card rule (hostmot2 watchdog): an empty FIFO mid-program stops the card and latches
     UNDERRUN until reset(); an empty FIFO after an end-of-stream frame is simply idle.
     """
 
     OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm",
                          "plant_pole_pct", "plant_gain_pct", "true_start_mm", "home_switch_mm",
-                         "index_pitch_mm", "homed_at_start"})
+                         "index_pitch_mm", "homed_at_start", "estop_input_file",
+                         "drive_fault_file"})
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
@@ -62,6 +67,9 @@ class SimCard(Drive):
         self._discarded = np.zeros(self.n_axes, dtype=np.int64)
         self._trace: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._comm_ok = True
+        self._estop_file = options.get("estop_input_file")
+        self._estop_tripped = False  # the in-process e-stop input (test hook)
+        self._fault_file = options.get("drive_fault_file")
         self.frames_clocked = 0  # every period since open, idle ones included
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -129,6 +137,9 @@ class SimCard(Drive):
 
     def _read_status(self) -> CardStatus:
         self._check_comm()
+        if self._fault_file is not None and CardStatus.FAULT not in self._status \
+                and os.path.exists(str(self._fault_file)):
+            self.inject_drive_fault(0)  # the test's fault, from another process
         with self._lock:
             return self._status
 
@@ -143,6 +154,22 @@ class SimCard(Drive):
             self._status = CardStatus.OK
             self._messages = []
             self._streaming = False
+
+    def _disable(self) -> None:
+        """The axes released: queued frames dropped, none taken until reset (they stand
+        where the stop left them: the simulated table has no load to pull it away)."""
+        self._check_comm()
+        with self._lock:
+            self._discarded += self._fifo.clear()
+            self._streaming = False
+
+    def _estop_input(self) -> bool:
+        return self._estop_tripped or (self._estop_file is not None
+                                       and os.path.exists(str(self._estop_file)))
+
+    def trip_estop_input(self, tripped: bool = True) -> None:
+        """The e-stop input opens (True) or closes again (test hook)."""
+        self._estop_tripped = tripped
 
     # -- homing ---------------------------------------------------------------------------
     def _stream_active(self) -> bool:

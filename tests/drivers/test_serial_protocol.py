@@ -19,8 +19,9 @@ TRANSCRIPT: list[tuple[p.Frame, str]] = [
     (p.Reset(0x1234), "a5 10 02 3412 da96"),
     (p.StatusRequest(1), "a5 11 02 0100 7d28"),
     (p.End(2), "a5 12 02 0200 f2e6"),
-    (STATUS, "5a 80 26 0300 6400 0001 81 00 0000 0302 0201"
-             " e2aaffff f5aaffff c6ff c7ff e30a0000 e60a0000 0100 0000 c35e"),
+    (p.Disable(4), "a5 14 02 0400 cd6b"),
+    (STATUS, "5a 80 27 0300 6400 0001 81 00 0000 0302 0201"
+             " e2aaffff f5aaffff c6ff c7ff e30a0000 e60a0000 0100 0000 00 9f96"),
 ]
 
 
@@ -100,5 +101,5 @@ def test_three_axis_status_round_trips() -> None:
     s = p.Status(0, 0, 512, p.ST_DRIVE_FAULT, 2, 0x2310, 1, 0, (1, 2, -3), (4, -5, 6),
                  (0, 0, 0), (0, 1, -1))
     data = p.encode_status(s)
-    assert len(data) == 3 + 14 + 3 * 12 + 2
+    assert len(data) == 3 + 14 + 3 * 12 + 1 + 2  # ..., the axes, the io byte, the CRC
     assert p.decode(data) == s

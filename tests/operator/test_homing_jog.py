@@ -86,7 +86,10 @@ def test_estop_during_homing_halts_it(tmp_path: Path) -> None:
             out, _ = homing.communicate(timeout=20)
         finally:
             homing.kill()
-        assert homing.returncode == 1
+        # Aborted by the e-stop: exit 4, and it says so (it printed "None" and exited 1).
+        assert homing.returncode == 4, out
+        first = out.splitlines()[0]
+        assert not first.startswith("cncctl home: None") and "e-stop" in first, out
         status = d.status()
         assert status["state"] == "ESTOP" and status["homed"] == {"x": False, "y": False}
         assert "e-stop" in (status["last_homing"] or "")

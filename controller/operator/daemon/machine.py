@@ -28,6 +28,8 @@ from drivers.errors import LostCommunicationError
 JOURNAL_EVERY_S = 0.5  # the journal's last line is at most this old after a crash
 MOTION_STALL_S = 1.0  # no motion-loop cycle for this long while running: unhealthy
 CHECK_STALL_S = 2.0  # no checked block for this long while checking: unhealthy
+ESTOP_INPUT_POLL_S = 0.02  # the drive's e-stop input is read this often (a job's loop: each T)
+ESTOP_INPUT = "e-stop input on the drive tripped"
 
 
 LEFTOVER_PREFIXES = ("job-", "approach-", ".journal.json.", ".offsets.json.")
@@ -59,6 +61,8 @@ class Machine(JobRunner, OperatorCommands):
         for problem in self.state_problems:
             log.log(ERR, f"state directory: {problem}")
         threading.Thread(target=self._journal_loop, name="journal", daemon=True).start()
+        self._disable_drive()  # ESTOP at start-up: the drives are off until reset
+        threading.Thread(target=self._estop_input_loop, name="estop-input", daemon=True).start()
         if self.last_job.get("state") == "INTERRUPTED":
             log.log(WARNING, f"the last job {self.last_job.get('program')!r} was interrupted "
                              f"at line {self.last_job.get('last_line')}; it will not resume")
@@ -115,6 +119,9 @@ class Machine(JobRunner, OperatorCommands):
                 self._set_state(State.FAULT)
             elif self.state is not State.ESTOP:
                 self._set_state(State.IDLE)
+            if self.state is State.ESTOP:
+                self._disable_drive()  # the homing aborted by an e-stop: now the drives off
+                failure = failure or self.last_homing  # the e-stop's word, said at once
             self.last_homing = failure or "done"
 
     last_homing: str | None = None
@@ -128,31 +135,74 @@ class Machine(JobRunner, OperatorCommands):
                                              "home`; the config's allow_unhomed permits runs "
                                              "without)")
 
+    def require_position(self, what: str) -> None:
+        """Refuse a jog or a homing while the drive cannot say where the machine is."""
+        try:
+            self.drive.position_counts()
+        except CncError as exc:
+            raise ProtocolError("position-unknown", f"cannot {what}: the position is unknown "
+                                f"({exc}): `cncctl reset` opens the drive again, then "
+                                "`cncctl home`") from None
+
     def position_text(self) -> str:
         pos = self._position_mm() or {}
         return " ".join(f"{k.upper()}{v:.3f}" for k, v in pos.items())
 
-    def abort(self, reason: str) -> None:
+    def abort(self, reason: str) -> str:
+        """Stop the job along the path; the state it leads to (IDLE, or the latched ESTOP;
+        the reply said RUNNING while a held job stopped)."""
         with self._lock:
             job = self.job
             if job is None:
                 raise ProtocolError("not-running", "no job is running")
             self._stop_job(job, reason)
+            return self.state.value if self.state is State.ESTOP else State.IDLE.value
 
     def estop(self, reason: str) -> None:
+        """Category 1: a running job stops at Amax along the path, then the drives are
+        disabled (at once when nothing moves); latched until reset, which enables them."""
         with self._lock:
             self.fault = reason
-            if self.state is State.HOMING:
+            homing = self.state is State.HOMING
+            if homing:
                 self.drive.abort_homing(reason)
+                # Said at once: `cncctl home` printed "None" while the homing thread ended.
+                self.last_homing = f"aborted by the e-stop ({reason})"
             self._set_state(State.ESTOP)
             if self.job is not None:
-                self._stop_job(self.job, reason)
+                self._stop_job(self.job, reason, estop=True)
+            elif not homing:
+                self._disable_drive()
         self.log.log(ERR, f"e-stop: {reason}")
+
+    def _disable_drive(self) -> None:
+        """The drives off (idempotent); a drive that cannot be told is logged, not raised:
+        the e-stop is latched whatever the drive answers."""
+        try:
+            if not self.drive.disabled:
+                self.drive.disable()
+        except CncError as exc:
+            self.log.log(ERR, f"e-stop: the drives could not be disabled: {exc}")
+
+    def _estop_input_loop(self) -> None:
+        """The drive's e-stop input, between jobs too (a job's motion loop reads it each
+        cycle and stops at once): tripped, it e-stops as `cncctl estop` does."""
+        while True:
+            time.sleep(ESTOP_INPUT_POLL_S)
+            try:
+                tripped = self.drive.estop_input()
+            except CncError:
+                continue
+            if tripped and self.state is not State.ESTOP:
+                self.estop(ESTOP_INPUT)
 
     def reset(self) -> None:
         with self._lock:
             if self.state is State.HOMING:
                 raise ProtocolError("busy", "homing: wait for it, or e-stop")
+            if self._estop_input_open():
+                raise ProtocolError("estop", "the e-stop input on the drive is open "
+                                             "(tripped): close it, then reset")
             if self.job is not None:
                 raise ProtocolError("busy", f"a job is {self.state.value.lower()}: abort it "
                                             "first")
@@ -180,8 +230,14 @@ class Machine(JobRunner, OperatorCommands):
             self.log.log(NOTICE, "reset: the drive link was lost: opening it again")
             self.drive.close()
             self.drive.open()
-        elif status.halted:
-            self.drive.reset()
+        elif status.halted or self.drive.disabled:
+            self.drive.reset()  # after an e-stop: the drives enabled again
+
+    def _estop_input_open(self) -> bool:
+        try:
+            return self.drive.estop_input()
+        except CncError:
+            return False
 
     def terminate(self, reason: str) -> None:
         """SIGTERM: stop a running job along the path (the caller waits for wait_idle)."""
@@ -218,6 +274,8 @@ class Machine(JobRunner, OperatorCommands):
         out["ferror_um"] = round(p.ferror_um, 1) if p else 0.0
         out["feed_override_pct"] = self.feed_override_pct
         out["position_mm"] = self._position_mm()
+        out["drives"] = "disabled" if self.drive.disabled else "enabled"
+        out["estop_input"] = self._estop_input_open()
         out["homed"] = manual.homed_status(self)
         out.update(self.offsets_status())
         out["last_homing"] = self.last_homing
@@ -260,9 +318,16 @@ class Machine(JobRunner, OperatorCommands):
         if self.state is State.FAULT:
             raise ProtocolError("fault", f"fault latched ({self.fault}): reset first")
 
-    def _stop_job(self, job: Job, reason: str) -> None:
+    def _stop_job(self, job: Job, reason: str, estop: bool = False) -> None:
+        """Abort (along the path), or e-stop (at Amax, then the drives disabled by the
+        motion loop; a job not moving yet never moves, and _finish disables)."""
         job.cancel = job.cancel or reason
-        if job.runtime is not None:
+        if job.runtime is None:
+            return
+        controller = job.runtime.controller
+        if estop and controller is not None:
+            controller.request_estop(reason)
+        else:
             job.runtime.request_abort(reason)
 
     def _set_state(self, state: State) -> None:
@@ -279,6 +344,8 @@ class Machine(JobRunner, OperatorCommands):
                 self._set_state(State.FAULT)
             elif self.state is not State.ESTOP:
                 self._set_state(State.IDLE)
+            if self.state is State.ESTOP:
+                self._disable_drive()  # an e-stop that came while the job checked or ran
 
     def _journal_loop(self) -> None:
         """Off the motion thread (a journal write syncs to disk): the line reached, as soon as

@@ -20,11 +20,14 @@ class Machine(Protocol):
     config: MachineConfig
     drive: Drive
     log: EventLog
+    last_homing: str | None
 
     @property
     def lock(self) -> threading.RLock: ...
 
     def require_idle(self) -> None: ...
+
+    def require_position(self, what: str) -> None: ...
 
     def set_state_homing(self) -> None: ...
 
@@ -59,6 +62,8 @@ def start_homing(machine: Machine, axis_names: list[str]) -> None:
     groups = [g for g in groups if g]
     with machine.lock:
         machine.require_idle()
+        machine.require_position("home")
+        machine.last_homing = None  # this homing's word comes when it ends
         machine.set_state_homing()
     threading.Thread(target=_home_groups, args=(machine, groups), name="homing",
                      daemon=True).start()

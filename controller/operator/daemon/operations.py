@@ -51,11 +51,16 @@ class OperatorCommands:
 
     def require_idle(self) -> None: ...
 
+    def require_position(self, what: str) -> None: ...
+
     def _is_running(self) -> bool: ...
 
     def jog(self, axis: str, distance_mm: float | None, direction: int, feed_mm_min: float,
             emit: Emit, timeout_s: float | None) -> tuple[int, str]:
         """Jog one axis as a one-line job within the soft limits; (job, what it does)."""
+        with self._lock:
+            self.require_idle()  # a latched e-stop or fault is said before anything else
+            self.require_position("jog")
         position = self._position_mm() or {}
         text, note = manual.jog_program(self.config, position, axis, distance_mm, direction,
                                         feed_mm_min)

@@ -231,9 +231,11 @@ class Server:
                 raise ProtocolError("busy", f"programs being sent take {uploading} bytes; "
                                             f"{MAX_UPLOADS_BYTES} at most at once: try again")
             conn.run = (request, Upload(size))
-        elif cmd in ("abort", "estop"):
-            getattr(self.machine, cmd)(f"{'aborted' if cmd == 'abort' else 'e-stop'} by "
-                                       f"operator ({who})")
+        elif cmd == "abort":
+            state = self.machine.abort(f"aborted by operator ({who})")
+            self._send(conn, reply_ok(rid, state=state))
+        elif cmd == "estop":
+            self.machine.estop(f"e-stop by operator ({who})")
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
         elif cmd == "hold":
             self.machine.hold()
