@@ -43,7 +43,7 @@ MESSAGE_WAIT_S = 0.05  # a stage's last message may still be in the queue's pipe
 @dataclass
 class RuntimeOptions:
     virtual_time: bool = False
-    ring_seconds: float = 30.0  # generator may run this far ahead of the table
+    ring_seconds: float | None = None  # generator runs this far ahead (runtime.reference_buffer_s)
     blocks_fn: BlocksFn = blocks_source
     generate_fn: GenerateFn = reference_source
     drive: Drive | None = None  # an unopened drive (tests); default: the configured backend
@@ -115,6 +115,11 @@ class RingSource:
     def total_rows(self) -> int | None:
         return self.ring.written if self.ring.flags & FLAG_FINAL else None
 
+    def primed(self) -> bool:
+        """The ring is full (the generator waits on it), or there is no more to wait for."""
+        return (self.ring.available() >= self.ring.capacity or self.state()[0]
+                is not SourceState.STREAMING)
+
 
 class Runtime:
     """Runs one program; run() returns the MotionResult (extra: rss, start-up timings)."""
@@ -161,7 +166,8 @@ class Runtime:
     def run(self) -> MotionResult:
         t0_s = time.monotonic()
         n_cols = len(self.config.axes) + 2
-        ring = RefRing.create(int(self.options.ring_seconds / self.config.sample_period_s), n_cols)
+        ring_s = self.options.ring_seconds or self.config.runtime.reference_buffer_s
+        ring = RefRing.create(int(round(ring_s / self.config.sample_period_s)), n_cols)
         messages = _Messages(_CTX.Queue())
         rt = "off"
         try:
@@ -246,8 +252,9 @@ class Runtime:
                 ahead = ring.written - (ctrl.executed if ctrl is not None else 0)
                 aborted = ctrl is not None and (ctrl.abort_requested or ctrl.state not in (
                     MotionState.WAITING, MotionState.RUNNING))  # stopping needs no new rows
-                return (ahead >= need or aborted or watch() is not None
-                        or source.state()[0] is not SourceState.STREAMING)
+                starting = ctrl is None or not ctrl.sent  # first motion: the ring full
+                return ((ahead >= need and not (starting and not source.primed())) or aborted
+                        or watch() is not None or source.state()[0] is not SourceState.STREAMING)
             pacer: Any = VirtualPacer(self.settings.cycle_frames, period_s, drive.advance,
                                       ready=ready)
         else:
