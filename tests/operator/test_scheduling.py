@@ -28,6 +28,12 @@ def _no_sys_nice() -> list[str]:
     return ["setpriv", "--inh-caps=-sys_nice", "--bounding-set=-sys_nice"]
 
 
+def _ordinary_nice() -> None:
+    """Nice 0 for the child: an in-process `cncctl run` of an earlier test may have left this
+    process at -10, which a child would inherit (and keep, privilege or not)."""
+    os.setpriority(os.PRIO_PROCESS, 0, 0)
+
+
 def _stat(pid: int, tid: int | None = None) -> list[str]:
     path = f"/proc/{pid}/task/{tid}/stat" if tid else f"/proc/{pid}/stat"
     return Path(path).read_text().rsplit(")", 1)[1].split()
@@ -103,7 +109,7 @@ def test_a_daemon_job_runs_as_reported(tmp_path: Path) -> None:
 
 def test_without_privilege_cncd_says_so_at_start_and_in_status(tmp_path: Path) -> None:
     prefix = _no_sys_nice()
-    with running_cncd(tmp_path, wrapper=prefix) as daemon:
+    with running_cncd(tmp_path, wrapper=prefix, preexec=_ordinary_nice) as daemon:
         sched = daemon.status()["scheduling"]
         assert sched["privileged"] is False and sched["motion"] == "SCHED_OTHER"
         assert sched["summary"].startswith("no privilege: ordinary scheduling")
@@ -115,7 +121,8 @@ def test_without_privilege_cncd_says_so_at_start_and_in_status(tmp_path: Path) -
 def test_without_privilege_cncctl_run_says_so_and_reports_it(tmp_path: Path) -> None:
     prefix = _no_sys_nice()
     done = subprocess.run([*prefix, *CNCCTL, "run", NACA, "--json"], capture_output=True,
-                          text=True, timeout=120, cwd=REPO)  # no daemon: an embedded run
+                          text=True, timeout=120, cwd=REPO,  # no daemon: an embedded run
+                          preexec_fn=_ordinary_nice)
     assert done.returncode == 0, done.stderr
     assert "cncctl: scheduling: no privilege: ordinary scheduling" in done.stderr
     sched = json.loads(done.stdout.splitlines()[-1])["scheduling"]
