@@ -111,6 +111,8 @@ class RuntimeConfig:
     nc_fifo_blocks: int
     card_fifo_low_water_ms: float
     card_fifo_high_water_ms: float
+    in_position_tolerance_mm: float = 0.002  # a run's motion time ends this close to the end
+    reference_buffer_s: float = 5.0  # reference points planned ahead of the motion loop
 
 
 @dataclass(frozen=True, slots=True)
@@ -223,6 +225,9 @@ def _read_runtime(sec: Section) -> RuntimeConfig:
         nc_fifo_blocks=sec.int("nc_fifo_blocks", 64, minval=2, maxval=100000),
         card_fifo_low_water_ms=sec.float("card_fifo_low_water_ms", 20.0, above=0.0),
         card_fifo_high_water_ms=sec.float("card_fifo_high_water_ms", 100.0, above=0.0),
+        in_position_tolerance_mm=sec.float("in_position_tolerance_mm", 0.002, above=0.0,
+                                           maxval=1.0),
+        reference_buffer_s=sec.float("reference_buffer_s", 5.0, minval=1.0, maxval=600.0),
     )
     if cfg.card_fifo_low_water_ms >= cfg.card_fifo_high_water_ms:
         raise ConfigError(sec.path, "runtime.card_fifo_low_water_ms", "must be below high water")

@@ -72,7 +72,9 @@ class Cncd:
 
 
 def start_cncd(tmp_path: Path, *extra: str, env: dict[str, str] | None = None,
-               preexec: Any = None, name: str = "cncd") -> Cncd:
+               preexec: Any = None, name: str = "cncd", wrapper: list[str] | None = None
+               ) -> Cncd:
+    """wrapper: a command that execs the daemon (setpriv ...): the pid stays the daemon's."""
     notify_path = str(tmp_path / f"{name}-notify")
     manager = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     if os.path.exists(notify_path):
@@ -86,8 +88,9 @@ def start_cncd(tmp_path: Path, *extra: str, env: dict[str, str] | None = None,
     full_env = {**os.environ, "NOTIFY_SOCKET": notify_path, "WATCHDOG_USEC": "1000000",
                 **(env or {})}
     with stderr_path.open("w") as err:
-        proc = subprocess.Popen([*CNCD, "--socket", socket_path, "--state-dir", str(state_dir),
-                                 *extra], stderr=err, env=full_env, preexec_fn=preexec)
+        proc = subprocess.Popen([*(wrapper or []), *CNCD, "--socket", socket_path,
+                                 "--state-dir", str(state_dir), *extra], stderr=err,
+                                env=full_env, preexec_fn=preexec)
     daemon = Cncd(proc, socket_path, state_dir, notify, stderr_path)
     try:
         notify.wait_for("READY=1")

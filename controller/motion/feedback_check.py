@@ -38,6 +38,18 @@ class FeedbackCheck:
         self.lo_counts = (travel[:, 0] - slack_mm) / self.pulse_mm
         self.hi_counts = (travel[:, 1] + slack_mm) / self.pulse_mm
         self.last = np.asarray(start_counts, dtype=np.int64).copy()
+        self.corrupt = False
+
+    def believed(self, fb: Feedback) -> tuple[Feedback, ImplausibleFeedback | None]:
+        """The rows before the first implausible one, and what was wrong with it; after one,
+        no row is believed (a drive that read garbage once cannot be trusted on)."""
+        if self.corrupt:
+            return _rows(fb, 0), None
+        bad = self.check(fb)
+        if bad is None:
+            return fb, None
+        self.corrupt = True
+        return _rows(fb, int(np.searchsorted(fb.seq, bad.seq))), bad
 
     def check(self, fb: Feedback) -> ImplausibleFeedback | None:
         if not len(fb):
@@ -63,3 +75,7 @@ class FeedbackCheck:
                 f"{self.hi_counts[axis] * self.pulse_mm[axis]:.3f}] mm: corrupt feedback; the "
                 "position is unknown"), int(fb.seq[row]))
         return None
+
+
+def _rows(fb: Feedback, n: int) -> Feedback:
+    return Feedback(fb.seq[:n], fb.commanded_counts[:n], fb.encoder_counts[:n])

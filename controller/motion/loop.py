@@ -13,6 +13,7 @@ from controller.generator.dynamics.precompensation import Precompensator
 from controller.motion import estop
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.feedback_check import FeedbackCheck
+from controller.motion.in_position import InPosition
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter
 from controller.motion.recall import SendJournal, Sent, retimer_state, take_back
@@ -74,8 +75,9 @@ class MotionController(OperatorRequests):
         self.pulses = PulseCounter(self.pulse_mm, start_cmd)
         self.ferr = FerrorCheck(self.config, start_cmd)
         self.fbcheck = FeedbackCheck(self.config, start_enc)
-        self.feedback_corrupt = False
         self.contour = ContourStats(self.pulse_mm)
+        self.in_position = InPosition(self.pulse_mm, self.settings.in_position_mm, self.period_s)
+        self.lead_frames = 0  # frames of the pre-compensation's lead dying away (not planned)
         self.hist = RefHistory(2 * self.drive.fifo_capacity() + 1024, self.n, self.period_s)
         self.prev_mm = self.last_mm = start_cmd * self.pulse_mm
         self.held = np.zeros((0, self.n + 2))
@@ -114,7 +116,10 @@ class MotionController(OperatorRequests):
             self.position_known = False
             self._finish(Outcome.FAULT, str(exc))
             return
-        fb = self._plausible(self._own_numbers(fb))
+        fb, bad = self.fbcheck.believed(self._own_numbers(fb))
+        if bad is not None:  # a reading no drive could give: none believed from then on
+            self.position_known = False
+            self._begin_stop(Outcome.FAULT, bad.message)
         self._account(fb)
         if status.halted:
             self.underruns += int(CardStatus.UNDERRUN in status)
@@ -146,21 +151,6 @@ class MotionController(OperatorRequests):
             return fb
         return Feedback(fb.seq - self.seq0, fb.commanded_counts, fb.encoder_counts)
 
-    def _plausible(self, fb: Feedback) -> Feedback:
-        """Feedback up to the first row no drive could have given; from there on none is
-        believed: the run stops as a fault with the position unknown (homing needed). A
-        flipped bit once read as 'Y axis following error 8388.608 mm' with the position
-        'known' at 232 mm on a 150 mm axis."""
-        if self.feedback_corrupt:
-            return Feedback(fb.seq[:0], fb.commanded_counts[:0], fb.encoder_counts[:0])
-        bad = self.fbcheck.check(fb)
-        if bad is None:
-            return fb
-        self.feedback_corrupt, self.position_known = True, False
-        self._begin_stop(Outcome.FAULT, bad.message)
-        keep = int(np.searchsorted(fb.seq, bad.seq))
-        return Feedback(fb.seq[:keep], fb.commanded_counts[:keep], fb.encoder_counts[:keep])
-
     def _account(self, fb: Feedback) -> None:
         if not len(fb):
             return
@@ -172,6 +162,7 @@ class MotionController(OperatorRequests):
         self.last_enc = fb.encoder_counts[-1]
         self.line = int(self.hist.line[fb.seq[-1] % self.hist.capacity])
         self.contour.update(fb, self.hist)
+        self.in_position.frames(fb.seq, fb.encoder_counts, self.pulses.counts)
 
     def _supervise(self, fb: Feedback) -> None:
         trip = self.ferr.check(fb)
@@ -205,6 +196,9 @@ class MotionController(OperatorRequests):
 
     # -- streaming ------------------------------------------------------------------------
     def _refill(self, level: int) -> None:
+        if self.state is MotionState.WAITING and not self.sent \
+                and not getattr(self.source, "primed", lambda: True)():
+            return  # first motion once the reference buffer is full or planned to its end
         s = self.settings
         want = self._frames(s.high_water_ms) - level
         hold, low = self._frames(s.holdback_ms), self._frames(s.low_water_ms)
@@ -279,7 +273,9 @@ class MotionController(OperatorRequests):
         pos = rows[:, : self.n]
         cmd = pos if self.precomp is None else self.precomp.push(pos)
         if self.precomp is not None and (end or pause):
+            wanted = len(rows)
             rows, cmd = with_lead_settled(self.precomp, rows, cmd, self.last_mm, self.line)
+            self.lead_frames += len(rows) - wanted
             room = max(0, self._tail_room() - self.drive.fifo_level())
             if len(cmd) > room:
                 self.pending_tail = (rows[room:], cmd[room:], end, pause)
@@ -390,6 +386,8 @@ class MotionController(OperatorRequests):
         now_s = self.pacer.elapsed_s()
         if self.executed:  # the settling: where the tool overshoots a stop
             self.contour.update_at(np.array([self.executed - 1]), enc, self.hist)
+        if self.first_motion_s is not None:
+            self.in_position.at_rest(enc, cmd, now_s - self.first_motion_s + self.period_s)
         # Equal once is not settled: the 36 % overshoot crosses the target on its way.
         if not np.array_equal(cmd, enc):
             self.settled_since_s = None

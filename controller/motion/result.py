@@ -17,7 +17,7 @@ def _read_position(ctrl: Any) -> tuple[np.ndarray | None, np.ndarray, bool]:
         cmd, enc = ctrl.drive.position_counts()
     except LostCommunicationError:
         return None, ctrl.last_enc, False
-    if ctrl.feedback_corrupt:  # the drive's reading is what was not believed: the last one was
+    if ctrl.fbcheck.corrupt:  # the drive's reading is what was not believed: the last one was
         return cmd, ctrl.last_enc, False
     return cmd, enc, True
 
@@ -27,14 +27,21 @@ def build_result(ctrl: Any) -> MotionResult:
     cmd, enc, known = _read_position(ctrl)
     commanded = ctrl.pulses.commanded_counts
     executed = (cmd - ctrl.start_cmd) if cmd is not None else np.full(len(names), -1)
-    motion_s = 0.0 if ctrl.first_motion_s is None else ctrl.last_motion_s - ctrl.first_motion_s
+    # From the first frame to the last one fed back; the motion time proper ends where the
+    # tool came within the in-position tolerance of the end, the rest is settling.
+    total_s = (0.0 if ctrl.first_motion_s is None
+               else ctrl.last_motion_s - ctrl.first_motion_s + ctrl.period_s)
+    motion_s = ctrl.in_position.motion_s(ctrl.executed, total_s) if ctrl.executed else 0.0
+    if ctrl.first_motion_s is not None and ctrl.settled_since_s is not None:
+        # the servo settled to the last count after the last frame ran (the paper's method)
+        total_s = max(total_s, ctrl.settled_since_s - ctrl.first_motion_s + ctrl.period_s)
     min_fifo_ms = (ctrl.min_fifo_frames or 0) * ctrl.period_s * 1e3
     return MotionResult(
         outcome=ctrl.outcome or Outcome.DONE,
         message=ctrl.message,
         line=ctrl.line,
-        motion_time_s=motion_s + (ctrl.period_s if ctrl.first_motion_s is not None else 0.0),
-        planned_time_s=ctrl.sent * ctrl.period_s,
+        motion_time_s=motion_s,
+        planned_time_s=(ctrl.sent - ctrl.lead_frames) * ctrl.period_s,
         contour_error_um=ctrl.contour.summary_um(),
         following_error_um_max=ctrl.ferr.max_abs_mm * 1e3,
         underruns=ctrl.underruns,
@@ -46,6 +53,7 @@ def build_result(ctrl: Any) -> MotionResult:
                            zip(names, enc, ctrl.pulse_mm, strict=True)},
         position_known=known,
         time_to_first_motion_s=ctrl.first_motion_s,
+        settling_time_s=max(0.0, total_s - motion_s),
     )
 
 

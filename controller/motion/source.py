@@ -26,6 +26,10 @@ class RefSource(Protocol):
 
     def total_rows(self) -> int | None: ...
 
+    # primed() -> bool, optional (a source without it is always primed): the buffer ahead of
+    # the motion loop is full, or the producer has finished or failed. A job starts moving only
+    # then, so that a loaded PC's generator starts with the whole buffer as its head start.
+
 
 def chunk_rows(chunk: RefChunk) -> np.ndarray:
     """A RefChunk as ring rows. A pause (M0) after the chunk is its last row's line, negated:
@@ -98,3 +102,6 @@ class ChunkSource:
 
     def total_rows(self) -> int | None:
         return self._read + len(self._pending) if self._done else None
+
+    def primed(self) -> bool:
+        return True  # in-process: the rows are produced when read

@@ -33,6 +33,7 @@ class MotionSettings:
     holdback_ms: float = 60.0  # reference kept back so that a stop can follow the path
     settle_s: float = 0.3
     progress_every_s: float = 0.1
+    in_position_mm: float = 0.002  # the motion time ends once the tool is this close to the end
 
     @classmethod
     def from_config(cls, config: MachineConfig, **overrides: Any) -> MotionSettings:
@@ -41,6 +42,7 @@ class MotionSettings:
         stop_ms = 1e3 * 15.0 * max(ip.max_feed_mm_s, ip.rapid_feed_mm_s) / (8 * ip.max_accel_mm_s2)
         base = cls(low_water_ms=config.runtime.card_fifo_low_water_ms,
                    high_water_ms=config.runtime.card_fifo_high_water_ms,
+                   in_position_mm=config.runtime.in_position_tolerance_mm,
                    holdback_ms=stop_ms + 10.0)
         return replace(base, **overrides)
 
@@ -85,3 +87,4 @@ class MotionResult:
     position_known: bool
     time_to_first_motion_s: float | None
     extra: dict[str, Any] = field(default_factory=dict)
+    settling_time_s: float = 0.0  # after motion_time_s: in position until the last frame ran

@@ -57,7 +57,7 @@ def _raise_priority_for_motion(argv: list[str]) -> None:
     refused without CAP_SYS_NICE or a LimitNICE, which only costs that time)."""
     if "run" in argv[:1]:
         try:
-            os.nice(-10)
+            os.setpriority(os.PRIO_PROCESS, 0, -10)  # absolute: cncctl run under nice stays -10
         except OSError:
             pass
 

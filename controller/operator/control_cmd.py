@@ -148,6 +148,9 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
         print("  not homed: " + " ".join(k.upper() for k, v in homed.items() if not v))
     for problem in s.get("state_problems") or []:
         print(f"  state directory: {problem}", flush=True)
+    sched = s.get("scheduling") or {}
+    if sched.get("summary"):
+        print(f"  scheduling: {sched['summary']}")
     last = s.get("last_job") or {}
     if last.get("program"):
         print(f"  last job {last['program']!r}: {last.get('state', '?').lower()} at line "

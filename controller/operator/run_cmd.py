@@ -11,6 +11,7 @@ from typing import Any
 
 from controller.config import load_config
 from controller.errors import CncError, ConfigError, NcError, OffsetsError
+from controller.motion.realtime import probe_scheduling
 from controller.motion.types import MotionProgress, MotionState, Outcome
 from controller.offsets import ProgramOffsets, load_offsets
 from controller.operator.client import (
@@ -185,6 +186,8 @@ def run(args: argparse.Namespace) -> int:
         runtime.request_abort(f"aborted by operator ({signal.Signals(signum).name})")
     previous = {sig: signal.signal(sig, on_stop_signal) for sig in STOP_SIGNALS}
     try:
+        if not args.virtual_time:
+            _say_scheduling()
         view.event("start", program=args.program, config=config.name,
                    drive=config.drive.backend, virtual_time=args.virtual_time)
         if not shared_drive:
@@ -218,3 +221,11 @@ def run(args: argparse.Namespace) -> int:
     view.close()
     view.final(result)
     return EXIT_CODES[result.outcome]
+
+
+def _say_scheduling() -> None:
+    """Without the privilege of real-time scheduling the run goes on, but the operator is told
+    at the start (the result's `scheduling` says it too)."""
+    sched = probe_scheduling()
+    if not sched.privileged:
+        print(f"cncctl: scheduling: {sched.summary()}", file=sys.stderr, flush=True)

@@ -103,6 +103,7 @@ def result_summary(result: MotionResult) -> dict[str, Any]:
         "message": result.message,
         "line": result.line,
         "motion_time_s": round(result.motion_time_s, 4),
+        "settling_time_s": round(result.settling_time_s, 4),
         "planned_time_s": round(result.planned_time_s, 4),
         "contour_error_um": {k: round(v, 3) for k, v in result.contour_error_um.items()},
         "following_error_um_max": round(result.following_error_um_max, 3),
@@ -116,6 +117,13 @@ def result_summary(result: MotionResult) -> dict[str, Any]:
         "time_to_first_motion_s": result.time_to_first_motion_s,
         **{k: v for k, v in result.extra.items()},
     }
+
+
+def _settling_text(s: dict[str, Any]) -> str:
+    """The settling after the motion time (a daemon of an older version may not send it)."""
+    if "settling_time_s" not in s:
+        return ""
+    return f" then settling {s['settling_time_s']:.3f} s"
 
 
 class JsonView:
@@ -173,7 +181,8 @@ class PlainView:
 
     def final_summary(self, s: dict[str, Any]) -> None:
         print(f"cncctl: {s['event']}{': ' + s['message'] if s['message'] else ''}\n"
-              f"  motion {s['motion_time_s']:.3f} s (planned {s['planned_time_s']:.3f} s), "
+              f"  motion {s['motion_time_s']:.3f} s (planned {s['planned_time_s']:.3f} s)"
+              f"{_settling_text(s)}, "
               f"contour error max {s['contour_error_um']['max']:.1f} um "
               f"rms {s['contour_error_um']['rms']:.1f} um, following error max "
               f"{s['following_error_um_max']:.0f} um\n"

@@ -12,6 +12,7 @@ import numpy as np
 
 from controller.config import MachineConfig, load_config
 from controller.errors import CncError, NcError
+from controller.generator.dynamics.precompensation import Precompensator
 from controller.generator.plan import Algorithm
 from controller.interpreter.program import read_program
 from controller.operator.check_cmd import check_program
@@ -42,7 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         choices=[a.value for a in Algorithm])
     parser.add_argument("--compare", action="store_true", help="run all four algorithms")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--trajectory", metavar="CSV", help="write t,x_ref,y_ref,x_act,y_act,feed")
+    parser.add_argument("--trajectory", metavar="CSV",
+                        help="write t,x_ref,y_ref,x_act,y_act,feed,x_cmd,y_cmd[,z_cmd]")
     parser.add_argument("--plot", metavar="PNG", help="feedrate and contour error along the path")
     parser.add_argument("--stats", action="store_true",
                         help="add how the plan was obtained: look-ahead windows, dynamics rounds")
@@ -65,7 +67,7 @@ def _one(path: str, config: MachineConfig, algorithm: str, trajectory: str | Non
     if view is not None:
         view.start(algorithm)
         sinks.append(view.add)
-    writer = TrajectoryWriter(trajectory, config.sample_period_s) if trajectory else None
+    writer = TrajectoryWriter(trajectory, config) if trajectory else None
     if writer is not None:
         sinks.append(writer.add)
     try:
@@ -84,18 +86,27 @@ def _one(path: str, config: MachineConfig, algorithm: str, trajectory: str | Non
 
 
 class TrajectoryWriter:
-    """`--trajectory CSV`, written as the samples come (t,x_ref,y_ref,x_act,y_act,feed, %.9g,
-    CRLF as the csv module writes): into CSV.part, renamed to CSV once the run is complete."""
+    """`--trajectory CSV`, written as the samples come (%.9g, CRLF as the csv module writes):
+    into CSV.part, renamed to CSV once the run is complete. One row per sample, the settling
+    after the end included (SETTLE_S at the end point). x_cmd, y_cmd (z_cmd) are what the motion
+    loop sends the drives for those samples: the wanted path through the servo
+    pre-compensation when the config has it (the path itself otherwise), in mm before rounding
+    to pulses, so that an outside servo model can be run on them."""
 
-    HEADER = "t,x_ref,y_ref,x_act,y_act,feed\r\n"
-    ROW = ",".join(["%.9g"] * 6) + "\r\n"
-
-    def __init__(self, path: str, sample_period_s: float) -> None:
+    def __init__(self, path: str, config: MachineConfig) -> None:
         self.path, self.part = path, path + ".part"
-        self.T = sample_period_s  # noqa: N815
+        self.T = config.sample_period_s  # noqa: N815
+        names = config.axis_names
+        cmd_cols = [f"{a}_cmd" for a in names]
+        self.ROW = ",".join(["%.9g"] * (6 + len(cmd_cols))) + "\r\n"
+        start = np.zeros(len(names))  # simulate starts at rest at X0 Y0 (Z0)
+        self.precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
+                                        for a in config.axes], self.T, start)
+                        if config.interpolator.servo_precompensation else None)
         try:
             self.fh: TextIO = open(self.part, "w", encoding="utf-8", newline="")  # noqa: SIM115
-            self.fh.write(self.HEADER)
+            self.fh.write(",".join(["t", "x_ref", "y_ref", "x_act", "y_act", "feed",
+                                    *cmd_cols]) + "\r\n")
         except OSError as exc:
             raise OutputError(f"--trajectory {path}: {exc.strerror}") from None
 
@@ -106,13 +117,13 @@ class TrajectoryWriter:
             raise OutputError(f"--trajectory {self.path}: {exc.strerror}") from None
 
     def _add(self, b: SampleBlock) -> None:
-        n = b.n_ref
+        n = len(b)
         if n == 0:
             return
-        ref = b.ref_mm[:n]
+        ref = b.ref_mm
+        cmd = ref if self.precomp is None else self.precomp.push(ref)
         rows = np.column_stack([np.arange(b.i0 + 1, b.i0 + n + 1) * self.T, ref[:, 0], ref[:, 1],
-                                ref[:, 0] - b.ex_mm[:n], ref[:, 1] - b.ey_mm[:n],
-                                b.feed_mm_s[:n]])
+                                ref[:, 0] - b.ex_mm, ref[:, 1] - b.ey_mm, b.feed_mm_s, cmd])
         fmt = self.ROW
         self.fh.write("".join([fmt % tuple(r) for r in rows.tolist()]))
 

@@ -16,7 +16,7 @@ from controller.errors import DriveError
 from controller.generator.dynamics.prediction import axis_servos
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer, WallPacer
-from controller.motion.realtime import back_to_normal, try_realtime
+from controller.motion.realtime import MOTION_PRIORITY, Scheduling, back_to_normal, try_realtime
 from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
 from controller.motion.source import SourceState
 from controller.motion.types import MotionProgress, MotionResult, MotionSettings, MotionState
@@ -43,7 +43,7 @@ MESSAGE_WAIT_S = 0.05  # a stage's last message may still be in the queue's pipe
 @dataclass
 class RuntimeOptions:
     virtual_time: bool = False
-    ring_seconds: float = 30.0  # generator may run this far ahead of the table
+    ring_seconds: float | None = None  # generator runs this far ahead (runtime.reference_buffer_s)
     blocks_fn: BlocksFn = blocks_source
     generate_fn: GenerateFn = reference_source
     drive: Drive | None = None  # an unopened drive (tests); default: the configured backend
@@ -51,7 +51,7 @@ class RuntimeOptions:
     start_mm: tuple[float, float, float] | None = None  # where the machine is (default origin)
     settings: dict[str, Any] = field(default_factory=dict)  # MotionSettings overrides
     on_progress: Callable[[MotionProgress], None] | None = None
-    rt_priority: int | None = 80  # real-time mode: try SCHED_FIFO for the motion process
+    rt_priority: int | None = MOTION_PRIORITY  # real time: try SCHED_FIFO for the motion thread
     optional_stop: bool = False  # M1 pauses like M0
     offsets: OffsetTable | None = None  # work offsets in force at the start (default none)
     from_line: int | None = None  # run from this line (interpreter state brought there)
@@ -65,6 +65,7 @@ class _Messages:
         self.info = info
         self.errors: dict[str, str] = {}
         self.rss_kb: dict[str, int] = {}
+        self.sched: dict[str, str] = {}  # what each producer runs at ("nice -10")
 
     def drain(self, wait_s: float = 0.0, until: Callable[[], bool] | None = None) -> None:
         """Take the messages already sent; wait up to wait_s for more, unless until() holds
@@ -77,7 +78,7 @@ class _Messages:
                     timeout=0.0 if done else max(0.0, deadline - time.monotonic()))
             except (queue.Empty, OSError, ValueError):
                 return
-            (self.errors if kind == "error" else self.rss_kb)[stage] = value
+            {"error": self.errors, "sched": self.sched}.get(kind, self.rss_kb)[stage] = value
 
     def failure(self) -> str:
         """Why the reference stream failed, once the failed stage's message is in (waited for
@@ -114,6 +115,11 @@ class RingSource:
 
     def total_rows(self) -> int | None:
         return self.ring.written if self.ring.flags & FLAG_FINAL else None
+
+    def primed(self) -> bool:
+        """The ring is full (the generator waits on it), or there is no more to wait for."""
+        return (self.ring.available() >= self.ring.capacity or self.state()[0]
+                is not SourceState.STREAMING)
 
 
 class Runtime:
@@ -161,7 +167,8 @@ class Runtime:
     def run(self) -> MotionResult:
         t0_s = time.monotonic()
         n_cols = len(self.config.axes) + 2
-        ring = RefRing.create(int(self.options.ring_seconds / self.config.sample_period_s), n_cols)
+        ring_s = self.options.ring_seconds or self.config.runtime.reference_buffer_s
+        ring = RefRing.create(int(round(ring_s / self.config.sample_period_s)), n_cols)
         messages = _Messages(_CTX.Queue())
         rt = "off"
         try:
@@ -185,6 +192,10 @@ class Runtime:
             messages.drain(MESSAGE_WAIT_S, until=lambda: set(self.procs) <= set(messages.rss_kb))
             ring.close()
         result.extra["realtime"] = rt
+        if rt != "off":
+            producers = messages.sched.get("generator", "unknown")
+            result.extra["scheduling"] = {**Scheduling(rt, producers).as_dict(),
+                                          "interpreter": messages.sched.get("interpreter")}
         return self._finish(result, messages, t0_s)
 
     def _start(self, ring: RefRing, messages: _Messages) -> None:
@@ -246,8 +257,9 @@ class Runtime:
                 ahead = ring.written - (ctrl.executed if ctrl is not None else 0)
                 aborted = ctrl is not None and (ctrl.abort_requested or ctrl.state not in (
                     MotionState.WAITING, MotionState.RUNNING))  # stopping needs no new rows
-                return (ahead >= need or aborted or watch() is not None
-                        or source.state()[0] is not SourceState.STREAMING)
+                starting = ctrl is None or not ctrl.sent  # first motion: the ring full
+                return ((ahead >= need and not (starting and not source.primed())) or aborted
+                        or watch() is not None or source.state()[0] is not SourceState.STREAMING)
             pacer: Any = VirtualPacer(self.settings.cycle_frames, period_s, drive.advance,
                                       ready=ready)
         else:

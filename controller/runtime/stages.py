@@ -13,6 +13,7 @@ from typing import Any
 
 from controller.config import MachineConfig
 from controller.interpreter.fifo import FAILED, drain_fifo, feed_fifo
+from controller.motion.realtime import producer_nice
 from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
 from controller.motion.source import chunk_rows
 from controller.refpoints import RefChunk
@@ -60,9 +61,6 @@ def preload_stages() -> None:
             pass
 
 
-PRODUCER_NICE = -10  # interpreter and generator outrank ordinary load, below the RT motion loop
-
-
 def _die_with_parent(parent_pid: int) -> None:
     """The kernel kills this child when the thread that forked it ends (PR_SET_PDEATHSIG):
     no producer outlives a killed `cncctl run` or cncd, even one busy planning that would not
@@ -91,18 +89,16 @@ def memory_ceiling(limit_bytes: int = PRODUCER_MEMORY_BYTES) -> None:
         resource.setrlimit(resource.RLIMIT_DATA, (cap, hard))
 
 
-def _child_setup(parent_pid: int) -> int:
+def _child_setup(parent_pid: int, info: Queue, stage: str) -> int:
     _die_with_parent(parent_pid)
     memory_ceiling()
     # Ctrl-C goes to the whole process group: only the motion process decides how to stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # Best effort: on a loaded machine the producers keep the reference ring ahead of the card
-    # and planning the first run reaches the first motion sooner. Without CAP_SYS_NICE (or a
-    # systemd LimitNICE) this is refused, which only costs headroom.
-    try:
-        os.nice(PRODUCER_NICE)
-    except OSError:
-        pass
+    # First, before the queue's feeder thread exists (it inherits it): on a loaded machine the
+    # producers keep the reference ring ahead of the card and planning the first run reaches
+    # the first motion sooner. Without CAP_SYS_NICE (or a systemd LimitNICE) it is refused,
+    # which costs headroom: the run's result says so.
+    info.put(("sched", stage, producer_nice()))
     return parent_pid
 
 
@@ -117,7 +113,7 @@ def _report_rss(info: Queue, name: str) -> None:
 def interpreter_main(path: str, config: MachineConfig, blocks_fn: BlocksFn, nc_fifo: Queue,
                      ring: RefRing, info: Queue, parent_pid: int) -> None:
     """Process 1: NC blocks onto the bounded NC FIFO (put blocks when full: back-pressure)."""
-    parent = _child_setup(parent_pid)
+    parent = _child_setup(parent_pid, info, "interpreter")
     try:
         items = _iter_safe(blocks_fn(path, config), info, "interpreter")
         feed_fifo(items, nc_fifo, lambda: _should_stop(ring, parent))
@@ -136,7 +132,7 @@ def _iter_safe(items: Iterable[Any], info: Queue, stage: str) -> Iterator[Any]:
 def generator_main(config: MachineConfig, generate_fn: GenerateFn, nc_fifo: Queue,
                    ring: RefRing, info: Queue, parent_pid: int) -> None:
     """Process 2: NC blocks -> reference points into the shared-memory ring."""
-    parent = _child_setup(parent_pid)
+    parent = _child_setup(parent_pid, info, "generator")
     try:
         for chunk in generate_fn(drain_fifo(nc_fifo, lambda: _should_stop(ring, parent)), config):
             if not ring.write(chunk_rows(chunk)) or os.getppid() != parent:

@@ -19,6 +19,8 @@ from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
 from drivers.sim.switches import SimSwitches, timeout_message
 
+REST_AFTER_S = 2.0  # idle this long, the Table II servo has settled (poles of ~100/s and up)
+
 
 class SimCard(Drive):
     """Frames are clocked one per sample period T, in wall-clock time or virtual time.
@@ -73,6 +75,7 @@ class SimCard(Drive):
         self.frames_clocked = 0  # every period since open, idle ones included
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._wake = threading.Event()  # work for a clock asleep at rest (see _clock_thread)
 
     # -- hooks ----------------------------------------------------------------------------
     def _open(self) -> None:
@@ -85,6 +88,7 @@ class SimCard(Drive):
 
     def _close(self) -> None:
         self._stop.set()
+        self._wake.set()
         if self._thread is not None:
             self._thread.join(timeout=1.0)
         self._thread = None
@@ -97,6 +101,7 @@ class SimCard(Drive):
 
     def _send_frames(self, frames: np.ndarray, end_of_stream: bool) -> None:
         self._check_comm()
+        self._wake.set()
         if frames.size and int(np.abs(frames).max()) > self.max_pulses:
             self._latch(CardStatus.BAD_FRAME, f"bad frame: more than {self.max_pulses} "
                         "pulses in one sample")
@@ -154,6 +159,7 @@ class SimCard(Drive):
             self._status = CardStatus.OK
             self._messages = []
             self._streaming = False
+        self._wake.set()
 
     def _disable(self) -> None:
         """The axes released: queued frames dropped, none taken until reset (they stand
@@ -185,6 +191,7 @@ class SimCard(Drive):
         self._homing_done.clear()
         with self._lock:
             self._homing_run = run
+        self._wake.set()
         if self.realtime:
             deadline_s = time.monotonic() + timeout_s
             while not self._homing_done.wait(0.02):
@@ -234,13 +241,44 @@ class SimCard(Drive):
 
     def _clock_thread(self) -> None:
         t0 = time.monotonic()
+        quiet = 0  # periods clocked in a row with nothing to do
         while not self._stop.is_set():
             due = int((time.monotonic() - t0) / self.period_s) - self.frames_clocked
             if due > 0:  # a late wake-up clocks every frame that fell due, as hardware would
                 with self._lock:
+                    busy = self._busy()
                     self._clock(due)
+                quiet = 0 if busy else quiet + due
+            if quiet >= self._rest_frames:
+                self._sleep_at_rest(t0)
+                quiet = 0
+                continue
             next_s = t0 + (self.frames_clocked + 1) * self.period_s
             time.sleep(max(0.0, next_s - time.monotonic()))
+
+    @property
+    def _rest_frames(self) -> int:
+        return max(1, round(REST_AFTER_S / self.period_s))
+
+    def _busy(self) -> bool:
+        """Anything for the clock to do: frames, a stream, a homing, an injected lag ramping."""
+        lag = self._axes
+        return (self._streaming or len(self._fifo) > 0 or self._homing_run is not None
+                or bool(np.any(lag.extra_lag_mm < lag.lag_target_mm)))
+
+    def _sleep_at_rest(self, t0: float) -> None:
+        """An idle cncd costs no CPU: a table at rest for REST_AFTER_S stays at rest (its servo
+        has settled to far below a pulse), so the clock sleeps until a write, a homing, a reset
+        or an injection wakes it, and skips the idle periods instead of stepping the servo
+        through them with zero velocity."""
+        self._wake.clear()  # before the check: a wake-up after it is not lost
+        with self._lock:
+            if self._busy():
+                return
+        self._wake.wait()
+        with self._lock:
+            self.frames_clocked = max(self.frames_clocked,
+                                      int((time.monotonic() - t0) / self.period_s))
 
     def _clock(self, n: int) -> None:
         if self._homing_run is not None:
@@ -289,6 +327,7 @@ class SimCard(Drive):
 
     def inject_drive_fault(self, axis: int, code: int = 0x2310) -> None:
         """Amplifier fault on one axis: that axis coasts (frozen), the card stops."""
+        self._wake.set()
         with self._lock:
             self._axes.freeze(axis)
             self._fault_axis = axis
@@ -297,16 +336,19 @@ class SimCard(Drive):
 
     def inject_lag(self, axis: int, lag_mm: float, ramp_frames: int = 20) -> None:
         """Mechanical drag: the encoder reads a further lag_mm below the servo model (ramped in)."""
+        self._wake.set()
         with self._lock:
             self._axes.add_lag(axis, abs(lag_mm), ramp_frames)
 
     def inject_stall(self, axis: int) -> None:
         """The axis stops moving while the card keeps stepping it."""
+        self._wake.set()
         with self._lock:
             self._axes.freeze(axis)
 
     def inject_underrun(self) -> None:
         """Lose every queued frame (as if the host's frames never arrived)."""
+        self._wake.set()
         with self._lock:
             self._discarded += self._fifo.clear()
 

@@ -124,3 +124,20 @@ def test_a_machine_no_plan_can_serve_is_refused_naming_the_key(
     assert text != BASE
     with pytest.raises(ConfigError, match=match):
         _load(tmp_path, text)
+def test_reference_buffer_and_in_position_keys_default_and_are_checked(tmp_path: Path) -> None:
+    cfg = load_config(str(REPO / "config/xy_table.yaml"))
+    assert cfg.runtime.reference_buffer_s == 5.0
+    assert cfg.runtime.in_position_tolerance_mm == 0.002
+    runtime = "runtime:\n  nc_fifo_blocks: 64\n"
+    path = tmp_path / "machine.yaml"
+    path.write_text(BASE.replace(runtime, runtime + "  reference_buffer_s: 12.5\n"
+                                 "  in_position_tolerance_mm: 0.005\n"))
+    cfg = load_config(str(path))
+    assert (cfg.runtime.reference_buffer_s, cfg.runtime.in_position_tolerance_mm) == (12.5,
+                                                                                      0.005)
+    for bad, key in (("reference_buffer_s: 0.1", "runtime.reference_buffer_s"),
+                     ("reference_buffer_s: '5'", "runtime.reference_buffer_s"),
+                     ("in_position_tolerance_mm: 0.0", "runtime.in_position_tolerance_mm"),
+                     ("reference_buffer: 5.0", "runtime.reference_buffer")):
+        with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+            _load(tmp_path, BASE.replace(runtime, runtime + f"  {bad}\n"))

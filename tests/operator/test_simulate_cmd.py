@@ -35,8 +35,8 @@ def test_json_has_every_field_of_the_issue(capsys: pytest.CaptureFixture[str],
     assert r["samples"] * r["sample_period_s"] == pytest.approx(r["motion_time_s"])
     with csv_path.open() as fh:
         rows = list(csv.reader(fh))
-    assert rows[0] == ["t", "x_ref", "y_ref", "x_act", "y_act", "feed"]
-    assert len(rows) == r["samples"] + 1
+    assert rows[0] == ["t", "x_ref", "y_ref", "x_act", "y_act", "feed", "x_cmd", "y_cmd"]
+    assert len(rows) == r["samples"] + 60 + 1  # and the 60 ms of settling simulated after them
     assert png.stat().st_size > 10_000
 
 

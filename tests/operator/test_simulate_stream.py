@@ -12,6 +12,7 @@ from long_helpers import walk
 
 from controller.config import load_config
 from controller.errors import PlanningError
+from controller.generator.dynamics.precompensation import Precompensator
 from controller.interpreter.program import read_program
 from controller.operator import simulate_cmd
 from controller.operator.cli import main
@@ -31,11 +32,16 @@ def test_the_streamed_csv_is_the_one_written_from_the_whole_arrays(tmp_path: Pat
     assert main(["simulate", program, "--json", "--trajectory", str(out)]) in (0, 1)
     traj = simulate(read_program(program, CFG), CFG, "ph-lookahead")
     expected = tmp_path / "expected.csv"
+    n, m = len(traj.t_s), len(traj.ex_mm)  # reference samples, and the settling after them
+    ref = np.vstack([traj.ref_mm, np.repeat(traj.ref_mm[-1:], m - n, axis=0)])
+    servos = [a.servo if a.name in ("x", "y") else None for a in CFG.axes]
+    cmd = Precompensator(servos, CFG.sample_period_s, np.zeros(2)).push(ref)
     with expected.open("w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
-        w.writerow(["t", "x_ref", "y_ref", "x_act", "y_act", "feed"])
-        rows = np.column_stack([traj.t_s, traj.ref_mm[:, 0], traj.ref_mm[:, 1],
-                                traj.act_mm[:, 0], traj.act_mm[:, 1], traj.feed_mm_s])
+        w.writerow(["t", "x_ref", "y_ref", "x_act", "y_act", "feed", "x_cmd", "y_cmd"])
+        rows = np.column_stack([np.arange(1, m + 1) * CFG.sample_period_s, ref[:, 0],
+                                ref[:, 1], ref[:, 0] - traj.ex_mm, ref[:, 1] - traj.ey_mm,
+                                np.r_[traj.feed_mm_s, np.zeros(m - n)], cmd])
         w.writerows([f"{v:.9g}" for v in row] for row in rows)
     assert out.read_bytes() == expected.read_bytes()
     assert not (tmp_path / "t.csv.part").exists()

@@ -176,6 +176,8 @@ def test_unit_allows_realtime_serial_and_can():
     assert one["RuntimeDirectory"] == "cncd" and one["StateDirectory"] == "cncd"
     # the motion thread asks for SCHED_FIFO 80 (controller/runtime/processes.py)
     assert int(one["LimitRTPRIO"]) >= 80
+    # the interpreter and generator set nice -10 (controller/motion/realtime.py)
+    assert int(one["LimitNICE"]) <= -10
     assert one["LimitMEMLOCK"] == "infinity"
     for forbidden in ("RestrictRealtime", "PrivateDevices", "PrivateNetwork",
                       "CPUSchedulingPolicy", "MemoryDenyWriteExecute"):  # fmt: skip

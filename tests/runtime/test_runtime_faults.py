@@ -51,8 +51,8 @@ def test_ring_back_pressure_blocks_the_producer_until_read_or_abort() -> None:
 
 
 def run_rt(virtual: bool, blocks_fn: object = refgen.fake_blocks,
-           generate_fn: object = refgen.fake_generate, kill_at_s: float | None = None
-           ) -> tuple[object, Runtime, Recorder, dict]:
+           generate_fn: object = refgen.fake_generate, kill_at_s: float | None = None,
+           ring_s: float | None = None) -> tuple[object, Runtime, Recorder, dict]:
     card = SimCard(CFG, realtime=not virtual)
     rec = Recorder(card)
     seen: dict = {}
@@ -66,7 +66,7 @@ def run_rt(virtual: bool, blocks_fn: object = refgen.fake_blocks,
             seen["stopping"] = time.monotonic()
 
     opts = RuntimeOptions(virtual_time=virtual, blocks_fn=blocks_fn, generate_fn=generate_fn,
-                          drive=card, on_progress=progress,
+                          drive=card, on_progress=progress, ring_seconds=ring_s,
                           settings={"progress_every_s": 0.002})
     runtime = Runtime("test.nc", CFG, opts)
     return runtime.run(), runtime, rec, seen
@@ -84,7 +84,9 @@ def test_three_processes_run_a_circle_exactly(virtual: bool) -> None:
 
 @pytest.mark.parametrize("virtual", [True, False])
 def test_killing_the_generator_stops_the_table_without_underrun(virtual: bool) -> None:
-    result, _, rec, seen = run_rt(virtual, generate_fn=refgen.hanging_generate, kill_at_s=0.15)
+    # A ring of 0.3 s: the 0.4 s streamed before the hang fill it, so the job starts moving.
+    result, _, rec, seen = run_rt(virtual, generate_fn=refgen.hanging_generate, kill_at_s=0.15,
+                                  ring_s=0.3)
     assert "killed" in seen
     assert result.outcome is Outcome.FAULT and "generator process died" in result.message
     assert result.underruns == 0 and result.position_known

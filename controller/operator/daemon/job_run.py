@@ -147,9 +147,11 @@ class JobRunner:
         """The job's result into the journal, the log and its connection; line: the program
         line to record instead of the result's (an approach's lines are not the program's)."""
         summary = result_summary(result)
-        if result.extra.get("realtime") == "SCHED_OTHER":
-            self.log.warn_once("rt", "the motion thread runs without SCHED_FIFO (no "
-                                     "LimitRTPRIO or CAP_SYS_NICE): late cycles are likelier")
+        sched = result.extra.get("scheduling")
+        if sched is not None:
+            self.scheduling = sched  # what the job's processes got (`cncctl status`)
+            if not sched["privileged"]:
+                self.log.warn_once("rt", f"scheduling: {sched['summary']}")
         position = summary["final_position_mm"] if result.position_known else None
         with self._lock:  # not interleaved with the journal loop's last-line writes
             self.journal.update(state=result.outcome.value.upper(),

@@ -12,6 +12,7 @@ from typing import Any
 
 from controller.config import MachineConfig
 from controller.errors import CncError
+from controller.motion.realtime import realtime_threads
 from controller.motion.types import MotionState
 from controller.operator.daemon import manual
 from controller.operator.daemon.job import Emit, Job, State
@@ -229,7 +230,8 @@ class Machine(JobRunner, OperatorCommands):
         if CardStatus.LOST_COMM in status:
             self.log.log(NOTICE, "reset: the drive link was lost: opening it again")
             self.drive.close()
-            self.drive.open()
+            with realtime_threads():  # its threads as at start-up (see main.Daemon)
+                self.drive.open()
         elif status.halted or self.drive.disabled:
             self.drive.reset()  # after an e-stop: the drives enabled again
 
@@ -253,6 +255,7 @@ class Machine(JobRunner, OperatorCommands):
         return job is None or job.done.wait(timeout_s)
 
     _last_job_started: Job | None = None
+    scheduling: dict[str, Any] | None = None  # probed at start-up, then the last job's
 
     # -- status and health --------------------------------------------------------------------
     def status(self) -> dict[str, Any]:
@@ -281,6 +284,7 @@ class Machine(JobRunner, OperatorCommands):
         out["last_homing"] = self.last_homing
         out["last_job"] = self.last_job
         out["state_problems"] = list(self.state_problems)
+        out["scheduling"] = self.scheduling
         return out
 
     def healthy(self) -> str | None:

@@ -15,10 +15,11 @@ from pathlib import Path
 
 from controller.config import MachineConfig, load_config
 from controller.errors import CncError
+from controller.motion.realtime import probe_scheduling, realtime_threads
 from controller.operator.client import default_socket_path, estop_socket_path
 from controller.operator.daemon.access import AccessPolicy, bind_socket, socket_gid
 from controller.operator.daemon.estop_socket import EstopSocket
-from controller.operator.daemon.log import ERR, INFO, NOTICE, EventLog
+from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.notify import run_watchdog, sd_notify
 from controller.operator.daemon.protocol import ProtocolError
@@ -71,9 +72,13 @@ class Daemon:
         self.config, self.socket_path, self.log = config, socket_path, log
         self.stop = threading.Event()
         self.drive = make_drive(config, realtime=True)
-        self.drive.open()
+        sched = probe_scheduling()
+        log.log(INFO if sched.privileged else WARNING, f"scheduling: {sched.summary()}")
+        with realtime_threads():  # the drive's threads (card clock, link) as the motion thread
+            self.drive.open()
         self.server: Server | None = None
         self.machine = Machine(config, self.drive, state_dir, log, self._publish)
+        self.machine.scheduling = sched.as_dict()
 
     def _publish(self, topic: str, event: dict) -> None:
         if self.server is not None:
