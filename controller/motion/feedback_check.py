@@ -39,6 +39,7 @@ class FeedbackCheck:
         self.hi_counts = (travel[:, 1] + slack_mm) / self.pulse_mm
         self.last = np.asarray(start_counts, dtype=np.int64).copy()
         self.corrupt = False
+        self.last_seq: int | None = None
 
     def believed(self, fb: Feedback) -> tuple[Feedback, ImplausibleFeedback | None]:
         """The rows before the first implausible one, and what was wrong with it; after one,
@@ -56,14 +57,21 @@ class FeedbackCheck:
             return None
         enc = fb.encoder_counts
         step = np.abs(np.diff(np.vstack([self.last, enc]), axis=0))
-        self.last = enc[-1].copy()
-        jumps = step > self.max_step_counts
+        # Rows may be frames apart (the serial card reports every few frames): the allowance
+        # grows with the frames between two readings.
+        seq = np.asarray(fb.seq, dtype=np.int64)
+        last_seq = self.last_seq if self.last_seq is not None else int(seq[0]) - 1
+        frames = np.maximum(np.diff(np.concatenate([[last_seq], seq])), 1)[:, None]
+        self.last, self.last_seq = enc[-1].copy(), int(seq[-1])
+        jumps = step > self.max_step_counts * frames
         if jumps.any():
             row, axis = (int(v) for v in np.argwhere(jumps)[0])
             return ImplausibleFeedback(self.names[axis], (
                 f"{self.names[axis].upper()} axis encoder jumped "
-                f"{step[row, axis] * self.pulse_mm[axis]:.3f} mm in one period (at most "
-                f"{self.max_step_counts[axis] * self.pulse_mm[axis]:.3f} mm is possible): "
+                f"{step[row, axis] * self.pulse_mm[axis]:.3f} mm in {frames[row, 0]} "
+                f"period(s) (at most "
+                f"{self.max_step_counts[axis] * frames[row, 0] * self.pulse_mm[axis]:.3f} mm is "
+                "possible): "
                 "corrupt feedback; the position is unknown"), int(fb.seq[row]))
         off = (enc < self.lo_counts) | (enc > self.hi_counts)
         if off.any():
