@@ -39,7 +39,7 @@ class FeedbackCheck:
         self.hi_counts = (travel[:, 1] + slack_mm) / self.pulse_mm
         self.last = np.asarray(start_counts, dtype=np.int64).copy()
         self.corrupt = False
-        self.last_seq: int | None = None
+        self.last_seq = -1  # the start counts stand before the run's first frame (seq 0)
 
     def believed(self, fb: Feedback) -> tuple[Feedback, ImplausibleFeedback | None]:
         """The rows before the first implausible one, and what was wrong with it; after one,
@@ -60,8 +60,7 @@ class FeedbackCheck:
         # Rows may be frames apart (the serial card reports every few frames): the allowance
         # grows with the frames between two readings.
         seq = np.asarray(fb.seq, dtype=np.int64)
-        last_seq = self.last_seq if self.last_seq is not None else int(seq[0]) - 1
-        frames = np.maximum(np.diff(np.concatenate([[last_seq], seq])), 1)[:, None]
+        frames = np.maximum(np.diff(np.concatenate([[self.last_seq], seq])), 1)[:, None]
         self.last, self.last_seq = enc[-1].copy(), int(seq[-1])
         jumps = step > self.max_step_counts * frames
         if jumps.any():
