@@ -278,7 +278,8 @@ def parse_config(data: Any, path: str) -> MachineConfig:
     top.finish()
     _check_plan_sizes(cfg, path)
     for axis in axes:
-        problem = pole_problem(axis.servo, period)
+        sv = axis.servo
+        problem = pole_problem((sv.a4, sv.a3, sv.a2, sv.a1, sv.a0), period)
         if problem is not None:
             raise ConfigError(path, f"axes.{axis.name}.servo", problem)
     if cfg.interpolator.servo_precompensation:

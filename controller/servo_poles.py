@@ -3,26 +3,19 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
 
 import numpy as np
-
-if TYPE_CHECKING:  # config.py calls this module while it reads a config
-    from controller.config import ServoParams
 
 MIN_DAMPING = 0.1  # a loop that rings longer than this is no machine to plan for
 MIN_POLE_RAD_S = 1e-3  # slower than this the loop never settles in a job's time
 
 
-def poles(servo: ServoParams) -> np.ndarray:
-    """Roots of a4 s^4 + a3 s^3 + a2 s^2 + a1 s + a0 (eq. 27's denominator)."""
-    return np.roots([servo.a4, servo.a3, servo.a2, servo.a1, servo.a0])
-
-
-def pole_problem(servo: ServoParams, sample_period_s: float) -> str | None:
-    """Why the model is unusable, naming its poles; None when it is fine."""
+def pole_problem(denominator: Sequence[float], sample_period_s: float) -> str | None:
+    """Why the model whose denominator is [a4, a3, a2, a1, a0] (eq. 27: a4 s^4 + ... + a0) is
+    unusable, naming its poles; None when it is fine."""
     with np.errstate(all="ignore"):
-        p = poles(servo)
+        p = np.roots(np.asarray(denominator, dtype=float))
     if len(p) == 0 or not np.all(np.isfinite(p)):
         return "its poles cannot be computed (coefficients out of range)"
     text = ", ".join(_pole_text(z) for z in sorted(p, key=lambda z: (z.real, z.imag)))

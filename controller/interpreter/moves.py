@@ -124,6 +124,9 @@ class MotionMixin:
         self.out.append(block)
         self.pos = end
 
+    def _pulse_mm(self) -> float:
+        return min(a.pulse_mm for a in self.config.axes)
+
     def _capped(self, feed_mm_s: float) -> float:
         return min(feed_mm_s, self.config.interpolator.max_feed_mm_s)
 
@@ -173,7 +176,7 @@ class MotionMixin:
         has_xy = _xy_flags(vals)
         w0 = vals.get("P", 1.0) if not has_xy else 1.0  # LinuxCNC: P alone weights point 0
         self.nurbs = NurbsCollector("G5.2", order, x0, y0, w0, z0, self.feed_mm_s,
-                                    self.path_control, self.path, lineno)
+                                    self.path_control, self.path, lineno, self._pulse_mm())
         if has_xy:
             self._g5_point(vals, lineno)
 
@@ -197,7 +200,8 @@ class MotionMixin:
                             f"the first G6.2 control point must be the current position "
                             f"X{self._program(0, x0):.4f} Y{self._program(1, y0):.4f}")
         self.nurbs = NurbsCollector("G6.2", order, x0, y0, vals.get("R", 1.0), z0,
-                                    self.feed_mm_s, self.path_control, self.path, lineno)
+                                    self.feed_mm_s, self.path_control, self.path, lineno,
+                                    self._pulse_mm())
         self.nurbs.add_knot(vals["K"], lineno, knot_only=False)
 
     def nurbs_line(self, gs: list[int], ms: list[int], vals: dict[str, float],

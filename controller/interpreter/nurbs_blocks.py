@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -63,7 +64,9 @@ class NurbsCollector:
     """Gathers the control points (and, for G6.2, the knots) of one NURBS block."""
 
     def __init__(self, kind: str, order: int, x: float, y: float, weight: float, z_mm: float,
-                 feed_mm_s: float, path: PathControl, program: str, line: int) -> None:
+                 feed_mm_s: float, path: PathControl, program: str, line: int,
+                 min_gap_mm: float = 0.0) -> None:
+        self.min_gap_mm = min_gap_mm  # two control points nearer than this must be the same
         self.kind = kind  # "G5.2" or "G6.2"
         self.order = order
         self.points: list[tuple[float, float]] = [(x, y)]
@@ -84,6 +87,12 @@ class NurbsCollector:
             raise WordError("X", "NURBS control point after the knot-only lines")
         if len(self.points) >= MAX_CONTROL_POINTS:
             raise WordError("X", f"NURBS with more than {MAX_CONTROL_POINTS} control points")
+        gap_mm = math.hypot(x - self.points[-1][0], y - self.points[-1][1])
+        if 0.0 < gap_mm < self.min_gap_mm:
+            raise WordError("X", f"NURBS control point {gap_mm:.3g} mm from the one before: "
+                                 f"nearer than the {self.min_gap_mm:g} mm pulse but not the same "
+                                 "point, a hook no machine can follow (repeat the point exactly "
+                                 "for a corner, or move it apart)")
         self.weights.append(_check_weight(weight, "P" if self.kind == "G5.2" else "R",
                                           self.weight_range))
         self.weight_range = (min(self.weight_range[0], weight), max(self.weight_range[1], weight))
