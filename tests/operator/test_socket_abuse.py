@@ -166,3 +166,47 @@ def test_abort_during_a_long_check_ends_it_at_once_and_status_answers_meanwhile(
                 run.wait()
         assert run.returncode == 4 and "aborted" in out + err, (out, err)
         assert d.status()["position_mm"] == {"x": 0.0, "y": 0.0}
+
+
+def test_small_ones_duplicate_keys_follow_fields_resume_after_estop_rejected_then_idle(
+        tmp_path: Path) -> None:
+    """{"cmd": "status", "cmd": "estop"} ran an e-stop; follow was not checked; resume right
+    after estop answered RUNNING; the rejected event came before the machine was IDLE."""
+    from daemon_helpers import raw
+
+    bad = tmp_path / "bad.nc"
+    bad.write_text("G21 G90\nG1 X1 F600 Q7\nM2\n")
+    with running_cncd(tmp_path) as d:
+        assert d.cncctl("reset").returncode == 0
+        reply = raw(d.socket_path, b'{"id": 1, "cmd": "status", "cmd": "estop"}\n')[0]
+        assert reply["ok"] is False and reply["error"] == "malformed"
+        assert d.status()["state"] == "IDLE"
+        reply = raw(d.socket_path, b'{"id": 2, "cmd": "log", "follow": "yes"}\n')[0]
+        assert reply["ok"] is False and "follow must be true or false" in reply["message"]
+        for _ in range(5):  # each rejection leaves the machine IDLE before it is told
+            done = d.cncctl("run", str(bad))
+            assert done.returncode == 2 and "busy" not in done.stderr, done.stderr
+
+
+def test_resume_right_after_an_estop_is_refused(tmp_path: Path) -> None:
+    from daemon_helpers import start_run, wait_moving
+
+    program = tmp_path / "square.nc"
+    program.write_text("G21 G90 G64 F1200\nG1 X40\nG1 Y10\nG1 X0\nG1 Y0\nM2\n")
+    with running_cncd(tmp_path) as d:
+        assert d.cncctl("reset").returncode == 0
+        run = start_run(d, program)
+        try:
+            wait_moving(run, after_s=0.3)
+            assert d.cncctl("hold").returncode == 0
+            assert d.cncctl("estop").returncode == 0
+            resume = d.cncctl("resume")
+            # Refused either way: while the e-stop's stop runs ("stopping"), or after it.
+            refused = "stopping" in resume.stderr or "not-paused" in resume.stderr
+            assert resume.returncode == 2 and refused, (resume.stdout, resume.stderr)
+            run.communicate(timeout=30)
+        finally:
+            if run.poll() is None:
+                run.kill()
+                run.wait()
+        assert d.status()["state"] == "ESTOP"

@@ -65,8 +65,8 @@ class JobRunner:
         except NcError as exc:
             message = NcError(job.name, exc.line, exc.col, exc.word, exc.message).format()
             self.log.log(NOTICE, f"job {job.number} rejected: {message}")
+            self._finish(job, None, None)  # IDLE before the client hears: it may run again
             job.emit({"event": "rejected", "message": message})
-            self._finish(job, None, None)
             return
         if job.approach_mm is not None and not self._approach(job, start_mm):
             return
@@ -125,8 +125,8 @@ class JobRunner:
         lock, before its runtime would start)."""
         if job.cancel is None:
             return False
+        self._finish(job, None, None)  # IDLE (or ESTOP) before the client hears
         job.emit({"event": "aborted", "message": job.cancel})
-        self._finish(job, None, None)
         return True
 
     def _options(self, job: Job) -> RuntimeOptions:

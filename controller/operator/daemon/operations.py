@@ -78,6 +78,9 @@ class OperatorCommands:
             job = self.job
             waiting = job is not None and job.progress is not None and (
                 job.progress.state in (MotionState.PAUSED, MotionState.HELD) or job.holding)
+            if job is not None and job.cancel is not None:  # e-stopped or aborted: stopping
+                raise ProtocolError("stopping", f"the job is stopping ({job.cancel}): nothing "
+                                                "to resume")
             if not waiting or job.runtime is None:
                 raise ProtocolError("not-paused", "no job is paused or held")
             job.holding = False

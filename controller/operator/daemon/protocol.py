@@ -57,7 +57,11 @@ def _id_of(obj: dict[str, Any]) -> Any:
 def parse_request(line: bytes) -> Request:
     """One request line (without its newline) -> Request, or ProtocolError."""
     try:
-        obj = json.loads(line.decode("utf-8"))
+        obj = json.loads(line.decode("utf-8"), object_pairs_hook=_unique_keys)
+    except _DuplicateKey:
+        # {"cmd": "status", "cmd": "estop"} was an e-stop (the last key won): a request
+        # that says two things is refused.
+        raise ProtocolError("malformed", "a request names a field twice") from None
     except (ValueError, RecursionError):
         # ValueError: undecodable bytes, bad JSON, and an integer of more than 4300 digits
         # (which once took the daemon down mid-job).
@@ -72,6 +76,22 @@ def parse_request(line: bytes) -> Request:
     request = Request(_id_of(obj), cmd, fields)
     _CHECKS.get(cmd, _no_fields)(request)
     return request
+
+
+class _DuplicateKey(Exception):
+    pass
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        raise _DuplicateKey
+    return out
+
+
+def _follow(request: Request) -> None:
+    if not isinstance(request.fields.get("follow", False), bool):
+        raise ProtocolError("bad-field", "follow must be true or false")
 
 
 def _no_fields(request: Request) -> None:
@@ -89,6 +109,7 @@ def _check_run(request: Request) -> None:
         raise ProtocolError("bad-field", "from_line must be a line number (1 or more)")
     if not isinstance(f.get("optional_stop", False), bool):
         raise ProtocolError("bad-field", "optional_stop must be true or false")
+    _follow(request)
     size = f.get("program_bytes")
     if not isinstance(size, int) or isinstance(size, bool) or size < 0:
         raise ProtocolError("bad-field", "run needs program_bytes, the size of the program "
@@ -102,6 +123,7 @@ def _check_run(request: Request) -> None:
 
 def _check_log(request: Request) -> None:
     _known(request, {"lines", "follow"})
+    _follow(request)
     lines = request.fields.get("lines", 50)
     if not isinstance(lines, int) or isinstance(lines, bool) or not 0 <= lines <= 100_000:
         raise ProtocolError("bad-field", "lines must be an integer 0..100000")
@@ -148,6 +170,7 @@ def _number(request: Request, key: str, lo: float, hi: float, required: bool = F
 
 def _check_jog(request: Request) -> None:
     _known(request, {"axis", "distance_mm", "direction", "feed_mm_min", "timeout_s", "follow"})
+    _follow(request)
     axis = request.fields.get("axis")
     if not isinstance(axis, str) or len(axis) != 1:
         raise ProtocolError("bad-field", "jog needs axis, one letter")
