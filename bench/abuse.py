@@ -157,18 +157,27 @@ def latency_row(kind: str, n: int, folder: Path) -> dict[str, Any]:
         attack = Attack(daemon.socket_path, kind, n)
         attack.start()
         time.sleep(1.0)
-        estops, statuses = [], []
+        estops, statuses, failed = [], [], {"estop": 0, "status": 0, "reset": 0}
         try:
             for _ in range(SAMPLES):
-                estops.append(estop_ms(daemon.socket_path))
-                statuses.append(status_ms(daemon.socket_path))
-                reset(daemon.socket_path)
+                for name, measure, out in (("estop", estop_ms, estops),
+                                           ("status", status_ms, statuses)):
+                    try:
+                        out.append(measure(daemon.socket_path))
+                    except (OSError, AssertionError, ValueError):
+                        failed[name] += 1  # refused, timed out or unanswered
+                try:
+                    reset(daemon.socket_path)
+                except (OSError, AssertionError, subprocess.TimeoutExpired):
+                    failed["reset"] += 1
         finally:
             attack.stop()
         return {"kind": kind, "connections": n, "opened": len(attack.socks),
-                "estop_ms_max": max(estops), "estop_ms_p50": float(np.median(estops)),
-                "status_ms_p99": float(np.percentile(statuses, 99)),
-                "status_ms_max": max(statuses), "daemon_rss_mb": rss_mb(daemon.proc.pid)}
+                "estop_ms_max": max(estops, default=float("nan")),
+                "estop_ms_p50": float(np.median(estops)) if estops else float("nan"),
+                "status_ms_p99": float(np.percentile(statuses, 99)) if statuses else float("nan"),
+                "status_ms_max": max(statuses, default=float("nan")), "failed": failed,
+                "daemon_rss_mb": rss_mb(daemon.proc.pid)}
     finally:
         stop(daemon)
 
@@ -185,7 +194,8 @@ def job_row(kind: str | None, folder: Path) -> dict[str, Any]:
         done = subprocess.run([*CNCCTL, "run", str(REPO / "nc_programs/butterfly.nc"), "--json",
                                "--socket", daemon.socket_path], capture_output=True, text=True,
                               timeout=120, stdin=subprocess.DEVNULL)
-        final = json.loads(done.stdout.splitlines()[-1])
+        lines = done.stdout.splitlines()
+        final = json.loads(lines[-1]) if lines else {"event": done.stderr.strip()[:80]}
         return {"kind": kind or "none", "outcome": final.get("event"),
                 "late_cycles": final.get("late_cycles"), "underruns": final.get("underruns"),
                 "min_fifo_ms": final.get("min_fifo_ms"), "daemon_rss_mb": rss_mb(daemon.proc.pid)}
@@ -196,12 +206,14 @@ def job_row(kind: str | None, folder: Path) -> dict[str, Any]:
 
 
 def markdown(latency: list[dict], jobs: list[dict]) -> str:
-    out = ["| attack | connections | e-stop p50 / max (ms) | status p99 / max (ms) | daemon peak "
-           "RSS (MB) |", "|---|---|---|---|---|"]
+    out = ["| attack | connections | e-stop p50 / max (ms) | status p99 / max (ms) | failed "
+           "(e-stop / status / reset, of 20) | daemon peak RSS (MB) |", "|---|---|---|---|---|---|"]
     for r in latency:
+        f = r["failed"]
         out.append(f"| {r['kind']} | {r['connections']} | {r['estop_ms_p50']:.1f} / "
                    f"{r['estop_ms_max']:.1f} | {r['status_ms_p99']:.1f} / "
-                   f"{r['status_ms_max']:.1f} | {r['daemon_rss_mb']:.0f} |")
+                   f"{r['status_ms_max']:.1f} | {f['estop']} / {f['status']} / {f['reset']} | "
+                   f"{r['daemon_rss_mb']:.0f} |")
     out += ["", "| attack during the butterfly (100 clients) | outcome | late cycles | underruns "
             "| lowest FIFO (ms) | daemon peak RSS (MB) |", "|---|---|---|---|---|---|"]
     for r in jobs:

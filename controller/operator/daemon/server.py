@@ -137,6 +137,10 @@ class Server:
             for conn in idle:
                 self._close(conn)
             return bool(idle)
+        # A young connection whose request waits unread in the kernel is served now, not
+        # evicted as idle: under a flood of reconnections a `reset` was closed unanswered.
+        for conn in [c for c in self.conns if c.idle and not c.out and _unread(c.sock)]:
+            self._service(conn, selectors.EVENT_READ)
         ranked = sorted((c for c in self.conns if not c.following),
                         key=lambda c: eviction_rank(c, now))
         if not ranked:
@@ -373,6 +377,14 @@ class Server:
             except (KeyError, ValueError):
                 pass
             conn.sock.close()
+
+
+def _unread(sock: socket.socket) -> bool:
+    """Bytes the client sent that the daemon has not read yet."""
+    try:
+        return bool(sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT))
+    except OSError:  # BlockingIOError (nothing there) or a reset: nothing to serve
+        return False
 
 
 def _send_now(sock: socket.socket, data: bytes) -> None:
