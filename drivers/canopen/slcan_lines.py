@@ -8,9 +8,11 @@ import time
 from typing import Any
 
 import can
+import serial
 from can.interfaces.slcan import slcanBus
 
 TERMINATORS = (ord("\r"), ord("\a"))
+MAX_EMPTY_READS = 100  # in a row, 1 ms apart: the device is gone
 MAX_LINE_BYTES = 64  # the longest Lawicel line is 27 bytes (T, 8 id, 1 dlc, 16 data, CR)
 
 
@@ -29,6 +31,7 @@ class LineSlcanBus(slcanBus):
         self._line_lock = threading.Lock()
         self.bad_lines = 0
         self.last_bad_line = ""
+        self._empty_reads = 0
         super().__init__(channel, **kwargs)
 
     def _read(self, timeout: float | None) -> str | None:
@@ -38,13 +41,27 @@ class LineSlcanBus(slcanBus):
             with self._line_lock:
                 if self._lines:
                     return self._lines.popleft()
-            waiting = port.in_waiting
-            chunk = port.read(waiting if waiting else 1)  # 1: blocks up to the port time-out
+            try:
+                waiting = port.in_waiting
+                chunk = port.read(waiting if waiting else 1)  # 1: waits up to the time-out
+            except serial.SerialException as exc:
+                chunk = self._empty_read(exc)
             if chunk:
+                self._empty_reads = 0
                 self._split(chunk)
                 continue
             if timeout is not None and time.monotonic() >= deadline_s:
                 return None
+
+    def _empty_read(self, exc: serial.SerialException) -> bytes:
+        """pyserial calls a read that finds no data after select said ready a disconnect. On a
+        pseudo-terminal that also happens once when the adapter flushes its queue as it opens
+        (a reset then failed reading 0x1000); only a run of them is a lost device."""
+        self._empty_reads += 1
+        if "returned no data" not in str(exc) or self._empty_reads > MAX_EMPTY_READS:
+            raise exc
+        time.sleep(0.001)
+        return b""
 
     def _split(self, chunk: bytes) -> None:
         start = 0

@@ -197,3 +197,25 @@ def test_a_drive_heartbeat_is_not_judged_late_while_the_reader_is_behind() -> No
     behind[0] = False
     link.cycle()
     assert CardStatus.LOST_COMM in link.status and "no heartbeat" in "; ".join(link.messages)
+
+
+def test_one_empty_read_of_the_pty_is_not_a_lost_device(pty_bus: Any) -> None:
+    """The adapter flushing its queue as it opens leaves select ready and nothing to read:
+    pyserial calls that a disconnect, and a reset after a replug failed reading 0x1000."""
+    import serial
+
+    master_fd, bus = pty_bus
+    real = bus.serialPortOrig.read
+    calls = [0]
+
+    def flaky(n: int = 1) -> bytes:
+        calls[0] += 1
+        if calls[0] == 1:
+            raise serial.SerialException("device reports readiness to read but returned no "
+                                         "data (device disconnected or multiple access on port?)")
+        return real(n)
+
+    bus.serialPortOrig.read = flaky
+    os.write(master_fd, b"t1816010002000000\r")
+    msgs = _receive(bus, 1)
+    assert len(msgs) == 1 and calls[0] > 1
