@@ -62,26 +62,26 @@ class FeedbackCheck:
         seq = np.asarray(fb.seq, dtype=np.int64)
         frames = np.maximum(np.diff(np.concatenate([[self.last_seq], seq])), 1)[:, None]
         self.last, self.last_seq = enc[-1].copy(), int(seq[-1])
+        mm = self.pulse_mm
         jumps = step > self.max_step_counts * frames
         if jumps.any():
             row, axis = (int(v) for v in np.argwhere(jumps)[0])
-            return ImplausibleFeedback(self.names[axis], (
-                f"{self.names[axis].upper()} axis encoder jumped "
-                f"{step[row, axis] * self.pulse_mm[axis]:.3f} mm in {frames[row, 0]} "
-                f"period(s) (at most "
-                f"{self.max_step_counts[axis] * frames[row, 0] * self.pulse_mm[axis]:.3f} mm is "
-                "possible): "
-                "corrupt feedback; the position is unknown"), int(fb.seq[row]))
+            return self._bad(axis, int(seq[row]), (
+                f"jumped {step[row, axis] * mm[axis]:.3f} mm in {frames[row, 0]} period(s) (at "
+                f"most {self.max_step_counts[axis] * frames[row, 0] * mm[axis]:.3f} mm is "
+                "possible)"))
         off = (enc < self.lo_counts) | (enc > self.hi_counts)
         if off.any():
             row, axis = (int(v) for v in np.argwhere(off)[0])
-            return ImplausibleFeedback(self.names[axis], (
-                f"{self.names[axis].upper()} axis encoder reads "
-                f"{enc[row, axis] * self.pulse_mm[axis]:.3f} mm, off its travel "
-                f"[{self.lo_counts[axis] * self.pulse_mm[axis]:.3f}, "
-                f"{self.hi_counts[axis] * self.pulse_mm[axis]:.3f}] mm: corrupt feedback; the "
-                "position is unknown"), int(fb.seq[row]))
+            return self._bad(axis, int(seq[row]), (
+                f"reads {enc[row, axis] * mm[axis]:.3f} mm, off its travel "
+                f"[{self.lo_counts[axis] * mm[axis]:.3f}, {self.hi_counts[axis] * mm[axis]:.3f}] "
+                "mm"))
         return None
+
+    def _bad(self, axis: int, seq: int, what: str) -> ImplausibleFeedback:
+        return ImplausibleFeedback(self.names[axis], f"{self.names[axis].upper()} axis encoder "
+                                   f"{what}: corrupt feedback; the position is unknown", seq)
 
 
 def _rows(fb: Feedback, n: int) -> Feedback:
