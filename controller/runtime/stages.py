@@ -82,11 +82,27 @@ PRODUCER_MEMORY_BYTES = 2 << 30
 
 
 def memory_ceiling(limit_bytes: int = PRODUCER_MEMORY_BYTES) -> None:
-    """Lower RLIMIT_DATA to limit_bytes (never raise it above what was inherited)."""
+    """Lower RLIMIT_DATA to limit_bytes more than the process holds now (a forked child
+    inherits its parent's heap, which counts: a test process of 3.5 GB forked producers that
+    could allocate nothing) -- never raised above what was inherited."""
+    cap = _data_bytes() + limit_bytes
     soft, hard = resource.getrlimit(resource.RLIMIT_DATA)
-    cap = limit_bytes if hard == resource.RLIM_INFINITY else min(limit_bytes, hard)
+    if hard != resource.RLIM_INFINITY:
+        cap = min(cap, hard)
     if soft == resource.RLIM_INFINITY or soft > cap:
         resource.setrlimit(resource.RLIMIT_DATA, (cap, hard))
+
+
+def _data_bytes() -> int:
+    """VmData of this process (what RLIMIT_DATA counts), 0 where /proc cannot say."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("VmData:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError):
+        pass
+    return 0
 
 
 def _child_setup(parent_pid: int, info: Queue, stage: str) -> int:
