@@ -1,19 +1,20 @@
 """Attacks on a real cncd from an authorised local account: e-stop latency with many hostile
 connections, status latency, late cycles of a job under attack, and the daemon's peak RSS.
 
-Each row starts a fresh cncd (the sim card) in its own process and opens N hostile
-connections of one kind:
+Each row starts a fresh cncd (the sim card) in its own process, and attacker processes of
+their own (one per 300 connections) open N hostile connections of one kind:
 - silent: connect and say nothing;
 - subscribers: subscribe to every topic, then never read;
 - trickle: send one byte of a request every 0.5 s;
-- flood: connect, send a status request, hang up, as fast as possible (4 threads).
+- flood: connect, send a status request, hang up, as fast as possible (4 threads in each of
+  1 or 4 processes; the connections column is the number of processes).
 
 Then it measures, 20 times each: the e-stop (connect to the e-stop socket until its answer
 `{"ok": true, "state": "ESTOP"}`, then `reset`), and a status request on the control
 socket. The job row runs the butterfly while 100 clients of each kind attack, and reports its
 late cycles and underruns against the same job without attack.
 
-    python bench/abuse.py [--counts 64 500 5000] [--markdown]
+    python bench/abuse.py [--counts 64 500 5000] [--flood-processes 1 4] [--markdown]
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 from daemon_helpers import CNCCTL, start_cncd, stop  # noqa: E402
 
-from controller.operator.client import estop_socket_path  # noqa: E402
+from controller.operator.client import connect_unix, estop_socket_path  # noqa: E402
 
 KINDS = ("silent", "subscribers", "trickle", "flood")
 SAMPLES = 20
@@ -81,14 +82,32 @@ class Attack:
                 t.start()
                 self.threads.append(t)
             return
-        for _ in range(self.n):
-            sock = self._open()
-            if sock is not None:
+        deadline_s = time.monotonic() + 30.0
+        while len(self.socks) < self.n and time.monotonic() < deadline_s:
+            sock = self._open()  # refused when connecting too fast: tried again
+            if sock is not None and self._answered_at_once(sock):
                 self.socks.append(sock)
         if self.kind == "trickle":
             t = threading.Thread(target=self._trickle, daemon=True)
             t.start()
             self.threads.append(t)
+
+    @staticmethod
+    def _answered_at_once(sock: socket.socket) -> bool:
+        """False (and closed) when the daemon refused the connection straight away."""
+        sock.setblocking(False)
+        try:
+            time.sleep(0.0005)
+            refused = sock.recv(1, socket.MSG_PEEK) is not None
+        except BlockingIOError:
+            refused = False
+        except OSError:
+            refused = True
+        sock.setblocking(True)
+        sock.settimeout(2.0)
+        if refused:
+            sock.close()
+        return not refused
 
     def _trickle(self) -> None:
         text = b'{"id": 1, "cmd": "status"}'
@@ -123,11 +142,45 @@ class Attack:
             sock.close()
 
 
+class Attackers:
+    """The hostile connections in processes of their own (a real attacker is not the operator's
+    process; the daemon limits how often one process may connect): one process per 300
+    connections, or `processes` flooding processes of 4 threads each. Stopped by pid."""
+
+    def __init__(self, path: str, kind: str, n: int, processes: int = 1) -> None:
+        count = processes if kind == "flood" else max(1, -(-n // 300))
+        share = -(-n // count)
+        self.procs = [subprocess.Popen([sys.executable, __file__, "--attack", kind, "--n",
+                                        str(share), "--socket", path], stdin=subprocess.PIPE,
+                                       stdout=subprocess.PIPE, text=True)
+                      for _ in range(count)]
+        self.opened = sum(int(p.stdout.readline().split()[1] or 0) for p in self.procs)
+
+    def stop(self) -> None:
+        for proc in self.procs:
+            proc.terminate()
+        for proc in self.procs:
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def attack_process(kind: str, n: int, path: str) -> None:
+    """Child: open the connections (up to 30 s), say how many, attack until SIGTERM."""
+    attack = Attack(path, kind, n)
+    attack.start()
+    print(f"opened {len(attack.socks)}", flush=True)
+    while True:  # SIGTERM's default action ends it, and the kernel closes its sockets
+        time.sleep(3600)
+
+
 def estop_ms(path: str) -> float:
     t0 = time.monotonic()
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
         sock.settimeout(10.0)
-        sock.connect(estop_socket_path(path))
+        connect_unix(sock, estop_socket_path(path), 10.0)  # as cncctl connects
         reply = json.loads(sock.makefile("rb").readline())
     assert reply.get("state") == "ESTOP", reply
     return (time.monotonic() - t0) * 1e3
@@ -137,7 +190,7 @@ def status_ms(path: str) -> float:
     t0 = time.monotonic()
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as sock:
         sock.settimeout(10.0)
-        sock.connect(path)
+        connect_unix(sock, path, 10.0)
         sock.sendall(b'{"id": 5, "cmd": "status"}\n')
         reply = json.loads(sock.makefile("rb").readline())
     assert reply.get("ok"), reply
@@ -154,8 +207,7 @@ def latency_row(kind: str, n: int, folder: Path) -> dict[str, Any]:
     daemon = start_cncd(folder, name=f"cncd-{kind}-{n}")
     try:
         reset(daemon.socket_path)
-        attack = Attack(daemon.socket_path, kind, n)
-        attack.start()
+        attack = Attackers(daemon.socket_path, kind, n, processes=n)
         time.sleep(1.0)
         estops, statuses, failed = [], [], {"estop": 0, "status": 0, "reset": 0}
         try:
@@ -172,7 +224,7 @@ def latency_row(kind: str, n: int, folder: Path) -> dict[str, Any]:
                     failed["reset"] += 1
         finally:
             attack.stop()
-        return {"kind": kind, "connections": n, "opened": len(attack.socks),
+        return {"kind": kind, "connections": n, "opened": attack.opened,
                 "estop_ms_max": max(estops, default=float("nan")),
                 "estop_ms_p50": float(np.median(estops)) if estops else float("nan"),
                 "status_ms_p99": float(np.percentile(statuses, 99)) if statuses else float("nan"),
@@ -188,8 +240,7 @@ def job_row(kind: str | None, folder: Path) -> dict[str, Any]:
     try:
         reset(daemon.socket_path)
         if kind is not None:
-            attack = Attack(daemon.socket_path, kind, 100)
-            attack.start()
+            attack = Attackers(daemon.socket_path, kind, 100)
             time.sleep(1.0)
         done = subprocess.run([*CNCCTL, "run", str(REPO / "nc_programs/butterfly.nc"), "--json",
                                "--socket", daemon.socket_path], capture_output=True, text=True,
@@ -226,14 +277,20 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--counts", nargs="+", type=int, default=[64, 500, 5000])
     ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=KINDS)
+    ap.add_argument("--flood-processes", nargs="+", type=int, default=[1, 4])
     ap.add_argument("--markdown", action="store_true")
+    ap.add_argument("--attack", choices=KINDS, help=argparse.SUPPRESS)  # an attacker child
+    ap.add_argument("--n", type=int, help=argparse.SUPPRESS)
+    ap.add_argument("--socket", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.attack:
+        attack_process(args.attack, args.n, args.socket)
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))  # thousands of client sockets
     latency, jobs = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for kind in args.kinds:
-            for n in args.counts if kind != "flood" else [4]:
+            for n in args.counts if kind != "flood" else args.flood_processes:
                 latency.append(latency_row(kind, n, Path(tmp)))
                 print(f"{kind} {n}: done", file=sys.stderr)
         for kind in (None, *args.kinds):

@@ -4,6 +4,7 @@ a negative nice for the interpreter and generator; what is permitted, probed and
 from __future__ import annotations
 
 import os
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -13,6 +14,10 @@ from typing import Any
 MOTION_PRIORITY = 80  # SCHED_FIFO of the motion thread and the drive's threads (LimitRTPRIO=90)
 PRODUCER_NICE = -10  # interpreter and generator outrank ordinary load (nice 0), not the motion
 ORDINARY = "SCHED_OTHER"
+# How long a thread that wants the GIL waits before the holder is asked to let go. Python's
+# 5 ms is longer than a motion cycle (2 ms): the control socket's thread serving a flood of
+# clients held the motion thread up past its cycle (21 late cycles in the butterfly).
+GIL_SWITCH_S = 0.0002
 NEEDS = (f"root, CAP_SYS_NICE, or LimitRTPRIO>={MOTION_PRIORITY} and LimitNICE={PRODUCER_NICE}"
          " (systemd/cncd.service)")
 
@@ -26,11 +31,18 @@ def try_realtime(priority: int) -> str:
     target. Failure is not an error: without CAP_SYS_NICE / LimitRTPRIO the card FIFO still
     absorbs late wake-ups, they are only more frequent.
     """
+    share_the_gil_often()
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
         return f"SCHED_FIFO {priority}"
     except (PermissionError, OSError, AttributeError):
         return ORDINARY
+
+
+def share_the_gil_often() -> None:
+    """A process with a motion thread hands the GIL over within GIL_SWITCH_S (process-wide;
+    the other threads then run in slices of that length, which costs little)."""
+    sys.setswitchinterval(min(sys.getswitchinterval(), GIL_SWITCH_S))
 
 
 def back_to_normal() -> None:
@@ -49,6 +61,13 @@ def producer_nice() -> str:
     except OSError:
         pass  # no CAP_SYS_NICE and no LimitNICE: it keeps the nice it had
     return f"nice {os.getpriority(os.PRIO_PROCESS, 0)}"
+
+
+def service_nice() -> str:
+    """The daemon's socket threads at the producers' nice: a flood of clients (ordinary
+    processes at nice 0) then cannot outrun the loop that turns them away, which kept the
+    listen queue full and status requests waiting seconds behind it."""
+    return producer_nice()
 
 
 @contextmanager

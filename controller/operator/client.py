@@ -6,6 +6,7 @@ import argparse
 import json
 import os
 import socket
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -32,6 +33,23 @@ def default_socket_path() -> str:
                         SOCKET_NAME)
 
 
+def connect_unix(sock: socket.socket, path: str, timeout_s: float) -> None:
+    """connect(), waiting up to timeout_s while the daemon's listen queue is full: a Unix
+    socket with a time-out refuses at once with EAGAIN there (a flood of other clients),
+    where a blocking one would wait for room."""
+    deadline_s = time.monotonic() + timeout_s
+    pause_s = 0.0005
+    while True:
+        try:
+            sock.connect(path)
+            return
+        except BlockingIOError:
+            if time.monotonic() + pause_s > deadline_s:
+                raise
+            time.sleep(pause_s)
+            pause_s = min(pause_s * 2, 0.01)
+
+
 class DaemonUnavailable(CncError):
     """No daemon answers on the socket (absent, stopped, or not allowed to connect)."""
 
@@ -56,7 +74,7 @@ class DaemonClient:
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM | socket.SOCK_CLOEXEC)
         self.sock.settimeout(timeout_s)
         try:
-            self.sock.connect(path)
+            connect_unix(self.sock, path, timeout_s)
         except OSError as exc:
             self.sock.close()
             raise NoDaemon(f"no daemon on {path}: {exc.strerror or exc}") from None
@@ -131,7 +149,7 @@ def request_estop(control_socket_path: str, timeout_s: float = 2.0) -> dict[str,
     sock.settimeout(timeout_s)
     try:
         try:
-            sock.connect(estop_socket_path(control_socket_path))
+            connect_unix(sock, estop_socket_path(control_socket_path), timeout_s)
         except (FileNotFoundError, ConnectionRefusedError):
             return None
         except OSError as exc:

@@ -210,3 +210,48 @@ def test_resume_right_after_an_estop_is_refused(tmp_path: Path) -> None:
                 run.kill()
                 run.wait()
         assert d.status()["state"] == "ESTOP"
+
+
+_FLOOD = """
+import socket, sys, threading
+def flood():
+    while True:
+        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            s.connect(sys.argv[1])
+            s.sendall(b'{"id": 1, "cmd": "status"}\\n')
+        except OSError:
+            pass
+        s.close()
+for _ in range(4):
+    threading.Thread(target=flood, daemon=True).start()
+print("flooding", flush=True)
+threading.Event().wait()
+"""
+
+
+def test_a_process_flooding_the_socket_is_turned_away_and_others_get_through(
+        tmp_path: Path) -> None:
+    """4 threads connecting, asking status and hanging up as fast as they could kept the listen
+    queue full: `cncctl reset` and 14 of 20 status requests failed at once with EAGAIN."""
+    import subprocess
+    import sys
+
+    with running_cncd(tmp_path) as d:
+        assert d.cncctl("reset").returncode == 0
+        flood = subprocess.Popen([sys.executable, "-c", _FLOOD, d.socket_path],
+                                 stdout=subprocess.PIPE, text=True)
+        try:
+            assert flood.stdout is not None and flood.stdout.readline() == "flooding\n"
+            time.sleep(1.0)
+            for _ in range(3):
+                status = d.cncctl("status", "--json")
+                assert status.returncode == 0, status.stderr
+                assert d.cncctl("reset").returncode == 0
+            estop = d.cncctl("estop")
+            assert estop.returncode == 0, estop.stderr
+        finally:
+            flood.kill()
+            flood.wait()
+        assert d.status()["state"] == "ESTOP"
+        assert f"pid {flood.pid} " in d.log_text() and "connects more than" in d.log_text()

@@ -77,6 +77,8 @@ def bind_socket(path: str, gid: int) -> socket.socket:
     if gid != os.getegid() or os.geteuid() == 0:
         os.chown(path, -1, gid)
     os.chmod(path, 0o660)
-    sock.listen(128)
+    # The kernel's most (net.core.somaxconn): under a flood of reconnections a short queue
+    # stayed full and an operator's connect failed at once with EAGAIN.
+    sock.listen(socket.SOMAXCONN)
     sock.setblocking(False)
     return sock

@@ -12,7 +12,7 @@ import time
 from typing import Any
 
 from controller.operator.daemon.access import AccessPolicy
-from controller.operator.daemon.connections import Conn, Upload, eviction_rank
+from controller.operator.daemon.connections import Conn, ConnectRate, Upload, eviction_rank
 from controller.operator.daemon.log import ERR, INFO, WARNING, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.protocol import (
@@ -30,6 +30,7 @@ IDLE_TIMEOUT_S = 300.0  # a connection with nothing pending and no subscription 
 MAX_UPLOADS_BYTES = 2 * MAX_PROGRAM_BYTES  # programs being received at once, all clients
 MAX_OUTPUT_BYTES = 4 << 20  # a subscriber this far behind is dropped (never blocks the daemon)
 _RECV_BYTES = 1 << 16
+ACCEPT_BATCH = 4096  # connections taken from the listen queue per turn of the loop
 
 
 class Server:
@@ -48,6 +49,7 @@ class Server:
         self.conns: set[Conn] = set()
         self.beat_s = time.monotonic()
         self._accept_paused_until = 0.0
+        self.rate = ConnectRate()
 
     # -- from other threads -------------------------------------------------------------------
     def publish(self, topic: str, event: dict[str, Any]) -> None:
@@ -91,7 +93,9 @@ class Server:
     def _accept(self) -> None:
         if time.monotonic() < self._accept_paused_until:
             return
-        for _ in range(64):
+        # The whole queue is taken each time (accepting costs little next to serving): a
+        # queue left full refuses every newcomer, the operator's `reset` among the flood.
+        for _ in range(ACCEPT_BATCH):
             try:
                 sock, _ = self.listener.accept()
             except BlockingIOError:
@@ -110,6 +114,14 @@ class Server:
         sock.setblocking(False)
         pid, uid, gid = struct.unpack("3i", sock.getsockopt(
             socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i")))
+        if not self.rate.allow(pid, time.monotonic()):
+            self.log.warn_once("connect-rate", f"control socket: pid {pid} (uid {uid}) connects "
+                                              f"more than {self.rate.per_s:.0f} times a second: "
+                                              "its connections are refused unread")
+            _send_now(sock, reply_error(None, "too-many-connections", "this process connects "
+                                        "too often: try again in a moment"))
+            sock.close()
+            return
         if not self.policy.allows(pid, uid, gid):
             self.log.log(WARNING, f"control socket: refused uid {uid} gid {gid} (pid {pid})")
             _send_now(sock, reply_error(None, "unauthorised", "not allowed: ask to be added to "
