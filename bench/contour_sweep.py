@@ -5,7 +5,8 @@ Usage: python bench/contour_sweep.py [--config xy_table_paper] [--corpus DIR ...
 Programs: the repository's nc_programs, generated sections and lobed NURBS (tests/gen_programs.py,
 as bench/table4_generated.py makes them), stop programs written here (a G61 square, an M0 in a
 contour, a dwell between moves) and, with --corpus, every .nc/.ngc file under the folders given
-(e.g. ../shared/corpus/linuxcnc). Each is planned by `simulate` with the config given; reported:
+(e.g. the LinuxCNC programs of a corpus of CAM programs, when present beside the clone). Each is
+planned by `simulate` with the config given; reported:
 true contour error max (the modelled tool's distance from the path, settling included), whether
 `contour_limit_met`, motion time and dynamics rounds. A program the interpreter refuses is counted
 as refused (not planned), one that raises anything else as a crash.

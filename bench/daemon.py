@@ -1,4 +1,4 @@
-"""cncd under load (issue 16): status latency with 100 clients polling at 20 Hz during a run,
+"""cncd under load: status latency with 100 clients polling at 20 Hz during a run,
 underruns of that run, restart-to-READY time, and SIGTERM-to-standstill time.
 
 Each status client connects, asks and reads the reply (what `cncctl status` does, without

@@ -1,5 +1,5 @@
 """Feed hold and feed override: time and distance to a standstill against the physical minimum
-at Amax, and the latency from a `feed` change to the new feed (issue 18's figures).
+at Amax, and the latency from a `feed` change to the new feed (docs/results.md gives them).
 
 Runs the motion controller on the virtual sim card (the same loop `cncctl run` uses) with the
 planned reference of a program, asks for a hold at points spread over it (or an override

@@ -1,4 +1,4 @@
-"""cncd jobs on a loaded machine PC (issue 28): late cycles, lowest card FIFO and underruns of
+"""cncd jobs on a loaded machine PC: late cycles, lowest card FIFO and underruns of
 a run while stress-ng keeps CPU hogs, I/O and memory hogs busy, a fresh daemon per run.
 
     python bench/loaded_pc.py [--runs 5] [--program nc_programs/butterfly.nc] [--unprivileged]

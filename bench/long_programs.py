@@ -1,4 +1,4 @@
-"""Long programs (issue 19): `cncctl simulate` and `cncctl run --virtual-time` on 1k-1M G1 lines and
+"""Long programs: `cncctl simulate` and `cncctl run --virtual-time` on 1k-1M G1 lines and
 1-1000 airfoils, each command a process of its own: CPU time, real-time factor, peak RSS, rounds.
 
     python bench/long_programs.py [--quick] [--markdown] [--only NAME ...] [--keep DIR]

@@ -1,4 +1,4 @@
-"""Model mismatch (issue 17 item 5): ours and the tuned peers, planned on the nominal Table II
+"""Model mismatch: ours and the tuned peers, planned on the nominal Table II
 model, run through a plant that is not that model.
 
 The plant's poles are moved by +-10 % and +-20 % (bandwidth off, DC gain kept), or its

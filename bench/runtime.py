@@ -25,7 +25,8 @@ CHURN = ("import time\nwhile True:\n    b = [bytearray(4096) for _ in range(2000
 
 
 def start_load(n_cpus: int) -> list[subprocess.Popen]:
-    """One CPU hog per core plus an allocation-churning process (DRIVES-AND-OPERATIONS 3.3)."""
+    """One CPU hog per core plus an allocation-churning process (the load a PC
+    running other programs puts on a Python 1 kHz loop)."""
     procs = [subprocess.Popen([sys.executable, "-c", HOG]) for _ in range(n_cpus)]
     procs.append(subprocess.Popen([sys.executable, "-c", CHURN]))
     return procs

@@ -1,4 +1,4 @@
-"""Long programs for the tests (issue 19): bench/long_programs.py's seeded writers, small."""
+"""Long programs for the tests: bench/long_programs.py's seeded writers, small."""
 
 from __future__ import annotations
 

@@ -12,7 +12,8 @@ from controller.refpoints import RefChunk
 
 def quintic_distance_mm(length_mm: float, v_mm_s: float, accel_mm_s2: float,
                         period_s: float) -> np.ndarray:
-    """Sampled s(t) of an accel/cruise/decel quintic feed plan (ALGORITHMS 2), rest to rest."""
+    """Sampled s(t) of an accel/cruise/decel quintic feed plan (docs/algorithms.md, Feed planning),
+    rest to rest."""
     vc = min(v_mm_s, math.sqrt(16.0 * accel_mm_s2 * length_mm / 15.0 / 2.0))
     ta = 15.0 * vc / (8.0 * accel_mm_s2)
     tc = max(0.0, (length_mm - ta * vc) / vc)

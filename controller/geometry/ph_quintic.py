@@ -60,17 +60,18 @@ class PhQuintic:
 
     @classmethod
     def hermite(cls, p0: complex, p5: complex, d0: complex, d1: complex) -> PhQuintic:
-        """The best of the 4 Hermite interpolants (ALGORITHMS.md 1.2): canonical frame, minimum
-        absolute rotation index, bending energy as tie-break, (+,+) first on full ties."""
+        """The best of the 4 Hermite interpolants (docs/algorithms.md, PH quintic blends):
+        canonical frame, minimum absolute rotation index, bending energy as tie-break, (+,+)
+        first on full ties."""
         dp = p5 - p0
         if dp == 0:
             raise ValueError("PH Hermite data with coincident end points")
         candidates = _candidates(complex(p0), complex(dp), complex(d0), complex(d1))
         if _tame(d0 / dp) and _tame(d1 / dp):
             # Both end derivatives within 80 degrees of the chord and 0.5-2 chords long: the
-            # canonical (+,+) solution is then the best (ALGORITHMS.md 1.2; checked by
-            # tests/geometry/test_ph_quintic.py), so skip ranking (root finding and energy
-            # quadrature cost ~1 ms per corner blend).
+            # canonical (+,+) solution is then the best (docs/algorithms.md, PH quintic blends;
+            # checked by tests/geometry/test_ph_quintic.py), so skip ranking (root finding and
+            # energy quadrature cost ~1 ms per corner blend).
             return candidates[0]
         return _best(candidates)
 

@@ -31,7 +31,8 @@ CONTOUR_SHARE = 0.9  # above 100 %: the plan's error times rate^2 kept within th
 
 
 def smoothstep5(u: np.ndarray) -> np.ndarray:
-    """The quintic 0 -> 1 with zero slope and curvature at both ends (ALGORITHMS 2's shape)."""
+    """The quintic 0 -> 1 with zero slope and curvature at both ends (docs/algorithms.md,
+    Feed planning)."""
     u = np.clip(u, 0.0, 1.0)
     return u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
 

@@ -14,7 +14,8 @@ REST_SPEED_MM_S = 0.05  # the reference is "at rest" below this (5 % of a 1 um p
 
 
 def stop_distances_mm(v0_mm_s: float, accel_mm_s2: float, period_s: float) -> np.ndarray:
-    """Distance travelled at samples k = 1..n of a quintic decel from v0 to 0 (ALGORITHMS 2).
+    """Distance travelled at samples k = 1..n of a quintic decel from v0 to 0 (docs/algorithms.md,
+    Feed planning).
 
     Duration 15 v0 / (8 A) gives peak deceleration A; rounding it up to whole samples only
     lowers the peak. The last entry is the full stop distance T v0 / 2 (at rest).

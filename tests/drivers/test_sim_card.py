@@ -43,7 +43,8 @@ def test_frames_execute_and_encoder_settles_exactly() -> None:
 
 
 def test_steady_following_error_is_the_servo_model_value() -> None:
-    """58 pulses/ms = 58 mm/s: e_ss = V (a1 - b1) / a0 (ALGORITHMS 3: 18.56 um at 58 mm/s)."""
+    """58 pulses/ms = 58 mm/s: e_ss = V (a1 - b1) / a0 (docs/algorithms.md, The servo model
+    (eq. 27): 18.56 um at 58 mm/s)."""
     cfg = xy_config()
     card = virtual_card(cfg)
     card.write_frames(ramp_frames(250), end_of_stream=True)

@@ -1,4 +1,4 @@
-"""G1 corners: PH blends stay within G64 P (or eps_max), G61 stops, limits hold (issue 4)."""
+"""G1 corners: PH blends stay within G64 P (or eps_max), G61 stops, limits hold."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Quintic Bernstein feed transitions: closed forms against numerics and ALGORITHMS.md section 2."""
+"""Quintic Bernstein feed transitions: closed forms against numerics and the check values
+of docs/algorithms.md, Feed planning."""
 
 from __future__ import annotations
 
@@ -58,7 +59,7 @@ def test_transition_peak_accel_is_amax_and_ends_are_flat(vs: float, ve: float) -
     assert float(s[-1]) == pytest.approx(float(transition_length_mm(vs, ve, AMAX)), rel=1e-12)
 
 
-def test_algorithms_md_transition_values() -> None:
+def test_transition_check_values() -> None:
     assert float(transition_duration_s(0.0, 58.333, AMAX)) == pytest.approx(0.044643, abs=1e-6)
     assert float(transition_length_mm(0.0, 58.333, AMAX)) == pytest.approx(1.302083, abs=1e-4)
 

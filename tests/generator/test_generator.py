@@ -1,4 +1,4 @@
-"""Acceptance of the reference-point generator (issue 4): benchmarks and generated programs."""
+"""Acceptance of the reference-point generator: benchmarks and generated programs."""
 
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ def _bound_s(curve: Nurbs) -> float:
 
 
 def _check_limits(program: str) -> dict:
-    """Every limit of issue 4 on one program; returns the report for further checks."""
+    """Every limit the generator keeps, on one program; returns the report for further checks."""
     traj = simulate(read_program(program, CFG), CFG, "ph-lookahead")
     r = report(traj, program, "ph-lookahead", CFG)
     assert r["contour_limit_met"]

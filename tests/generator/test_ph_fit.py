@@ -46,7 +46,7 @@ def test_naca_leading_edge_table_one() -> None:
     naca = read_program_nurbs("naca2415.nc")
     (zone,) = detect_sharp_corners(naca, KAPPA_TH)
     one = fit_single(naca, zone.u_start, zone.u_end)
-    assert one.fit_max_mm == pytest.approx(0.013, abs=0.001)  # ALGORITHMS.md 1.3: 13 um
+    assert one.fit_max_mm == pytest.approx(0.013, abs=0.001)  # docs/algorithms.md: 13 um
     assert one.ph.length_mm == pytest.approx(1.302, abs=0.001)
     assert one.ph.curvature(np.linspace(0, 1, 2001)).max() == pytest.approx(1.237, abs=0.001)
     pieces = fit_zone(naca, zone.u_start, zone.u_end, E_MM)

@@ -1,4 +1,5 @@
-"""The numpy-only servo model against scipy.signal and ALGORITHMS.md section 3's check values."""
+"""The numpy-only servo model against scipy.signal and the check values of
+docs/algorithms.md, The servo model (eq. 27)."""
 
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ def test_zoh_matches_scipy(axis: str) -> None:
     assert np.allclose(s.b, np.squeeze(b_ref) / a_ref[0], rtol=1e-9, atol=1e-14)
 
 
-def test_check_values_of_algorithms_md() -> None:
+def test_check_values_of_the_servo_model() -> None:
     s = discretise(CFG.axis("x").servo, T)
     assert s.a == pytest.approx([1, -3.332194, 4.188233, -2.352050, 0.497380], abs=1e-6)
     e = tracking_error_mm(s, np.full(400, 58.3333333))

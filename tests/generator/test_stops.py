@@ -1,4 +1,4 @@
-"""The tool's true distance from the path, stops included (issue 17): measured, and held within
+"""The tool's true distance from the path, stops included: measured, and held within
 eps_max by gentler braking into each stop."""
 
 from __future__ import annotations
@@ -84,7 +84,7 @@ def test_the_braking_model_finds_the_largest_acceleration_within_the_target() ->
     target_mm = 0.95 * XY_TABLE.interpolator.contour_error_limit_mm
     model = BrakingModel(XY_TABLE, target_mm)
     amax = XY_TABLE.interpolator.max_accel_mm_s2
-    assert abs(model.overshoot_mm(58.33, amax) - 0.0511) < 0.001  # the 51 um of issue 17
+    assert abs(model.overshoot_mm(58.33, amax) - 0.0511) < 0.001  # the 51 um eq. 28 cannot see
     for v in (58.3, 30.0, 10.0):  # speeds on the memo's 0.1 mm/s grid
         accel = model.accel_for(v)  # (between grid speeds the loop checks the real path)
         assert model.overshoot_mm(v, accel) <= target_mm

@@ -1,4 +1,5 @@
-"""Time-optimal lower bound (ALGORITHMS.md 5) and the quintic plan's distance to it."""
+"""Time-optimal lower bound (docs/algorithms.md, Feed planning) and the quintic plan's
+distance to it."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Look-ahead windows of long runs (issue 19): continued without stops, bounded, flat per line."""
+"""Look-ahead windows of long runs: continued without stops, bounded, flat per line."""
 
 from __future__ import annotations
 
@@ -108,7 +108,7 @@ def test_windows_share_repeated_curves_and_blends_but_a_short_run_does_not(
     lines = [p.line for r in runs for p in r.geometry.path.pieces]
     assert len(set(lines)) == 40  # every piece keeps its own block's line
     calls["repeats"].clear()
-    _runs(airfoils(tmp_path, 3))  # one window: planned as before issue 19, bit for bit
+    _runs(airfoils(tmp_path, 3))  # one window: planned as without windows, bit for bit
     assert calls["repeats"] == [None]
 
 

@@ -86,7 +86,7 @@ def test_power_forms_of_many_quintics_are_each_quintics_own(data: list) -> None:
 
 
 def test_ph_calgo_quintic_feed_ticks() -> None:
-    """ALGORITHMS.md 1.2: CALGO curve (4.82 mm) under a rest-to-rest feed, 1 ms ticks."""
+    """docs/algorithms.md (PH quintic blends): CALGO curve (4.82 mm), rest-to-rest feed, 1 ms."""
     ph = PhQuintic.hermite(0.8 + 1.4j, 4.2 + 3.6j, 5 * (1.6 - 0.6j), 5 * (1.6 - 0.6j))
     t = np.arange(0, 106) / 105  # normalised time; smooth F(t) from 0 to the full length
     f = ph.length_mm * (10 * t**3 - 15 * t**4 + 6 * t**5)
@@ -111,7 +111,7 @@ def test_taylor_on_an_arc_has_small_drift() -> None:
 
 
 def test_taylor_fluctuation_on_butterfly_matches_reference_table() -> None:
-    """ALGORITHMS.md notes: 2nd-order Taylor at 58.33 mm/s: max ~110 %, RMS ~1.7e-2."""
+    """docs/algorithms.md (PH quintic blends): Taylor at 58.33 mm/s: max ~110 %, RMS ~1.7e-2."""
     c = read_program_nurbs("butterfly.nc")
     v, period = 58.33, 1e-3
     n = int(c.length_mm / (v * period)) - 1

@@ -1,4 +1,5 @@
-"""PH quintic Hermite interpolation: ALGORITHMS.md 1.2 worked checks and closed-form identities."""
+"""PH quintic Hermite interpolation: the worked checks of docs/algorithms.md (PH quintic
+blends) and closed-form identities."""
 
 from __future__ import annotations
 

@@ -78,7 +78,7 @@ def test_from_line_asks_nothing_when_no_daemon_answers(
     code = main(["run", arcs, "--from-line", "2", "--socket",
                  str(tmp_path / "d.sock")])
     err = capsys.readouterr().err
-    # No daemon: nothing moved, so rejected (2), as the README's exit codes say (was 3).
+    # No daemon: nothing moved, so rejected (2), as docs/operator.md's exit codes say.
     assert code == 2 and "no daemon" in err and "nothing moved" in err
     assert "first moves" not in err
 

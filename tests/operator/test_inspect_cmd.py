@@ -1,4 +1,4 @@
-"""`cncctl inspect`: JSON form of issue 3, corners and PH segments of the shipped programs."""
+"""`cncctl inspect`: its JSON form, corners and PH segments of the shipped programs."""
 
 from __future__ import annotations
 

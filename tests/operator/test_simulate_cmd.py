@@ -1,4 +1,4 @@
-"""`cncctl simulate`: the JSON form of issue 4, Table IV layout, trajectory CSV, plot, bad input."""
+"""`cncctl simulate`: its JSON form, Table IV layout, trajectory CSV, plot, bad input."""
 
 from __future__ import annotations
 

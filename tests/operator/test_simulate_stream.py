@@ -1,4 +1,4 @@
-"""`cncctl simulate` streaming (issue 19): the trajectory CSV as it goes, plot series, --stats."""
+"""`cncctl simulate` streaming: the trajectory CSV as it goes, plot series, --stats."""
 
 from __future__ import annotations
 

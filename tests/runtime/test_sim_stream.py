@@ -1,4 +1,4 @@
-"""`cncctl simulate` streams (issue 19): the same numbers as the whole arrays, in bounded memory."""
+"""`cncctl simulate` streams: the same numbers as the whole arrays, in bounded memory."""
 
 from __future__ import annotations
 
@@ -154,7 +154,7 @@ def test_stream_and_figures_keep_bounded_memory_on_a_long_reference() -> None:
 
 def test_simulate_of_a_long_walk_stays_small(tmp_path: Path) -> None:
     """The whole `cncctl simulate` process on 6000 G1 lines (80 s of motion, 80,000 samples,
-    30 MB of samples kept before issue 19): its peak RSS."""
+    30 MB of samples kept before it streamed): its peak RSS."""
     program = walk(tmp_path, 6000)
     # VmHWM, not ru_maxrss: a child's ru_maxrss starts from its parent's (pytest's) at fork.
     code = ("import sys\nfrom controller.operator.cli import main\n"

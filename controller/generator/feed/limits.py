@@ -53,6 +53,7 @@ def corner_feed_mm_s(kappa_per_mm: np.ndarray | float, sample_period_s: float,
 def path_feed_limit_mm_s(kappa_per_mm: np.ndarray | float, sample_period_s: float,
                          chord_tol_mm: float, accel_mm_s2: float,
                          vmax_mm_s: float) -> np.ndarray:
-    """min(Vmax, sqrt(Amax/kappa), V_af): the limit of the time-optimal bound (ALGORITHMS 5)."""
+    """min(Vmax, sqrt(Amax/kappa), V_af): the limit of the time-optimal bound (docs/algorithms.md,
+    Feed planning)."""
     return np.minimum(chord_error_feed_mm_s(kappa_per_mm, sample_period_s, chord_tol_mm, vmax_mm_s),
                       centripetal_feed_mm_s(kappa_per_mm, accel_mm_s2, vmax_mm_s))

@@ -1,4 +1,5 @@
-"""Time-optimal lower bound on a path: forward-backward pass on v^2 (ALGORITHMS.md section 5)."""
+"""Time-optimal lower bound on a path: forward-backward pass on v^2 (docs/algorithms.md,
+Feed planning)."""
 
 from __future__ import annotations
 

@@ -35,8 +35,8 @@ def _complex(xy: np.ndarray) -> complex:
 
 
 def _hermite_all(curve: Curve, u_start: np.ndarray, u_end: np.ndarray) -> list[PhQuintic]:
-    """ALGORITHMS 1.3 for each zone: p0 = C(u_s), p5 = C(u_e), d = C'(u) (u_e - u_s)
-    (xi-derivatives), with one curve evaluation for all the zones' ends."""
+    """For each zone (docs/algorithms.md, PH quintic blends): p0 = C(u_s), p5 = C(u_e),
+    d = C'(u) (u_e - u_s) (xi-derivatives), with one curve evaluation for all the zones' ends."""
     d = curve.evaluate(np.concatenate((u_start, u_end)), 1)
     n, du = len(u_start), u_end - u_start
     return [PhQuintic.hermite(_complex(d[0, i]), _complex(d[0, n + i]),
