@@ -25,10 +25,10 @@ sys.path.insert(0, str(HERE))
 import peers  # noqa: E402
 
 from controller.config import MachineConfig, load_config  # noqa: E402
-from controller.generator.dynamics.prediction import planning_limit_mm  # noqa: E402
-from controller.generator.dynamics.servo import mismatched_config  # noqa: E402
 from controller.interpreter.program import read_program  # noqa: E402
 from controller.runtime.simulation import simulate  # noqa: E402
+from controller.servo.model import mismatched_config  # noqa: E402
+from controller.servo.prediction import planning_limit_mm  # noqa: E402
 
 REPO = HERE.parent
 CASES = [(0, 0), (-20, 0), (-10, 0), (10, 0), (20, 0), (0, -20), (0, -10), (0, 10), (0, 20)]

@@ -7,7 +7,7 @@ E/V = (s^3 + a3 s^2 + (a2 - b2) s + (a1 - b1)) / (s^4 + a3 s^3 + a2 s^2 + a1 s +
 (divided through by a4). This convention gives the steady ramp error V (a1 - b1) / a0.
 
 Only numpy is used: scipy.signal costs 0.6 s to import, which `cncctl run` would pay before
-the first motion. tests/generator/test_servo.py checks both functions against scipy.signal.
+the first motion. tests/servo/test_servo_model.py checks both functions against scipy.signal.
 """
 
 from __future__ import annotations

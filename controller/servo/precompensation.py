@@ -29,7 +29,7 @@ from functools import lru_cache
 import numpy as np
 
 from controller.config import ServoParams
-from controller.generator.dynamics.servo import (
+from controller.servo.model import (
     DiscreteServo,
     discretise,
     filter_block,
