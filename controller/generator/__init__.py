@@ -9,3 +9,4 @@ long run's windows share), sampling (reference points), baselines, plan (the pro
 Modules may import the base layer, controller.geometry and the modules before them (ph may
 import corners); dynamics and the files around the modules also controller.servo. Nothing here
 imports the interpreter, motion or anything above.
+"""
