@@ -1,4 +1,5 @@
-"""The numpy-only servo model against scipy.signal and ALGORITHMS.md section 3's check values."""
+"""The numpy-only servo model against scipy.signal and the check values of docs/algorithms.md,
+'The servo model (eq. 27)'."""
 
 from __future__ import annotations
 
