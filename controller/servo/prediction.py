@@ -55,7 +55,7 @@ def axis_servos(config: MachineConfig) -> tuple[DiscreteServo, DiscreteServo]:
 
 def acceleration_gain_s2(config: MachineConfig) -> float:
     """c2 of the small-s expansion e ~ c1 v + c2 a (docs/algorithms.md,
-    'The servo model (eq. 27)'): the worse of X and Y.
+    The servo model (eq. 27)): the worse of X and Y.
 
     The contour error on a curve is about c2 * kappa * v^2, so eps_max / c2 is the normal
     acceleration the servo loop can follow within the contour limit. Pre-compensated, c2 is

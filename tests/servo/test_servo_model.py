@@ -1,5 +1,5 @@
-"""The numpy-only servo model against scipy.signal and the check values of docs/algorithms.md,
-'The servo model (eq. 27)'."""
+"""The numpy-only servo model against scipy.signal and the check values of
+docs/algorithms.md, The servo model (eq. 27)."""
 
 from __future__ import annotations
 
