@@ -3,7 +3,7 @@ model, run through a plant that is not that model.
 
 The plant's poles are moved by +-10 % and +-20 % (bandwidth off, DC gain kept), or its
 feed-forward lags c1, c2 scaled by +-10 % and +-20 % (`mismatched` in
-controller/generator/dynamics/servo.py; the sim card runs the same plant with the drive
+controller/servo/model.py; the sim card runs the same plant with the drive
 options plant_pole_pct and plant_gain_pct). Each reference is planned once on the nominal model:
 ours by `simulate` (pre-compensated: the frames sent lead the path by the nominal model's lag,
 and the plant is not that model), Klipper and grbl at the acceleration tuned for the nominal
@@ -25,10 +25,10 @@ sys.path.insert(0, str(HERE))
 import peers  # noqa: E402
 
 from controller.config import MachineConfig, load_config  # noqa: E402
-from controller.generator.dynamics.prediction import planning_limit_mm  # noqa: E402
-from controller.generator.dynamics.servo import mismatched_config  # noqa: E402
 from controller.interpreter.program import read_program  # noqa: E402
 from controller.runtime.simulation import simulate  # noqa: E402
+from controller.servo.model import mismatched_config  # noqa: E402
+from controller.servo.prediction import planning_limit_mm  # noqa: E402
 
 REPO = HERE.parent
 CASES = [(0, 0), (-20, 0), (-10, 0), (10, 0), (20, 0), (0, -20), (0, -10), (0, 10), (0, 20)]

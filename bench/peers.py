@@ -9,12 +9,12 @@ Two contour errors are measured on those actual positions: eq. 28 (`contour_erro
 component of the axis errors at the reference point, tangent from central differences of the
 reference; ours reports its own eq. 28 with the generator's exact tangent) and the TRUE error,
 the distance of the actual position from the programmed path (NURBS and closing G1, as a polyline
-within 0.02 um; `controller.generator.dynamics.path_distance`). Each peer is fed the program's
+within 0.02 um; `controller.servo.path_distance`). Each peer is fed the program's
 NURBS flattened into G1 chords (chord error within 1 um and 10 um: every chord is checked at its
 quarter, half and three-quarter points, as a CAM post would), and the program's G1 as is. Each
 peer's acceleration is bisected (geometrically, to 0.5 %) for the largest value whose TRUE
 contour error max is within what ours plans for: eps_max less sqrt(2) pulses of quantisation
-margin (controller.generator.dynamics.prediction.planning_limit_mm), since on a machine both
+margin (controller.servo.prediction.planning_limit_mm), since on a machine both
 would need that margin; Vmax = the config's Vmax.
 The time bound is bench/time_bound.py's (Amax, Vmax, chord tolerance, T of the config).
 
@@ -98,22 +98,22 @@ from time_bound import arc_length_samples  # noqa: E402
 
 from controller.blocks import LineBlock, NcBlock, NurbsBlock  # noqa: E402
 from controller.config import MachineConfig, load_config  # noqa: E402
-from controller.generator.dynamics.path_distance import (  # noqa: E402
+from controller.generator.feed.time_bound import time_optimal_bound_s  # noqa: E402
+from controller.geometry.nurbs import Nurbs  # noqa: E402
+from controller.interpreter.program import read_program  # noqa: E402
+from controller.runtime.simulation import simulate, tangent_angles  # noqa: E402
+from controller.servo.model import contour_error_mm, tracking_error_mm  # noqa: E402
+from controller.servo.path_distance import (  # noqa: E402
     PathDistance,
     block_polyline,
     path_polyline,
     sample_curve,
 )
-from controller.generator.dynamics.precompensation import Precompensator  # noqa: E402
-from controller.generator.dynamics.prediction import (  # noqa: E402
+from controller.servo.precompensation import Precompensator  # noqa: E402
+from controller.servo.prediction import (  # noqa: E402
     planning_limit_mm,
     plant_servos,
 )
-from controller.generator.dynamics.servo import contour_error_mm, tracking_error_mm  # noqa: E402
-from controller.generator.feed.time_bound import time_optimal_bound_s  # noqa: E402
-from controller.geometry.nurbs import Nurbs  # noqa: E402
-from controller.interpreter.program import read_program  # noqa: E402
-from controller.runtime.simulation import simulate, tangent_angles  # noqa: E402
 
 PROGRAMS = ("nc_programs/naca2415.nc", "nc_programs/naca2415_loop.nc", "nc_programs/butterfly.nc")
 SETTLE_S = 0.3  # held final reference after the end: the Table II servo settles within ~50 ms

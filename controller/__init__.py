@@ -3,8 +3,11 @@
 Imports point one way (tests/test_layers.py keeps it so):
 
     operator -> runtime -> interpreter | generator | motion -> drivers
-             -> generator modules (corners, ph, feed, dynamics) -> geometry
+             -> generator modules (corners, ph, feed, dynamics) -> servo -> geometry
              -> base layer (errors, config, numeric, blocks, refpoints)
+
+servo (the servo model of eq. 27, its prediction and the tool's true distance from the path)
+is below the processes: the generator plans with it, motion and the simulated drives run it.
 
 The base layer is the files in this folder: errors, the machine config, numpy helpers, and the
 two things that flow between the processes (NC blocks, reference-point chunks).

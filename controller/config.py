@@ -79,7 +79,7 @@ class InterpolatorConfig:
     rapid_feed_mm_s: float
     max_dynamics_rounds: int
     # Send X and Y a reference that leads the path by the servo model's lag, so the model's
-    # actual position follows the path itself (controller/generator/dynamics/precompensation.py).
+    # actual position follows the path itself (controller/servo/precompensation.py).
     # Off is the paper's method (Table IV); on, the contour limit rarely binds.
     servo_precompensation: bool = False
 

@@ -1,6 +1,6 @@
 """The tree's architecture, kept: no import cycles between files, imports pointing one way
-(operator -> runtime -> processes -> drivers / generator modules -> geometry -> base), every
-package listed in pyproject.toml and opening with a docstring, files of a readable size."""
+(operator -> runtime -> processes -> drivers / generator modules -> servo -> geometry -> base),
+every package listed in pyproject.toml and opening with a docstring, files of a readable size."""
 
 from __future__ import annotations
 
@@ -22,15 +22,16 @@ ALLOWED: dict[str, set[str]] = {
     "corners": {"base", "geometry"},
     "ph": {"base", "geometry", "corners"},
     "feed": {"base", "geometry"},
-    "dynamics": {"base", "geometry"},
-    "drivers": {"base", "dynamics"},  # the sim card clocks its axes through the servo model
+    "servo": {"base", "geometry"},  # path_distance evaluates NURBS blocks
+    "dynamics": {"base", "geometry", "servo"},
+    "drivers": {"base", "servo"},  # the sim card clocks its axes through the servo model
     "interpreter": {"base", "geometry"},
-    "generator": {"base", "geometry"} | GENERATOR_MODULES,
-    "motion": {"base", "drivers", "dynamics"},  # hold and override: the servo model's check
-    "runtime": {"base", "geometry", "drivers", "interpreter", "generator", "motion"}
+    "generator": {"base", "geometry", "servo"} | GENERATOR_MODULES,
+    "motion": {"base", "drivers", "servo"},  # hold and override: the servo model's check
+    "runtime": {"base", "geometry", "servo", "drivers", "interpreter", "generator", "motion"}
     | GENERATOR_MODULES,
-    "operator": {"base", "geometry", "drivers", "interpreter", "generator", "motion", "runtime"}
-    | GENERATOR_MODULES,
+    "operator": {"base", "geometry", "servo", "drivers", "interpreter", "generator", "motion",
+                 "runtime"} | GENERATOR_MODULES,
 }
 
 
@@ -159,9 +160,10 @@ def test_the_checks_find_a_cycle_and_a_wrong_way_import() -> None:
 def test_parts_are_known() -> None:
     assert {part_of(m) for m in source_files()} == set(ALLOWED)
     assert part_of("controller.config") == "base"
-    assert part_of("controller.generator.loop") == "generator"
+    assert part_of("controller.generator.replan") == "generator"
     assert part_of("controller.generator.ph.fit") == "ph"
     assert part_of("controller.motion") == "motion"
+    assert part_of("controller.servo.model") == "servo"
 
 
 def test_every_package_is_installed() -> None:

@@ -24,7 +24,9 @@ from controller.errors import PlanningError
 from controller.generator.baselines import FORMULA_FEEDS, plan_formula_run
 from controller.generator.feed.planner import plan_feed
 from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
-from controller.generator.loop import (
+from controller.generator.ph.construct import BlockCurve, block_curve
+from controller.generator.repeats import Repeats
+from controller.generator.replan import (
     NURBS_LOOKAHEAD,
     PH_LOOKAHEAD,
     Continuation,
@@ -32,8 +34,6 @@ from controller.generator.loop import (
     RunStatus,
     plan_contour_run,
 )
-from controller.generator.ph.construct import BlockCurve, block_curve
-from controller.generator.repeats import Repeats
 from controller.generator.window import continuation_cut
 from controller.refpoints import RefChunk
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.generator.dynamics.prediction import axis_servos, state_after
-from controller.generator.dynamics.stops import NEAR_SAMPLES
-from controller.generator.loop import Continuation, RunPlan
+from controller.generator.replan import Continuation, RunPlan
 from controller.geometry.path import Piece, chain, make_piece
+from controller.servo.prediction import axis_servos, state_after
+from controller.servo.true_distance import NEAR_SAMPLES
 
 # The end of a window is planned again with the next blocks: this share of it, and at least
 # MIN_OVERLAP_MM (several braking distances at Vmax: what the stop at the window's end and the

@@ -15,9 +15,9 @@ from controller.blocks import (
 from controller.config import MachineConfig
 from controller.errors import NcError
 from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
-from controller.interpreter.frames import AXIS_CODES, OffsetsMixin
 from controller.interpreter.line_state import LineState
 from controller.interpreter.moves import MAX_BLOCK_S, MotionMixin
+from controller.interpreter.work_offsets import AXIS_CODES, OffsetsMixin
 from controller.offsets import OffsetTable, ProgramOffsets
 
 MM_PER_INCH = 25.4

@@ -3,5 +3,6 @@ the drive, feedback checked (following and contour error), every fault a control
 
 loop (MotionController) uses checks, pulses, pacing, stopping, source and the drive interface;
 ring is the shared-memory FIFO from the generator; realtime is SCHED_FIFO. May import the base
-layer and drivers.
+layer, controller.servo (hold and override re-time and check with the servo model, the
+pre-compensation filter) and drivers.
 """

@@ -9,7 +9,6 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.errors import DriveError
-from controller.generator.dynamics.precompensation import Precompensator
 from controller.motion import estop
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.feedback_check import FeedbackCheck
@@ -29,6 +28,7 @@ from controller.motion.types import (
     MotionState,
     Outcome,
 )
+from controller.servo.precompensation import Precompensator
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import LostCommunicationError, UnderrunError
 

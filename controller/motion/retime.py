@@ -8,14 +8,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.generator.dynamics.prediction import (
+from controller.servo.model import filter_block
+from controller.servo.prediction import (
     SETTLE_S,
     axis_servos,
     planning_limit_mm,
     rest_state,
 )
-from controller.generator.dynamics.servo import filter_block
-from controller.generator.dynamics.stops import distance_from_reference_mm
+from controller.servo.true_distance import distance_from_reference_mm
 
 ACCEL_MARGIN = 0.98  # first guess of a ramp: this share of Amax for the rate change alone
 MIN_RAMP_S = 0.01

@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from controller.generator.dynamics.precompensation import Precompensator
+from controller.servo.precompensation import Precompensator
 
 REST_SPEED_MM_S = 0.05  # the reference is "at rest" below this (5 % of a 1 um pulse per ms)
 

@@ -12,16 +12,16 @@ import numpy as np
 
 from controller.config import MachineConfig, load_config
 from controller.errors import CncError, NcError
-from controller.generator.dynamics.precompensation import Precompensator
 from controller.generator.plan import Algorithm
 from controller.interpreter.program import read_program
 from controller.operator.check_cmd import check_program
 from controller.operator.outputs import OutputError, output_path
 from controller.operator.simulate_plot import PlotSeries
 from controller.operator.simulate_view import SimulateView
-from controller.runtime.sim_figures import Figures
-from controller.runtime.sim_stream import SampleBlock
+from controller.runtime.simulate_figures import Figures
+from controller.runtime.simulate_stream import SampleBlock
 from controller.runtime.simulation import limit_um, simulate_stream
+from controller.servo.precompensation import Precompensator
 
 TABLE_ROWS = (
     ("X tracking error max (um)", lambda r: r["tracking_error_um"]["x"]["max"]),

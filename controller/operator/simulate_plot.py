@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.runtime.sim_stream import SampleBlock
+from controller.runtime.simulate_stream import SampleBlock
 
 MAX_POINTS = 20_000  # per series: a longer program is shown by buckets of samples
 

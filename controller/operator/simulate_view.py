@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import TextIO
 
 from controller.operator.run_view import ProgramLines, lines_text
-from controller.runtime.sim_stream import SampleBlock
+from controller.runtime.simulate_stream import SampleBlock
 
 
 class SimulateView:

@@ -13,7 +13,6 @@ from typing import Any
 
 from controller.config import MachineConfig
 from controller.errors import DriveError
-from controller.generator.dynamics.prediction import axis_servos
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.realtime import MOTION_PRIORITY, Scheduling, back_to_normal, try_realtime
@@ -30,6 +29,7 @@ from controller.runtime.stages import (
     preload_stages,
     reference_source,
 )
+from controller.servo.prediction import axis_servos
 from drivers.base import Drive
 from drivers.errors import DriveUnavailableError
 from drivers.registry import make_drive

@@ -10,10 +10,10 @@ import numpy as np
 
 from controller.blocks import NcBlock
 from controller.config import MachineConfig
-from controller.generator.loop import RunPlan
 from controller.generator.plan import Algorithm, PlannedStep, plan_program
-from controller.runtime.sim_figures import Figures
-from controller.runtime.sim_stream import SampleBlock, ServoStream
+from controller.generator.replan import RunPlan
+from controller.runtime.simulate_figures import Figures
+from controller.runtime.simulate_stream import SampleBlock, ServoStream
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,7 +15,7 @@ from canopen.sdo import SdoAbortedError
 
 from controller.config import AxisConfig, MachineConfig
 from controller.errors import DriveError
-from controller.generator.dynamics.servo import AxisServoStepper, discretise
+from controller.servo.model import AxisServoStepper, discretise
 from drivers.canopen import cia402 as c
 from drivers.canopen.options import drive_layout
 from drivers.canopen.sim_homing import SimHoming402

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.generator.dynamics.servo import AxisServoStepper, discretise
+from controller.servo.model import AxisServoStepper, discretise
 
 
 class SimAxes:
     """Commanded step counters, servo lag, encoders; stall/lag/freeze injections per axis.
 
-    Convention of controller.generator.dynamics.servo: r[k] = accumulated pulses * pulse_mm,
+    Convention of controller.servo.model: r[k] = accumulated pulses * pulse_mm,
     v[k] = (r[k] - r[k-1]) / T drives the E/V filter, actual = r - e.
     """
 

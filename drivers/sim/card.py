@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.generator.dynamics.servo import mismatched_config
+from controller.servo.model import mismatched_config
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, HomingError, LostCommunicationError
 from drivers.homing import plan_for

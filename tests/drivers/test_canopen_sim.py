@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from controller.config import load_config
-from controller.generator.dynamics.servo import discretise
+from controller.servo.model import discretise
 from drivers.base import CardStatus
 from drivers.canopen import cia402 as c
 from drivers.canopen.backend import CanopenDrive

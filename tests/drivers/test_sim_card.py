@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from runtime_helpers import virtual_card, xy_config
 
-from controller.generator.dynamics.servo import discretise
+from controller.servo.model import discretise
 from drivers.base import CardStatus
 from drivers.errors import (
     BadFrameError,
@@ -157,7 +157,7 @@ def test_an_unknown_drive_option_is_an_error_naming_it() -> None:
 @pytest.mark.parametrize("pole_pct,gain_pct", [(0.0, 0.0), (-20.0, 0.0), (0.0, 20.0)])
 def test_the_card_can_run_a_plant_off_the_model(pole_pct: float, gain_pct: float) -> None:
     """Steady lag at 58 pulses/ms: V (a1 - b1) / a0 of the mismatched plant, not the model."""
-    from controller.generator.dynamics.servo import mismatched
+    from controller.servo.model import mismatched
 
     card = virtual_card(xy_config(), plant_pole_pct=pole_pct, plant_gain_pct=gain_pct)
     card.write_frames(ramp_frames(250), end_of_stream=True)

@@ -12,25 +12,25 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from controller.config import ConfigError, load_config, parse_config
-from controller.generator.dynamics.path_distance import PathDistance, path_polyline
-from controller.generator.dynamics.precompensation import (
+from controller.interpreter.program import read_program
+from controller.runtime.simulation import simulate
+from controller.servo.model import (
+    discretise,
+    small_s_gains,
+    tracking_error_mm,
+)
+from controller.servo.path_distance import PathDistance, path_polyline
+from controller.servo.precompensation import (
     Precompensator,
     compensation_filter,
     residual_servo,
 )
-from controller.generator.dynamics.prediction import (
+from controller.servo.prediction import (
     acceleration_gain_s2,
     axis_servos,
     planning_limit_mm,
     plant_servos,
 )
-from controller.generator.dynamics.servo import (
-    discretise,
-    small_s_gains,
-    tracking_error_mm,
-)
-from controller.interpreter.program import read_program
-from controller.runtime.simulation import simulate
 
 REPO = Path(__file__).resolve().parents[2]
 CFG = load_config("xy_table_paper")
@@ -150,11 +150,11 @@ def test_config_key_is_read_and_refused_where_the_loop_has_position_error() -> N
 def test_the_braking_model_is_not_shared_between_compensated_and_plain_plans() -> None:
     """Both kinds of plan in one process (a bench, cncd with two configs): each stop is braked
     on its own loop's model, whichever was planned first."""
-    from controller.generator import loop
+    from controller.generator import replan
 
     blocks = list(read_program(str(REPO / "nc_programs" / "naca2415.nc"), ON))
-    loop._MODELS.clear()
+    replan._MODELS.clear()
     alone = len(simulate(blocks, ON, "ph-lookahead").t_s)
-    loop._MODELS.clear()
+    replan._MODELS.clear()
     simulate(blocks, CFG, "ph-lookahead")
     assert len(simulate(blocks, ON, "ph-lookahead").t_s) == alone

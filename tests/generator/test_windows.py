@@ -10,22 +10,22 @@ import pytest
 from long_helpers import airfoils, walk
 
 from controller.config import load_config
-from controller.generator import loop
 from controller.generator import plan as plan_module
-from controller.generator.dynamics.prediction import ServoPrediction
-from controller.generator.dynamics.stops import true_error_mm
+from controller.generator import replan
 from controller.generator.feed.planner import plan_feed
-from controller.generator.loop import RunStatus
 from controller.generator.ph import construct
 from controller.generator.ph.blend import blend_joint
 from controller.generator.plan import WINDOW_NOMINAL_S, plan_program
 from controller.generator.repeats import Bounded
+from controller.generator.replan import RunStatus
 from controller.generator.sampling import Interpolation, interpolate
 from controller.geometry.curves import LineCurve
 from controller.geometry.path import Path as ToolPath
 from controller.geometry.path import PieceKind, chain, make_piece
 from controller.interpreter.program import read_program
 from controller.runtime.simulation import report, simulate
+from controller.servo.prediction import ServoPrediction
+from controller.servo.true_distance import true_error_mm
 
 CFG = load_config(None)
 T = CFG.sample_period_s
@@ -85,7 +85,7 @@ def test_nurbs_windows_are_bounded_by_nominal_motion_time(tmp_path: Path) -> Non
 def test_windows_share_repeated_curves_and_blends_but_a_short_run_does_not(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     calls = {"blend": 0, "repeats": []}
-    original_blend, original_run = construct.blend_joint, loop.plan_contour_run
+    original_blend, original_run = construct.blend_joint, replan.plan_contour_run
 
     def counting_blend(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
         calls["blend"] += 1

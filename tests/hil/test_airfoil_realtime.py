@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from controller.config import load_config
-from controller.generator.dynamics.servo import contour_error_mm, discretise, tracking_error_mm
 from controller.motion.types import Outcome
 from controller.runtime.processes import Runtime, RuntimeOptions
+from controller.servo.model import contour_error_mm, discretise, tracking_error_mm
 
 PROGRAM = Path(__file__).resolve().parents[2] / "nc_programs" / "naca2415.nc"
 

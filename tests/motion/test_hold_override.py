@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 from runtime_helpers import virtual_card, xy_config
 
-from controller.generator.dynamics.path_distance import path_distance
-from controller.generator.dynamics.prediction import planning_limit_mm
-from controller.generator.dynamics.servo import discretise, tracking_error_mm
-from controller.generator.dynamics.stops import distance_from_reference_mm
 from controller.generator.plan import generate_reference
 from controller.interpreter.program import read_program
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer
 from controller.motion.source import ChunkSource
 from controller.motion.types import MotionProgress, MotionSettings, MotionState, Outcome
+from controller.servo.model import discretise, tracking_error_mm
+from controller.servo.path_distance import path_distance
+from controller.servo.prediction import planning_limit_mm
+from controller.servo.true_distance import distance_from_reference_mm
 
 CFG = xy_config()
 T = CFG.sample_period_s

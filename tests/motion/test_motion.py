@@ -12,8 +12,6 @@ from hypothesis import strategies as st
 from refgen import circle_chunks, line_chunks
 from runtime_helpers import Recorder, assert_smooth, virtual_card, xy_config
 
-from controller.generator.dynamics.servo import discretise, tracking_error_mm
-from controller.generator.dynamics.stops import distance_from_reference_mm
 from controller.motion.checks import FerrorCheck
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer
@@ -25,6 +23,8 @@ from controller.motion.types import (
     MotionState,
     Outcome,
 )
+from controller.servo.model import discretise, tracking_error_mm
+from controller.servo.true_distance import distance_from_reference_mm
 from drivers.base import CardStatus
 
 CFG = xy_config()

@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from runtime_helpers import Recorder, virtual_card, xy_config
 
-from controller.generator.dynamics.path_distance import PathDistance, path_polyline
 from controller.generator.plan import generate_reference
 from controller.interpreter.program import read_program
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer
 from controller.motion.source import ChunkSource
 from controller.motion.types import MotionProgress, MotionSettings, MotionState, Outcome
+from controller.servo.path_distance import PathDistance, path_polyline
 
 PLAIN = xy_config()
 ON = replace(PLAIN, interpolator=replace(PLAIN.interpolator, servo_precompensation=True))

@@ -12,13 +12,13 @@ from long_helpers import walk
 
 from controller.config import load_config
 from controller.errors import PlanningError
-from controller.generator.dynamics.precompensation import Precompensator
 from controller.interpreter.program import read_program
 from controller.operator import simulate_cmd
 from controller.operator.cli import main
 from controller.operator.simulate_plot import MAX_POINTS, PlotSeries
-from controller.runtime.sim_stream import SampleBlock
+from controller.runtime.simulate_stream import SampleBlock
 from controller.runtime.simulation import simulate
+from controller.servo.precompensation import Precompensator
 
 REPO = Path(__file__).resolve().parents[2]
 NACA = str(REPO / "nc_programs/naca2415.nc")

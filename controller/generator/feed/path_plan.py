@@ -12,7 +12,7 @@ from controller.generator.feed.grid import PieceSamples, grid_step_mm, limit_sam
 from controller.generator.feed.limits import chord_error_feed_mm_s, corner_feed_mm_s
 from controller.generator.feed.planner import PlanResult, plan_feed
 from controller.generator.feed.profile import FeedProfile
-from controller.generator.feed.stops import (
+from controller.generator.feed.stop_approach import (
     STOP_MATCH_MM,
     approach_split,
     model_stop_accel,
@@ -48,7 +48,8 @@ class FeedInput:
     centripetal_accel_mm_s2: float  # normal-acceleration budget (contour-error derived)
     policy: LimitPolicy = LimitPolicy.CONTINUOUS
     reductions: tuple[Reduction, ...] = field(default=())
-    # (s of a stop, braking acceleration into it), from the dynamics module (feed/stops.py)
+    # (s of a stop, braking acceleration into it), from the dynamics module
+    # (feed/stop_approach.py)
     stop_accels: tuple[tuple[float, float], ...] = field(default=())
     # the dynamics module's first guess for stops without one: approach speed -> acceleration
     stop_accel_for: Callable[[float], float] | None = None

@@ -14,7 +14,7 @@ from drivers.base import Drive
 from drivers.homing import homing_groups
 
 
-class Machine(Protocol):
+class ManualHost(Protocol):
     """What homing needs of the daemon's Machine (machine.py imports this module)."""
 
     config: MachineConfig
@@ -46,7 +46,7 @@ def unhomed_axes(config: MachineConfig, homed: tuple[bool, ...]) -> list[str]:
             if a.homing is not None and not h]
 
 
-def start_homing(machine: Machine, axis_names: list[str]) -> None:
+def start_homing(machine: ManualHost, axis_names: list[str]) -> None:
     """Home the named axes (all with a homing sequence if none named), group by group, in a
     thread; the machine is HOMING meanwhile and IDLE (or FAULT) after."""
     config = machine.config
@@ -69,7 +69,7 @@ def start_homing(machine: Machine, axis_names: list[str]) -> None:
                      daemon=True).start()
 
 
-def _home_groups(machine: Machine, groups: list[tuple[int, ...]]) -> None:
+def _home_groups(machine: ManualHost, groups: list[tuple[int, ...]]) -> None:
     names = lambda g: ", ".join(machine.config.axes[i].name.upper() for i in g)  # noqa: E731
     try:
         for group in groups:
@@ -107,7 +107,7 @@ def jog_program(config: MachineConfig, position_mm: dict[str, float], axis: str,
     return text, note
 
 
-def homed_status(machine: Machine) -> dict[str, Any]:
+def homed_status(machine: ManualHost) -> dict[str, Any]:
     try:
         homed = machine.drive.homed()
     except CncError:

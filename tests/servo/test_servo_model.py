@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from scipy.signal import cont2discrete, lfilter
 
 from controller.config import load_config
-from controller.generator.dynamics.servo import (
+from controller.servo.model import (
     AxisServoStepper,
     discretise,
     error_transfer,

@@ -1,4 +1,4 @@
-"""Module 4 of the generator: servo-model prediction of tracking and contour errors (eqs. 27-28)."""
+"""Servo-model prediction of tracking and contour errors (eqs. 27-28) along a reference."""
 
 from __future__ import annotations
 
@@ -8,18 +8,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.generator.dynamics.precompensation import residual_servo
-from controller.generator.dynamics.servo import (
+from controller.servo.model import (
     DiscreteServo,
     contour_error_mm,
     discretise,
     filter_block,
     small_s_gains,
 )
+from controller.servo.precompensation import residual_servo
 
 SETTLE_S = 0.06  # simulate this long at rest after the run so the tail error is seen too
-TARGET_FRACTION = 0.95  # re-plan aiming this far under the limit, so rounds converge quickly
-LOOKBACK_S = 0.03  # a violation is caused by what the path did up to this long before it
 
 
 @dataclass(frozen=True, eq=False)
@@ -29,16 +27,6 @@ class ServoPrediction:
     ex_mm: np.ndarray
     ey_mm: np.ndarray
     contour_mm: np.ndarray
-
-
-@dataclass(frozen=True)
-class Violation:
-    """A stretch of samples [k_lo, k_hi] whose |contour error| exceeds the limit."""
-
-    k_lo: int
-    k_hi: int
-    k_peak: int
-    peak_mm: float
 
 
 def planning_limit_mm(config: MachineConfig) -> float:
@@ -66,7 +54,8 @@ def axis_servos(config: MachineConfig) -> tuple[DiscreteServo, DiscreteServo]:
 
 
 def acceleration_gain_s2(config: MachineConfig) -> float:
-    """c2 of the small-s expansion e ~ c1 v + c2 a (ALGORITHMS.md 3): the worse of X and Y.
+    """c2 of the small-s expansion e ~ c1 v + c2 a (docs/algorithms.md,
+    The servo model (eq. 27)): the worse of X and Y.
 
     The contour error on a curve is about c2 * kappa * v^2, so eps_max / c2 is the normal
     acceleration the servo loop can follow within the contour limit. Pre-compensated, c2 is
@@ -115,16 +104,3 @@ def state_after(xy_mm: np.ndarray, start_xy_mm: np.ndarray,
     v = _velocities(xy_mm, start_xy_mm, sample_period_s)
     sx, sy = rest_state(servos) if state is None else state
     return filter_block(servos[0], v[:, 0], sx)[1], filter_block(servos[1], v[:, 1], sy)[1]
-
-
-def find_violations(contour_mm: np.ndarray, limit_mm: float) -> list[Violation]:
-    """Contiguous stretches above the limit, each with its peak."""
-    over = np.abs(contour_mm) > limit_mm
-    if not np.any(over):
-        return []
-    edges = np.flatnonzero(np.diff(np.r_[0, over.astype(np.int8), 0]))
-    out = []
-    for lo, hi in zip(edges[::2], edges[1::2] - 1, strict=True):
-        k = lo + int(np.argmax(np.abs(contour_mm[lo:hi + 1])))
-        out.append(Violation(int(lo), int(hi), int(k), float(abs(contour_mm[k]))))
-    return out

@@ -17,10 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.generator.dynamics.prediction import SETTLE_S, axis_servos
-from controller.generator.dynamics.servo import BLOCK, contour_error_mm, filter_block
-from controller.generator.dynamics.stops import NEAR_SAMPLES, window_distance_mm
 from controller.numeric import segment_distance
+from controller.servo.model import BLOCK, contour_error_mm, filter_block
+from controller.servo.prediction import SETTLE_S, axis_servos
+from controller.servo.true_distance import NEAR_SAMPLES, window_distance_mm
 
 MOVING_MM = 1e-9  # a central difference shorter than this: the tangent is held
 

@@ -11,24 +11,15 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.errors import PlanningError
-from controller.generator.dynamics.prediction import (
+from controller.generator.dynamics.braking import BrakingModel
+from controller.generator.dynamics.checks import (
     LOOKBACK_S,
     TARGET_FRACTION,
-    ServoPrediction,
-    ServoState,
-    Violation,
-    acceleration_gain_s2,
-    axis_servos,
-    find_violations,
-    planning_limit_mm,
-    predict,
-)
-from controller.generator.dynamics.stops import (
-    BrakingModel,
     StopError,
+    Violation,
+    find_violations,
     near_stops,
     stop_errors,
-    true_error_mm,
 )
 from controller.generator.feed.path_plan import (
     FeedInput,
@@ -49,6 +40,15 @@ from controller.generator.ph.construct import (
 from controller.generator.repeats import Repeats
 from controller.generator.sampling import Interpolation, Samples, interpolate
 from controller.geometry.path import Piece, PieceKind
+from controller.servo.prediction import (
+    ServoPrediction,
+    ServoState,
+    acceleration_gain_s2,
+    axis_servos,
+    planning_limit_mm,
+    predict,
+)
+from controller.servo.true_distance import true_error_mm
 
 # The first plan keeps kappa v^2 under this share of the planning limit / c2 (the steady contour
 # error); the rest of the limit is left for the transients the dynamics module then measures.

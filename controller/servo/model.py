@@ -1,13 +1,13 @@
 """Servo-loop model of one axis (paper eq. 27, Table II), discretised at the sample period.
 
-Convention (ALGORITHMS.md section 3): the tracking error E = R - P is the output of the
-4th-order E/V transfer function, zero-order-hold discretised, driven by the per-sample axis
-velocity v[k] = (r[k] - r[k-1]) / T. With a0 = b0 the s factor of eq. 27 cancels, so
+Convention (docs/algorithms.md, The servo model (eq. 27)): the tracking error E = R - P is the
+output of the 4th-order E/V transfer function, zero-order-hold discretised, driven by the
+per-sample axis velocity v[k] = (r[k] - r[k-1]) / T. With a0 = b0 the s factor of eq. 27 cancels, so
 E/V = (s^3 + a3 s^2 + (a2 - b2) s + (a1 - b1)) / (s^4 + a3 s^3 + a2 s^2 + a1 s + a0)
 (divided through by a4). This convention gives the steady ramp error V (a1 - b1) / a0.
 
 Only numpy is used: scipy.signal costs 0.6 s to import, which `cncctl run` would pay before
-the first motion. tests/generator/test_servo.py checks both functions against scipy.signal.
+the first motion. tests/servo/test_servo_model.py checks both functions against scipy.signal.
 """
 
 from __future__ import annotations

@@ -12,14 +12,14 @@ from hypothesis.extra.numpy import arrays
 
 from controller.blocks import NurbsBlock, StopBlock
 from controller.config import load_config
-from controller.generator.dynamics.path_distance import (
+from controller.geometry.nurbs import Nurbs
+from controller.interpreter.program import read_program
+from controller.servo.path_distance import (
     PathDistance,
     brute_force_distance_mm,
     path_distance,
     path_polyline,
 )
-from controller.geometry.nurbs import Nurbs
-from controller.interpreter.program import read_program
 
 REPO = Path(__file__).resolve().parents[2]
 coord = st.floats(-50.0, 50.0, allow_nan=False, allow_infinity=False)

@@ -4,28 +4,16 @@ included. Around a stop it is the overshoot eq. 28 cannot see."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from controller.config import MachineConfig
-from controller.generator.dynamics.prediction import ServoPrediction, axis_servos
-from controller.generator.dynamics.servo import tracking_error_mm
-from controller.generator.dynamics.window_search import pruned_window_distance_mm, squared_gap
 from controller.numeric import segment_distance
+from controller.servo.prediction import ServoPrediction
+from controller.servo.window_search import pruned_window_distance_mm, squared_gap
 
 # Reference segments searched each side of a sample's own: the modelled tool is never further
 # along the path than this from its reference (at 1 ms, 40 samples hold 50 um even at 1.25 mm/s).
 NEAR_SAMPLES = 40
-BEFORE_S = 0.05  # a stop's window starts this long before it ...
 WINDOW_BLOCK = 512  # samples measured at once: their temporaries stay in the cache
-
-
-@dataclass(frozen=True)
-class StopError:
-    s_mm: float  # where the stop is on the run's path
-    k: int  # its sample
-    error_mm: float  # largest true distance in its window (the overshoot and its settling)
 
 
 def held_reference(xy_mm: np.ndarray, pred: ServoPrediction) -> np.ndarray:
@@ -108,75 +96,3 @@ def window_distance_mm(ref: np.ndarray, points: np.ndarray, k: np.ndarray,
         out[lo:lo + WINDOW_BLOCK] = np.sqrt(squared_gap(px - ax, py - ay, abx, aby, den)
                                             .min(axis=1))
     return out
-
-
-def stop_errors(true_mm: np.ndarray, s_mm: np.ndarray, stops_mm: list[float], n_run: int,
-                sample_period_s: float) -> list[StopError]:
-    """Per stop: the largest true error from BEFORE_S before it to the end of the settling
-    window after it (or to the next stop's window)."""
-    before = int(round(BEFORE_S / sample_period_s))
-    settle = len(true_mm) - n_run
-    out = []
-    for s_stop in stops_mm:
-        k = int(min(np.searchsorted(s_mm, s_stop - 1e-6), n_run - 1))
-        window = true_mm[max(0, k - before):min(len(true_mm), k + settle + 1)]
-        out.append(StopError(float(s_stop), k, float(window.max()) if window.size else 0.0))
-    return out
-
-
-def near_stops(n: int, stops: list[StopError], sample_period_s: float, settle: int) -> np.ndarray:
-    """Mask of the samples inside some stop's window (their error is the stops' business)."""
-    before = int(round(BEFORE_S / sample_period_s))
-    mask = np.zeros(n, bool)
-    for e in stops:
-        mask[max(0, e.k - before):min(n, e.k + settle + 1)] = True
-    return mask
-
-
-class BrakingModel:
-    """A first guess of each stop's braking acceleration, before any plan: the overshoot of a
-    straight cruise at v braked to rest by a quintic of peak acceleration A, through each axis
-    model; the largest A (a bisection) whose overshoot is within the target. The loop then
-    checks it on the real path. Memoised by speed on a 0.1 mm/s grid (the overshoot is not
-    monotonic in the speed: between grid speeds it may be a little over the target, which is
-    5 % under the limit, and the loop measures the real path anyway)."""
-
-    CRUISE_S = 0.03  # the cruise before the braking: the servo is in its steady lag by then
-
-    def __init__(self, config: MachineConfig, target_mm: float) -> None:
-        self.servos = axis_servos(config)
-        self.period_s = config.sample_period_s
-        self.accel_mm_s2 = config.interpolator.max_accel_mm_s2
-        self.target_mm = target_mm
-        self._memo: dict[float, float] = {}
-
-    def overshoot_mm(self, v_mm_s: float, accel_mm_s2: float) -> float:
-        T = self.period_s  # noqa: N806
-        brake_s = 15.0 * v_mm_s / (8.0 * accel_mm_s2)
-        tau = np.minimum(np.arange(1, int(np.ceil(brake_s / T)) + 1) * T / brake_s, 1.0)
-        v = np.r_[np.full(int(self.CRUISE_S / T), v_mm_s),
-                  v_mm_s * (1.0 - tau ** 3 * (10.0 + tau * (-15.0 + 6.0 * tau))),
-                  np.zeros(int(SETTLE_AFTER_S / T))]
-        x = np.cumsum(v) * T
-        # How far past the stop each axis model's actual position (x - e) gets.
-        return max(float(np.max(x - tracking_error_mm(servo, v) - x[-1]))
-                   for servo in self.servos)
-
-    def accel_for(self, v_mm_s: float) -> float:
-        """The braking acceleration for an approach at v (the full one when that is fine)."""
-        key = np.ceil(v_mm_s * 10.0) / 10.0
-        if key not in self._memo:
-            self._memo[key] = self._search(float(key))
-        return self._memo[key]
-
-    def _search(self, v_mm_s: float) -> float:
-        if v_mm_s <= 0.0 or self.overshoot_mm(v_mm_s, self.accel_mm_s2) <= self.target_mm:
-            return self.accel_mm_s2
-        lo, hi = 0.05 * self.accel_mm_s2, self.accel_mm_s2
-        for _ in range(12):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if self.overshoot_mm(v_mm_s, mid) <= self.target_mm else (lo, mid)
-        return lo
-
-
-SETTLE_AFTER_S = 0.06  # the model's settling after the stop

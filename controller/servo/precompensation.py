@@ -1,10 +1,10 @@
 """Servo pre-compensation: the reference sent to a drive leads the wanted path by the model's lag.
 
-The Table II loop follows its reference R with P/R = N/D (ALGORITHMS.md section 3), N = b2 s^2 +
-b1 s + b0 and D the 4th-order denominator: at speed it lags behind (c1 v along the path) and cuts
-inside every curve (c2 kappa v^2). Sending R = (D/N) P makes the model follow P itself. D/N is
-improper (the plant has relative degree 2), so it is split into derivative terms and a stable
-strictly proper rest. With V the wanted axis velocity,
+The Table II loop follows its reference R with P/R = N/D (docs/algorithms.md, Pre-compensation),
+N = b2 s^2 + b1 s + b0 and D the 4th-order denominator: at speed it lags behind
+(c1 v along the path) and cuts inside every curve (c2 kappa v^2). Sending R = (D/N) P makes the
+model follow P itself. D/N is improper (the plant has relative degree 2), so it is split into
+derivative terms and a stable strictly proper rest. With V the wanted axis velocity,
 
     R - P = ((D - N) / (s N)) V = (q1 s + q0) V + (Rm(s) / (s N)) V,
 
@@ -29,7 +29,7 @@ from functools import lru_cache
 import numpy as np
 
 from controller.config import ServoParams
-from controller.generator.dynamics.servo import (
+from controller.servo.model import (
     DiscreteServo,
     discretise,
     filter_block,

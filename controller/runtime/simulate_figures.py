@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from controller.generator.loop import RunPlan, RunStatus
-from controller.runtime.sim_stream import SampleBlock
+from controller.generator.replan import RunPlan, RunStatus
+from controller.runtime.simulate_stream import SampleBlock
 
 EXACT_SUM_SAMPLES = 1 << 18  # about 4 minutes of motion at 1 ms: 8 MB of kept values
 

@@ -22,7 +22,6 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from controller.blocks import ArcBlock, LineBlock, NcBlock, NurbsBlock
 from controller.geometry.nurbs import Nurbs
@@ -88,6 +87,10 @@ class PathDistance:
         seeds = self._a[seg_of_seed] + frac[:, None] * self._d[seg_of_seed]
         seeds = np.vstack([seeds, pts[-1:]])
         self._seed_segment = np.r_[seg_of_seed, len(seg_len) - 1]
+        # scipy here, not at the top: the servo package is imported by every process, and
+        # scipy costs a fraction of a second to import where only tests and benches measure.
+        from scipy.spatial import cKDTree
+
         self._tree = cKDTree(seeds)
 
     def measure(self, points_mm: np.ndarray, chunk: int = 4096) -> FootPoints:

@@ -10,12 +10,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from runtime_helpers import xy_config
 
-from controller.generator.dynamics.stops import distance_from_reference_mm, window_distance_mm
 from controller.generator.feed.profile import transition_duration_s
-from controller.generator.feed.stops import approach_split
+from controller.generator.feed.stop_approach import approach_split
 from controller.interpreter.program import read_program
 from controller.numeric import segment_distance
 from controller.runtime.simulation import report, simulate
+from controller.servo.true_distance import distance_from_reference_mm, window_distance_mm
 
 XY_TABLE = xy_config()  # the paper's method: its stops overshoot without pre-compensation
 LIMIT_UM = XY_TABLE.interpolator.contour_error_limit_mm * 1e3
@@ -79,7 +79,7 @@ def test_approach_split_joins_at_a_speed_vlim_allows(vmax: float, length: float,
 
 
 def test_the_braking_model_finds_the_largest_acceleration_within_the_target() -> None:
-    from controller.generator.dynamics.stops import BrakingModel
+    from controller.generator.dynamics.braking import BrakingModel
 
     target_mm = 0.95 * XY_TABLE.interpolator.contour_error_limit_mm
     model = BrakingModel(XY_TABLE, target_mm)

@@ -12,14 +12,14 @@ import pytest
 from long_helpers import walk
 
 from controller.config import load_config
-from controller.generator.dynamics.prediction import SETTLE_S, axis_servos
-from controller.generator.dynamics.servo import contour_error_mm, tracking_error_mm
-from controller.generator.dynamics.stops import distance_from_reference_mm
 from controller.generator.plan import plan_program
 from controller.interpreter.program import read_program
-from controller.runtime.sim_figures import Figures, Moments
-from controller.runtime.sim_stream import ServoStream
+from controller.runtime.simulate_figures import Figures, Moments
+from controller.runtime.simulate_stream import ServoStream
 from controller.runtime.simulation import simulate, tangent_angles
+from controller.servo.model import contour_error_mm, tracking_error_mm
+from controller.servo.prediction import SETTLE_S, axis_servos
+from controller.servo.true_distance import distance_from_reference_mm
 
 REPO = Path(__file__).resolve().parents[2]
 XY = load_config(None)
