@@ -10,7 +10,7 @@ from typing import TextIO
 
 import numpy as np
 
-from controller.config import MachineConfig, load_config
+from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import CncError, NcError
 from controller.generator.dynamics.precompensation import Precompensator
 from controller.generator.plan import Algorithm
@@ -38,7 +38,7 @@ TABLE_ROWS = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("program", help="G-code program")
-    parser.add_argument("--config", help="machine configuration (YAML file or built-in name)")
+    parser.add_argument("--config", help=CONFIG_HELP)
     parser.add_argument("--algorithm", default=Algorithm.PH_LOOKAHEAD.value,
                         choices=[a.value for a in Algorithm])
     parser.add_argument("--compare", action="store_true", help="run all four algorithms")
