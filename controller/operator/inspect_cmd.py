@@ -9,7 +9,7 @@ import sys
 from controller.config import CONFIG_HELP, load_config
 from controller.errors import ConfigError, NcError
 from controller.operator.inspect_report import format_report, inspect_blocks
-from controller.operator.outputs import OutputError, output_path
+from controller.operator.outputs import OutputError, plot_path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         config = load_config(args.config)
-        plot = output_path(args.plot, "--plot") if args.plot is not None else None
+        plot = plot_path(args.plot) if args.plot is not None else None
         report = inspect_blocks(read_program(args.program, config), config)
     except ConfigError as exc:
         print(f"cncctl: config error: {exc}", file=sys.stderr)

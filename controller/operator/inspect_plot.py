@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from controller.operator.inspect_report import InspectReport
+from controller.operator.outputs import plot_format
 
 _SAMPLES_PER_SPAN = 32
 
@@ -46,5 +47,5 @@ def plot_report(report: InspectReport, png_path: str) -> None:
     ax_kappa.set_ylabel("curvature 1/mm")
     ax_kappa.legend(loc="best", fontsize=8)
     fig.tight_layout()
-    fig.savefig(png_path, dpi=110)
+    fig.savefig(png_path, dpi=110, format=plot_format(png_path))
     plt.close(fig)

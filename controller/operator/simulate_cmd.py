@@ -16,7 +16,7 @@ from controller.generator.dynamics.precompensation import Precompensator
 from controller.generator.plan import Algorithm
 from controller.interpreter.program import read_program
 from controller.operator.check_cmd import check_program
-from controller.operator.outputs import OutputError, output_path
+from controller.operator.outputs import OutputError, output_path, plot_path
 from controller.operator.simulate_plot import PlotSeries
 from controller.operator.simulate_view import SimulateView
 from controller.runtime.sim_figures import Figures
@@ -170,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
         if args.trajectory is not None:
             args.trajectory = output_path(args.trajectory, "--trajectory")
         if args.plot is not None:
-            args.plot = output_path(args.plot, "--plot")
+            args.plot = plot_path(args.plot)
         _check_whole_program(args.program, config)
         algorithms = [a.value for a in Algorithm] if args.compare else [args.algorithm]
         chosen = args.algorithm if args.compare else algorithms[-1]
