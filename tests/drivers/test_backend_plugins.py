@@ -80,3 +80,14 @@ def test_broken_entry_point_is_a_drive_error(tmp_path: Path) -> None:
     run = _cncctl(site, "run", "--virtual-time", "--yes", "--config", str(config), PROGRAM)
     assert run.returncode == 2, run.stderr
     assert "needs libfoo" in run.stderr and "Traceback" not in run.stderr
+
+
+def test_a_backend_registered_in_process_passes_the_config_check(tmp_path: Path) -> None:
+    from controller.config import load_config
+    from drivers.registry import make_drive, register_backend
+    from drivers.sim.card import SimCard
+
+    register_backend("inprocess_test_drive", SimCard)
+    config = load_config(str(_config(tmp_path, "inprocess_test_drive")))
+    assert config.drive.backend == "inprocess_test_drive"
+    assert isinstance(make_drive(config, realtime=False), SimCard)
