@@ -10,12 +10,19 @@ from typing import Any
 
 import yaml
 
+from controller.backends import BUILTIN_BACKENDS, backend_names
 from controller.errors import ConfigError
 from controller.servo_poles import pole_problem
 from controller.yaml_strict import Section, StrictLoader
 
 DEFAULT_CONFIG_NAME = "xy_table"
 CONFIG_ENV_VAR = "CNC_CONFIG"
+# The installed machine's config (systemd/install.py writes it): `cncctl` and `cncd` read it
+# when neither --config nor $CNC_CONFIG names one, so both see the same machine.
+SYSTEM_CONFIG_PATH = Path("/etc/cncd/cncd.yaml")
+CONFIG_HELP = (f"machine configuration, a YAML file or a built-in name (default: "
+               f"${CONFIG_ENV_VAR}, else {SYSTEM_CONFIG_PATH} if it exists, "
+               f"else {DEFAULT_CONFIG_NAME})")
 
 
 @dataclass(frozen=True, slots=True)
@@ -214,7 +221,9 @@ def _read_interpolator(sec: Section) -> InterpolatorConfig:
 
 
 def _read_drive(sec: Section) -> DriveConfig:
-    backend = sec.str("backend", choices=("sim", "canopen", "serial"))
+    backend = sec.str("backend")
+    if backend not in BUILTIN_BACKENDS:  # only then are the installed packages looked through
+        backend = sec.str("backend", choices=backend_names())
     options = sec.mapping("options", {})
     sec.finish()
     return DriveConfig(backend=backend, options=tuple(sorted(options.items())))
@@ -313,8 +322,13 @@ def builtin_config_path(name: str) -> Path | None:
 
 
 def resolve_config_path(explicit: str | None = None) -> Path:
-    """--config FILE, else $CNC_CONFIG, else the built-in xy_table; a bare name is a built-in."""
-    chosen = explicit or os.environ.get(CONFIG_ENV_VAR) or DEFAULT_CONFIG_NAME
+    """--config FILE, else $CNC_CONFIG, else /etc/cncd/cncd.yaml if there is one, else the
+    built-in xy_table; a bare name is a built-in. `cncctl` and `cncd` both resolve here."""
+    chosen = explicit or os.environ.get(CONFIG_ENV_VAR)
+    if not chosen:
+        if SYSTEM_CONFIG_PATH.is_file():
+            return SYSTEM_CONFIG_PATH
+        chosen = DEFAULT_CONFIG_NAME
     path = Path(chosen)
     if path.is_file():
         return path

@@ -133,6 +133,25 @@ def describe(table: OffsetTable) -> dict[str, Any]:
     }
 
 
+def describe_text(table: OffsetTable, axes: Sequence[str]) -> str:
+    """One line for the event log: the active system, the origin in force, every system set
+    and G92 if set, on the machine's axes (mm)."""
+    def words(p: Sequence[float]) -> str:
+        return " ".join(f"{a.upper()}{p['xyz'.index(a)]:.3f}" for a in axes)
+
+    def nonzero(p: Sequence[float]) -> bool:
+        return any(p["xyz".index(a)] != 0.0 for a in axes)
+
+    text = f"{table.active_name} active, work origin {words(work_origin(table))}"
+    set_ = [f"{name} {words(p)}" for name, p in zip(SYSTEM_NAMES, table.systems_mm, strict=True)
+            if nonzero(p)]
+    if set_:
+        text += "; " + ", ".join(set_)
+    if nonzero(table.g92_mm):
+        text += f"; G92 {words(table.g92_mm)}"
+    return text
+
+
 def to_json(table: OffsetTable) -> dict[str, Any]:
     """The file's form of a table (what save_offsets writes)."""
     return {

@@ -1,4 +1,8 @@
-"""Drive backends by name (python-can style): config `drive.backend` picks one, imported on use."""
+"""Drive backends by name (python-can style): config `drive.backend` picks one, imported on use.
+
+A backend from another package registers through the entry-point group `phcnc.drives`
+(`name = "module:factory"`, see controller/backends.py); factory(config, **drive.options)
+returns a drivers.base.Drive, not yet opened."""
 
 from __future__ import annotations
 
@@ -6,6 +10,8 @@ import importlib
 from collections.abc import Callable
 from typing import Any
 
+from controller.backends import allow_backend, installed_backends
+from controller.backends import backend_names as backend_names
 from controller.config import MachineConfig
 from controller.errors import DriveError
 from drivers.base import Drive
@@ -28,22 +34,30 @@ _registered: dict[str, Callable[..., Drive]] = {}
 
 
 def register_backend(name: str, factory: Callable[..., Drive]) -> None:
-    """Make a backend from outside this package available under `name` (config drive.backend)."""
+    """Make a backend available under `name` (config drive.backend) in this process; an
+    installed package uses the `phcnc.drives` entry point instead."""
     _registered[name] = factory
-
-
-def backend_names() -> tuple[str, ...]:
-    return tuple(sorted(BUILTIN_BACKENDS.keys() | _registered.keys()))
+    allow_backend(name)
 
 
 def _factory(name: str) -> Callable[..., Drive]:
     if name in _registered:
         return _registered[name]
-    if name not in BUILTIN_BACKENDS:
+    if name in BUILTIN_BACKENDS:
+        module_name, class_name = BUILTIN_BACKENDS[name].split(":")
+        return getattr(importlib.import_module(module_name), class_name)
+    ep = installed_backends().get(name)
+    if ep is None:
         raise DriveError(f"drive backend {name!r} is not available "
                          f"(have: {', '.join(backend_names())})")
-    module_name, class_name = BUILTIN_BACKENDS[name].split(":")
-    return getattr(importlib.import_module(module_name), class_name)
+    try:
+        factory = ep.load()
+    except Exception as exc:  # a broken plug-in is a drive error, not a traceback
+        raise DriveError(f"drive backend {name!r} ({ep.value}, entry point "
+                         f"{ep.group}) cannot be loaded: {type(exc).__name__}: {exc}") from exc
+    if not callable(factory):
+        raise DriveError(f"drive backend {name!r}: {ep.value} is not callable")
+    return factory
 
 
 def simulated_peer(name: str) -> Callable[..., None]:

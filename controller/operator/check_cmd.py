@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Literal, overload
 
 from controller.blocks import ArcBlock, LineBlock, NurbsBlock
-from controller.config import MachineConfig, load_config
+from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import ConfigError, DriveError, NcError, OffsetsError
 from controller.interpreter.extent import (
     TravelLimits,
@@ -154,7 +154,7 @@ def format_summary(s: CheckSummary) -> str:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("program", help="G-code program file")
-    parser.add_argument("--config", help="machine config file or built-in name")
+    parser.add_argument("--config", help=CONFIG_HELP)
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument("--offsets", metavar="FILE",
                         help="work offset table (JSON, as cncd keeps it in its state "

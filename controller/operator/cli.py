@@ -1,4 +1,4 @@
-"""`cncctl`: the operator command (check, inspect, simulate, run)."""
+"""`cncctl`: the operator command (check, inspect, simulate, run, the daemon's commands)."""
 
 from __future__ import annotations
 
@@ -28,6 +28,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("offset", _OPS + "control_cmd", "work offsets: show, set G54 --here, select G55, clear-g92"),
     ("log", _OPS + "control_cmd", "the daemon's last events"),
     ("simdrive", _OPS + "simdrive_cmd", "serve a simulated CANopen drive set or serial card"),
+    ("completion", _OPS + "completion_cmd", "print the shell completion script (bash or zsh)"),
 )
 
 

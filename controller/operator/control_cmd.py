@@ -24,6 +24,7 @@ from controller.operator.client import (
 )
 from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
 from controller.operator.run_remote import FINAL_EVENTS, RemoteOperator
+from controller.operator.words import axes_text, offsets_table
 
 # The README's exit codes everywhere: 0 done, 2 rejected (nothing moved), 3 fault, 4 aborted.
 EXIT_REFUSED = EXIT_REJECTED
@@ -76,6 +77,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--here", action="store_true",
                             help="the current position becomes the system's zero (or reads "
                                  "the values given)")
+        parser.add_argument("--json", action="store_true",
+                            help="the whole table as JSON (every axis), not a table")
     elif command == "feed":
         parser.add_argument("percent", type=float,
                             help="feed override in %% of the programmed feed, 0-150 "
@@ -241,7 +244,7 @@ def _follow_job(client: DaemonClient, continuous: bool = False,
                 where = event.get("final_position_mm")
                 message = event.get("message") or ""
                 print(f"cncctl: {kind}" + (f": {message}" if message else "")
-                      + (f" at {where}" if where else ""))
+                      + (f" at {axes_text(where)}" if where else ""))
                 if kind == "rejected":
                     return EXIT_REFUSED
                 if kind == "aborted" and continuous and (
@@ -277,8 +280,20 @@ def _offset(client: DaemonClient, args: argparse.Namespace) -> int:
             values[m.group(1).lower()] = float(m.group(2))
         table = client.request("offset", action=args.action, system=args.system or "",
                                values=values, here=args.here)["offsets"]
-    print(json.dumps(table, indent=2))
+    if args.json:
+        print(json.dumps(table, indent=2))
+    else:
+        print(offsets_table(table, _machine_axes(client)))
     return 0
+
+
+def _machine_axes(client: DaemonClient) -> list[str]:
+    """The machine's axes, as the daemon's status names them (xyz when it names none)."""
+    status = client.request("status")
+    for key in ("position_mm", "homed", "work_position_mm"):
+        if status.get(key):
+            return list(status[key])
+    return list("xyz")
 
 
 def _feed(client: DaemonClient, args: argparse.Namespace) -> int:

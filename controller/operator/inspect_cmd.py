@@ -6,15 +6,15 @@ import argparse
 import json
 import sys
 
-from controller.config import load_config
+from controller.config import CONFIG_HELP, load_config
 from controller.errors import ConfigError, NcError
 from controller.operator.inspect_report import format_report, inspect_blocks
-from controller.operator.outputs import OutputError, output_path
+from controller.operator.outputs import OutputError, plot_path
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("program", help="G-code program file")
-    parser.add_argument("--config", help="machine config file or built-in name")
+    parser.add_argument("--config", help=CONFIG_HELP)
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     parser.add_argument("--plot", metavar="PNG", help="write a plot of curves, zones and kappa")
 
@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         config = load_config(args.config)
-        plot = output_path(args.plot, "--plot") if args.plot is not None else None
+        plot = plot_path(args.plot) if args.plot is not None else None
         report = inspect_blocks(read_program(args.program, config), config)
     except ConfigError as exc:
         print(f"cncctl: config error: {exc}", file=sys.stderr)

@@ -2,20 +2,40 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from controller.operator.inspect_report import InspectReport
+from controller.operator.outputs import plot_format
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 _SAMPLES_PER_SPAN = 32
 
 
 def plot_report(report: InspectReport, png_path: str) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = draw_report(report)
+    fig.savefig(png_path, dpi=110, format=plot_format(png_path))
+    plt.close(fig)
+
+
+def draw_report(report: InspectReport) -> Figure:
+    """The figure: every block's path on the left (lines, arcs, NURBS), kappa(u) on the right."""
     import matplotlib
 
     matplotlib.use("Agg")  # no display needed
     import matplotlib.pyplot as plt
 
     fig, (ax_path, ax_kappa) = plt.subplots(1, 2, figsize=(13, 5.5))
+    feed_label, rapid_label = "lines and arcs", "rapids"
+    for pts, rapid in report.moves:
+        ax_path.plot(pts[:, 0], pts[:, 1], ":" if rapid else "-", color="0.45", lw=0.8,
+                     label=rapid_label if rapid else feed_label)
+        feed_label, rapid_label = (feed_label, None) if rapid else (None, rapid_label)
     for i, (curve, zones, segments, kappa_th) in enumerate(
             zip(report.curves, report.zones, report.segments, report.kappa_th_per_mm,
                 strict=True)):
@@ -44,7 +64,10 @@ def plot_report(report: InspectReport, png_path: str) -> None:
     ax_path.legend(loc="best", fontsize=8)
     ax_kappa.set_xlabel("u")
     ax_kappa.set_ylabel("curvature 1/mm")
-    ax_kappa.legend(loc="best", fontsize=8)
+    if report.curves:
+        ax_kappa.legend(loc="best", fontsize=8)
+    else:
+        ax_kappa.text(0.5, 0.5, "no NURBS blocks", ha="center", va="center",
+                      transform=ax_kappa.transAxes)
     fig.tight_layout()
-    fig.savefig(png_path, dpi=110)
-    plt.close(fig)
+    return fig

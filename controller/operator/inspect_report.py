@@ -53,6 +53,8 @@ class InspectReport:
     zones: list[list[CornerZone]] = field(default_factory=list)
     segments: list[list[PhSegment]] = field(default_factory=list)
     kappa_th_per_mm: list[float] = field(default_factory=list)
+    # the lines and arcs as XY polylines (mm), each with True for a rapid: drawn, not reported
+    moves: list[tuple[np.ndarray, bool]] = field(default_factory=list)
 
     def to_json(self) -> dict[str, object]:
         return {"path_length_mm": self.path_length_mm, "nurbs": [asdict(n) for n in self.nurbs]}
@@ -80,12 +82,31 @@ def inspect_nurbs(curve: Nurbs, line: int, kappa_th_per_mm: float, error_limit_m
     return info, zones, segments
 
 
+ARC_STEP_RAD = np.pi / 90  # 2 degrees a chord: a smooth arc at any plot size
+
+
+def move_polyline(block: LineBlock | ArcBlock) -> np.ndarray:
+    """The XY points (n, 2) of a line or arc, for the plot."""
+    if isinstance(block, LineBlock):
+        return np.array([block.start[:2], block.end[:2]], dtype=float)
+    cx, cy = block.center
+    sweep = block.sweep_rad
+    t = np.linspace(0.0, 1.0, max(2, int(np.ceil(abs(sweep) / ARC_STEP_RAD)) + 1))
+    a0 = np.arctan2(block.start[1] - cy, block.start[0] - cx)
+    r_end = np.hypot(block.end[0] - cx, block.end[1] - cy)
+    radius = block.radius_mm + (r_end - block.radius_mm) * t  # lands on the end point
+    angle = a0 + sweep * t
+    return np.column_stack([cx + radius * np.cos(angle), cy + radius * np.sin(angle)])
+
+
 def inspect_blocks(blocks: Iterable[NcBlock], config: MachineConfig) -> InspectReport:
     """Walk the blocks: sum the path length, analyse every NURBS block."""
     report = InspectReport()
     for block in blocks:
         if isinstance(block, LineBlock | ArcBlock):
             report.path_length_mm += block.length_mm
+            report.moves.append((move_polyline(block),
+                                 isinstance(block, LineBlock) and block.rapid))
         elif isinstance(block, NurbsBlock):
             curve = Nurbs.from_block(block)
             kappa_th = kappa_threshold_per_mm(block, config)

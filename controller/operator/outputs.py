@@ -36,3 +36,29 @@ def output_path(path: str, option: str) -> str:
             not os.access(real, os.W_OK):
         raise OutputError(f"{option} {path}: permission denied")
     return real
+
+
+PLOT_INSTALL = "pip install 'phcnc[plot]'"  # the `plot` extra of pyproject.toml
+DEFAULT_PLOT_FORMAT = "png"
+
+
+def plot_format(path: str) -> str:
+    """The file format of a plot: its extension, or png for a name without one (matplotlib
+    would otherwise write `name.png` beside the path that was checked)."""
+    return os.path.splitext(path)[1][1:].lower() or DEFAULT_PLOT_FORMAT
+
+
+def plot_path(path: str, option: str = "--plot") -> str:
+    """output_path, and matplotlib there and able to write the format: all known before the
+    program is planned, instead of a traceback after it."""
+    real = output_path(path, option)
+    try:
+        from matplotlib.backend_bases import FigureCanvasBase
+    except ImportError:
+        raise OutputError(f"{option} needs matplotlib: {PLOT_INSTALL}") from None
+    formats = FigureCanvasBase.get_supported_filetypes()
+    fmt = plot_format(real)
+    if fmt not in formats:
+        raise OutputError(f"{option} {path}: cannot write .{fmt} (give a file name ending in "
+                          f"{', '.join('.' + f for f in sorted(formats))})")
+    return real

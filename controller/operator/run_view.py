@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from typing import Any, TextIO
 
 from controller.motion.types import MotionProgress, MotionResult, MotionState
+from controller.operator.words import axes_text, pulses_text
 
 MAX_MARKS = 4096  # file positions a ProgramLines keeps, whatever the program's length
 SHOWN_CHARS = 256  # a line's text kept for the status line (it shows 32); the rest is skipped
@@ -188,7 +189,8 @@ class PlainView:
               f"{s['following_error_um_max']:.0f} um\n"
               f"  underruns {s['underruns']}, late cycles {s['late_cycles']}, "
               f"lowest FIFO {s['min_fifo_ms']:.0f} ms, final position "
-              f"{_final_position_text(s)}, pulses {s['pulses']}", file=self.out, flush=True)
+              f"{_final_position_text(s)}, pulses {pulses_text(s['pulses'])}", file=self.out,
+              flush=True)
 
     def close(self) -> None:
         if isinstance(self.lines, ProgramLines):
@@ -199,8 +201,9 @@ def _final_position_text(s: dict[str, Any]) -> str:
     """Where the run ended, or plainly that it is not known (the link was lost: the figures
     are what was commanded, the table may stand millimetres away)."""
     if s.get("position_known", True):
-        return str(s["final_position_mm"])
-    return (f"UNKNOWN (the drive stopped answering; last commanded {s['final_position_mm']}: "
+        return axes_text(s["final_position_mm"])
+    return (f"UNKNOWN (the drive stopped answering; last commanded "
+            f"{axes_text(s['final_position_mm'])}: "
             "home or check the machine before the next job)")
 
 

@@ -10,12 +10,12 @@ from typing import TextIO
 
 import numpy as np
 
-from controller.config import MachineConfig, load_config
+from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import CncError, NcError
 from controller.generator.plan import Algorithm
 from controller.interpreter.program import read_program
 from controller.operator.check_cmd import check_program
-from controller.operator.outputs import OutputError, output_path
+from controller.operator.outputs import OutputError, output_path, plot_path
 from controller.operator.simulate_plot import PlotSeries
 from controller.operator.simulate_view import SimulateView
 from controller.runtime.simulate_figures import Figures
@@ -38,7 +38,7 @@ TABLE_ROWS = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("program", help="G-code program")
-    parser.add_argument("--config", help="machine configuration (YAML file or built-in name)")
+    parser.add_argument("--config", help=CONFIG_HELP)
     parser.add_argument("--algorithm", default=Algorithm.PH_LOOKAHEAD.value,
                         choices=[a.value for a in Algorithm])
     parser.add_argument("--compare", action="store_true", help="run all four algorithms")
@@ -170,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
         if args.trajectory is not None:
             args.trajectory = output_path(args.trajectory, "--trajectory")
         if args.plot is not None:
-            args.plot = output_path(args.plot, "--plot")
+            args.plot = plot_path(args.plot)
         _check_whole_program(args.program, config)
         algorithms = [a.value for a in Algorithm] if args.compare else [args.algorithm]
         chosen = args.algorithm if args.compare else algorithms[-1]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.operator.outputs import plot_format
 from controller.runtime.simulate_stream import SampleBlock
 
 MAX_POINTS = 20_000  # per series: a longer program is shown by buckets of samples
@@ -111,5 +112,5 @@ def plot_simulation(path: str, series: list[PlotSeries], reports: list[dict],
         ax_e.set_ylabel("contour error (um)")
         ax_e.set_xlabel("t (s)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, format=plot_format(path))
     plt.close(fig)

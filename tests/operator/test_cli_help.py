@@ -97,4 +97,4 @@ def test_a_lost_position_is_said_plainly_in_the_text_summary(
     out = capsys.readouterr().out
     assert "final position UNKNOWN" in out and "home or check the machine" in out
     view.final_summary(summary | {"position_known": True})
-    assert "final position {'x': 28.337, 'y': -43.295}" in capsys.readouterr().out
+    assert "final position X 28.337 Y -43.295 mm, pulses none" in capsys.readouterr().out

@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from controller.config import MachineConfig, load_config
+from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import CncError
 from controller.motion.realtime import probe_scheduling, realtime_threads, service_nice
 from controller.operator.client import default_socket_path, estop_socket_path
@@ -37,7 +37,7 @@ def default_state_dir() -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="cncd", description="phcnc controller daemon")
-    ap.add_argument("--config", help="machine configuration (file or built-in name)")
+    ap.add_argument("--config", help=CONFIG_HELP)
     # The defaults come from the environment: a % in them must not break --help (argparse
     # %-formats help strings).
     socket_default = default_socket_path().replace("%", "%%")

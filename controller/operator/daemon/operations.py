@@ -14,6 +14,7 @@ from controller.offsets import (
     OffsetsError,
     OffsetTable,
     describe,
+    describe_text,
     from_json,
     select,
     to_json,
@@ -134,7 +135,8 @@ class OperatorCommands:
                 raise OffsetsError(str(self.state_files.path / OFFSETS_FILE), "cannot write the "
                                    f"offset table: {exc.strerror or exc}") from None
             self.offsets = table
-        self.log.log(NOTICE, f"work offsets ({why}): {describe(table)}")
+        self.log.log(NOTICE, f"work offsets ({why}): "
+                                 f"{describe_text(table, self.config.axis_names)}")
 
     def offset(self, action: str, system: str | None, values: dict[str, float],
                here: bool) -> dict[str, Any]:
