@@ -14,8 +14,8 @@ from controller.motion.types import MotionProgress, MotionResult, Outcome
 from controller.operator.daemon.check_process import CheckCancelled, check_in_child
 from controller.operator.daemon.job import Job, State, progress_event
 from controller.operator.daemon.log import ERR, INFO, NOTICE
-from controller.operator.from_line import approach_program
-from controller.operator.run_view import result_summary
+from controller.operator.run.from_line import approach_program
+from controller.operator.run.view import result_summary
 from controller.runtime.processes import Runtime, RuntimeOptions
 
 
