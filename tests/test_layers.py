@@ -174,12 +174,45 @@ def test_every_package_is_installed() -> None:
     assert listed - packages == {"controller.machine_configs"}
 
 
+# A file may be longer when it is one cohesive class that splitting would scatter (its state
+# spread over mixins or helpers reaching into it): its docstring has a line "Kept whole:
+# <Class> ..." naming a class the file defines and saying why.
+MAX_LINES_KEPT_WHOLE = 700
+KEPT_WHOLE = "Kept whole:"
+
+
+def line_limit(source: str) -> int:
+    """The most lines a file may have: MAX_LINES, or MAX_LINES_KEPT_WHOLE when its docstring
+    has a "Kept whole:" line naming one of its classes and saying why."""
+    tree = ast.parse(source)
+    classes = {n.name for n in tree.body if isinstance(n, ast.ClassDef)}
+    for line in (ast.get_docstring(tree) or "").splitlines():
+        if line.strip().startswith(KEPT_WHOLE):
+            words = line.strip()[len(KEPT_WHOLE):].replace(",", " ").split()
+            if len(words) >= 3 and words[0].strip("`") in classes:  # a class and why
+                return MAX_LINES_KEPT_WHOLE
+    return MAX_LINES
+
+
+def test_only_a_class_kept_whole_may_be_longer() -> None:
+    body = "class Loop:\n    pass\n"
+    assert line_limit(f'"""A loop."""\n{body}') == MAX_LINES
+    assert line_limit(f'"""A loop.\n\nKept whole: Loop owns the state of one run."""\n{body}'
+                      ) == MAX_LINES_KEPT_WHOLE
+    assert line_limit(f'"""A loop.\n\nKept whole: Other owns the state."""\n{body}'
+                      ) == MAX_LINES  # not a class of this file
+    assert line_limit(f'"""A loop.\n\nKept whole: Loop"""\n{body}') == MAX_LINES  # no why
+    assert line_limit(f'"""A loop; Kept whole: Loop owns it."""\n{body}') == MAX_LINES
+
+
 @pytest.mark.parametrize("name", sorted(source_files()))
 def test_every_file_says_what_it_is(name: str) -> None:
     path = source_files()[name]
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+    source = path.read_text(encoding="utf-8")
+    tree = ast.parse(source)
     doc = ast.get_docstring(tree)
     assert doc, f"{path} has no docstring"
     if path.name == "__init__.py" and not name.startswith("drivers."):  # drivers/ says it once
         assert "import" in doc.lower(), f"{path} does not say what its package may import"
-    assert len(path.read_text(encoding="utf-8").splitlines()) <= MAX_LINES
+    assert len(source.splitlines()) <= line_limit(source), \
+        f"{path}: more than {MAX_LINES} lines, and not one class kept whole (see line_limit)"

@@ -228,6 +228,83 @@ def _is_contour_block(block: NcBlock) -> bool:
     return isinstance(block, LineBlock) and not block.rapid and block.start[2] == block.end[2]
 
 
+class LookAhead:
+    """The look-ahead of plan_program, as Klipper's LookAheadQueue: contour blocks are added,
+    planned in windows (ph-lookahead) or flushed to rest, and the planned steps emitted on one
+    timeline, with an in-position hold after a step that came to rest moving."""
+
+    def __init__(self, config: MachineConfig, algorithm: Algorithm) -> None:
+        self.config = config
+        self.algorithm = algorithm
+        self.t_s = 0.0  # time of the last sample emitted
+        self.pending: list[NcBlock] = []
+        self.pending_s = 0.0  # nominal motion time of the pending blocks
+        self.cont: Continuation | None = None  # the cut window's rest, planned with the next
+        self.repeats = Repeats()  # shared by the windows of a long run (repeats.py)
+        self.settle_after: PlannedStep | None = None  # the last step, if it came to rest moving
+        self.last_pos: np.ndarray | None = None  # the last reference point sent (check_steps)
+
+    @property
+    def next_t0_s(self) -> float:
+        """Time of the sample after the last one emitted."""
+        return self.t_s + self.config.sample_period_s
+
+    def emit(self, step: PlannedStep | None, at_rest: bool = True,
+             dwell: bool = False) -> Iterator[PlannedStep]:
+        """The step, timed on from the last one (after an in-position hold if that one came to
+        rest moving), and checked for jumps."""
+        if step is None or not len(step.chunk):
+            return
+        T = self.config.sample_period_s  # noqa: N806
+        if self.settle_after is not None and not dwell:
+            # In-position check between moves that stop (exact stop, rapids, Z moves), as
+            # Fanuc does: the next move starts once the servo has settled, so it does not
+            # begin with the residual error of the last one (the dynamics module assumes rest).
+            hold = _in_position_hold(self.settle_after, self.config, self.t_s)
+            yield hold
+            self.t_s += len(hold.chunk) * T
+            step = replace(step, chunk=replace(step.chunk, t0_s=self.t_s + T))
+        check_steps(step.chunk, self.last_pos, self.config)
+        self.last_pos = step.chunk.pos_mm[-1]
+        self.t_s = step.chunk.t0_s + (len(step.chunk) - 1) * T
+        yield step
+        self.settle_after = step if at_rest and not dwell else None
+
+    def _take_pending(self) -> list[NcBlock]:
+        run_blocks = list(self.pending)
+        self.pending.clear()
+        self.pending_s = 0.0
+        return run_blocks
+
+    def flush(self) -> Iterator[PlannedStep]:
+        """Plan the pending blocks (and a cut window's rest) all the way to rest."""
+        if self.pending or self.cont is not None:
+            run_blocks = self._take_pending()
+            step = _contour(run_blocks, self.config, self.algorithm, self.t_s, self.cont,
+                            self.repeats)
+            self.cont = None
+            yield from self.emit(step)
+
+    def _window(self) -> Iterator[PlannedStep]:
+        run_blocks = self._take_pending()
+        step, self.cont = _window(run_blocks, self.config, self.t_s, self.cont, self.repeats)
+        yield from self.emit(step, at_rest=self.cont is None)
+
+    def add(self, block: NcBlock, last_part: bool) -> Iterator[PlannedStep]:
+        """Add a contour block (last_part: the last part of a programmed block); plan what a
+        stop, a full window or a full run asks for."""
+        self.pending.append(block)
+        self.pending_s += nominal_s(block, self.config.interpolator.max_feed_mm_s)
+        exact = block.path.mode != PathMode.BLEND  # type: ignore[union-attr]
+        if exact and last_part:
+            yield from self.flush()
+        elif (len(self.pending) >= WINDOW_BLOCKS or self.pending_s >= WINDOW_NOMINAL_S) \
+                and self.algorithm == Algorithm.PH_LOOKAHEAD:
+            yield from self._window()
+        elif len(self.pending) >= MAX_RUN_BLOCKS or self.pending_s >= MAX_RUN_NOMINAL_S:
+            yield from self.flush()
+
+
 def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
                  algorithm: Algorithm | str = Algorithm.PH_LOOKAHEAD) -> Iterator[PlannedStep]:
     """Group blocks into runs (rest to rest) and plan each; chunks follow each other in time.
@@ -235,91 +312,33 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
     ph-lookahead plans long runs in look-ahead windows of WINDOW_BLOCKS new blocks (or
     WINDOW_NOMINAL_S of nominal motion), each cut mid-cruise and continued by the next (see
     _window); the other algorithms stop between windows of MAX_RUN_BLOCKS."""
-    algorithm = Algorithm(algorithm)
-    T = config.sample_period_s  # noqa: N806
-    t_s = 0.0
-    pending: list[NcBlock] = []
-    pending_s = [0.0]  # nominal motion time of the pending blocks
+    queue = LookAhead(config, Algorithm(algorithm))
     vmax = config.interpolator.max_feed_mm_s
-    cont: Continuation | None = None
-    repeats = Repeats()  # shared by the windows of a long run (repeats.py)
-
-    settle_after: PlannedStep | None = None  # the last step, if it came to rest moving
-    last_pos: np.ndarray | None = None  # the last reference point sent (check_steps)
-
-    def emit(step: PlannedStep | None, at_rest: bool = True,
-             dwell: bool = False) -> Iterator[PlannedStep]:
-        nonlocal t_s, settle_after, last_pos
-        if step is None or not len(step.chunk):
-            return
-        if settle_after is not None and not dwell:
-            # In-position check between moves that stop (exact stop, rapids, Z moves), as
-            # Fanuc does: the next move starts once the servo has settled, so it does not
-            # begin with the residual error of the last one (the dynamics module assumes rest).
-            hold = _in_position_hold(settle_after, config, t_s)
-            yield hold
-            t_s += len(hold.chunk) * T
-            step = replace(step, chunk=replace(step.chunk, t0_s=t_s + T))
-        check_steps(step.chunk, last_pos, config)
-        last_pos = step.chunk.pos_mm[-1]
-        t_s = step.chunk.t0_s + (len(step.chunk) - 1) * T
-        yield step
-        settle_after = step if at_rest and not dwell else None
-
-    def flush() -> Iterator[PlannedStep]:
-        nonlocal cont
-        if pending or cont is not None:
-            run_blocks = list(pending)
-            pending.clear()
-            pending_s[0] = 0.0
-            step = _contour(run_blocks, config, algorithm, t_s, cont, repeats)
-            cont = None
-            yield from emit(step)
-
-    def window() -> Iterator[PlannedStep]:
-        nonlocal cont
-        run_blocks = list(pending)
-        pending.clear()
-        pending_s[0] = 0.0
-        step, cont = _window(run_blocks, config, t_s, cont, repeats)
-        yield from emit(step, at_rest=cont is None)
-
-    def add_contour(block: NcBlock, last_part: bool) -> Iterator[PlannedStep]:
-        pending.append(block)  # type: ignore[arg-type]
-        pending_s[0] += nominal_s(block, vmax)
-        exact = block.path.mode != PathMode.BLEND  # type: ignore[union-attr]
-        if exact and last_part:
-            yield from flush()
-        elif (len(pending) >= WINDOW_BLOCKS or pending_s[0] >= WINDOW_NOMINAL_S) \
-                and algorithm == Algorithm.PH_LOOKAHEAD:
-            yield from window()
-        elif len(pending) >= MAX_RUN_BLOCKS or pending_s[0] >= MAX_RUN_NOMINAL_S:
-            yield from flush()
-
     for block in blocks:
         if _is_contour_block(block):
             parts = contour_parts(block, vmax) if not isinstance(block, NurbsBlock) else \
                 iter(nurbs_parts(block, vmax, config.interpolator.kappa_threshold_per_mm))
             part = next(parts)
             for after in parts:  # one part ahead: the last one is known without a list
-                yield from add_contour(part, False)
+                yield from queue.add(part, False)
                 part = after
-            yield from add_contour(part, True)
+            yield from queue.add(part, True)
             continue
-        yield from flush()
+        yield from queue.flush()
         # A long move or dwell comes in chunks, each timed on from the one before (emit may
         # put an in-position hold before the first).
         if isinstance(block, LineBlock):
             for chunk, last in _straight_move(block, config, 0.0):
-                yield from emit(PlannedStep(replace(chunk, t0_s=t_s + T), rapid=block.rapid),
-                                at_rest=last)
+                yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s),
+                                                  rapid=block.rapid), at_rest=last)
         elif isinstance(block, DwellBlock):
             for chunk in _dwell(block, config, 0.0):
-                yield from emit(PlannedStep(replace(chunk, t0_s=t_s + T)), dwell=True)
+                yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s)),
+                                      dwell=True)
         elif isinstance(block, StopBlock) and block.kind is StopKind.PAUSE:
             # M0: settle in position, then the motion controller waits for the operator.
-            yield from emit(PlannedStep(_pause(block, config, t_s)), dwell=True)
-    yield from flush()
+            yield from queue.emit(PlannedStep(_pause(block, config, queue.t_s)), dwell=True)
+    yield from queue.flush()
 
 
 END_MISS_MM = 1e-3  # a run's planned end this far from the programmed end is a planning fault

@@ -1,4 +1,9 @@
-"""The motion controller loop: keeps the card FIFO filled, checks feedback, stops under control."""
+"""The motion controller loop: keeps the card FIFO filled, checks feedback, stops under control.
+
+Kept whole: MotionController is one run's state machine (streaming, pauses and holds, stops,
+e-stop); its state lives in typed parts it owns (SendState: what a take-back restores,
+RunFigures and RunChecks: what the result reads, OperatorRequests), and the steps that move
+it between states stay methods of the one class instead of functions writing into it."""
 
 from __future__ import annotations
 
@@ -8,19 +13,18 @@ from collections.abc import Callable
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.errors import DriveError
-from controller.motion import estop
+from controller.errors import CncError, DriveError
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.in_position import InPosition
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter
-from controller.motion.recall import SendJournal, Sent, retimer_state, take_back
+from controller.motion.recall import SendState
 from controller.motion.requests import OperatorRequests
-from controller.motion.result import build_progress, build_result
+from controller.motion.result import RunChecks, RunFigures, build_result
 from controller.motion.retime import Retimer
 from controller.motion.source import RefSource, SourceState, pause_index, row_lines
-from controller.motion.stopping import stop_along_path, with_lead_settled
+from controller.motion.stopping import amax_stop_distances_mm, stop_along_path, with_lead_settled
 from controller.motion.types import (
     MotionProgress,
     MotionResult,
@@ -33,9 +37,11 @@ from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import LostCommunicationError, UnderrunError
 
 SETTLE_HOLD_S = 0.02  # encoder equal to the step counter for this long = settled
+ESTOP_INPUT = "e-stop input on the drive tripped"
+ESTOP_KEEP_FRAMES = 2  # frames left in the card when the e-stop takes the rest back
 
 
-class MotionController(OperatorRequests):
+class MotionController:
     """One instance runs one program: run() returns a MotionResult, never raises on faults.
 
     Every fault ends in a controlled stop (quintic decel along the buffered path, appended
@@ -55,6 +61,8 @@ class MotionController(OperatorRequests):
         self.period_s = config.sample_period_s
         self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
         self.retimer = Retimer(config)
+        self.requests = OperatorRequests()
+        self.work_origin_mm: tuple[float, ...] = ()  # for the progress reports' work position
 
     def _frames(self, ms: float) -> int:
         return max(1, math.ceil(ms * 1e-3 / self.period_s - 1e-9))
@@ -65,49 +73,41 @@ class MotionController(OperatorRequests):
         while self.state is not MotionState.FINISHED:
             self.pacer.wait()
             self._cycle()
-        estop.disable_drives(self)  # after an e-stop's stop: category 1
+        self._disable_drives()  # after an e-stop's stop: category 1
         return self._result()
 
     def _setup(self) -> None:
         start_cmd, start_enc = self.drive.position_counts()
-        self.start_cmd = start_cmd
-        self.last_enc = start_enc
-        self.pulses = PulseCounter(self.pulse_mm, start_cmd)
-        self.ferr = FerrorCheck(self.config, start_cmd)
-        self.fbcheck = FeedbackCheck(self.config, start_enc)
-        self.contour = ContourStats(self.pulse_mm)
-        self.in_position = InPosition(self.pulse_mm, self.settings.in_position_mm, self.period_s)
-        self.lead_frames = 0  # frames of the pre-compensation's lead dying away (not planned)
-        self.hist = RefHistory(2 * self.drive.fifo_capacity() + 1024, self.n, self.period_s)
-        self.prev_mm = self.last_mm = start_cmd * self.pulse_mm
-        self.held = np.zeros((0, self.n + 2))
+        self.figures = RunFigures(start_cmd=start_cmd, last_enc=start_enc)
+        self.checks = RunChecks(
+            ferr=FerrorCheck(self.config, start_cmd),
+            fbcheck=FeedbackCheck(self.config, start_enc),
+            contour=ContourStats(self.pulse_mm),
+            in_position=InPosition(self.pulse_mm, self.settings.in_position_mm, self.period_s))
+        start_mm = start_cmd * self.pulse_mm
+        precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
+                                   for a in self.config.axes], self.period_s, start_mm)
+                   if self.config.interpolator.servo_precompensation else None)
+        self.stream = SendState(
+            held=np.zeros((0, self.n + 2)), prev_mm=start_mm, last_mm=start_mm,
+            retimer=self.retimer, pulses=PulseCounter(self.pulse_mm, start_cmd),
+            hist=RefHistory(2 * self.drive.fifo_capacity() + 1024, self.n, self.period_s),
+            precomp=precomp)
         self.pending_stop = np.zeros((0, self.n))
         self.state = MotionState.WAITING
         self.outcome: Outcome | None = None
         self.message = ""
-        self.sent = self.executed = 0
         self.sent_eos = False
-        self.line = 0
-        self.underruns = 0
-        self.min_fifo_frames: int | None = None
-        self.first_motion_s: float | None = None
-        self.last_motion_s = 0.0
         self.next_progress_s = 0.0
         self.settle_deadline_s = 0.0
-        self.settled_since_s: float | None = None
         self.position_known = True
         self.pausing = False  # the frames up to a program pause are sent: wait there
         self.holding = False  # feed hold asked: decelerate along the path, then wait
         self.program_pause = False  # the standstill being reached is a program pause (M0)
         self.restarting = False  # resumed from a pause: the FIFO is empty by design
         self.seq0: int | None = None  # the drive's number of this run's first frame
-        self.journal = SendJournal()  # what each send changed (a hold takes frames back)
-        self.recalled_frames = 0
         self.pending_tail: tuple | None = None  # a stream's end at rest still to go out
         self.estop_reason: str | None = None  # the e-stop under way (then disable)
-        self.precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
-                                        for a in self.config.axes], self.period_s, self.last_mm)
-                        if self.config.interpolator.servo_precompensation else None)
 
     def _cycle(self) -> None:
         try:
@@ -116,17 +116,17 @@ class MotionController(OperatorRequests):
             self.position_known = False
             self._finish(Outcome.FAULT, str(exc))
             return
-        fb, bad = self.fbcheck.believed(self._own_numbers(fb))
+        fb, bad = self.checks.fbcheck.believed(self._own_numbers(fb))
         if bad is not None:  # a reading no drive could give: none believed from then on
             self.position_known = False
             self._begin_stop(Outcome.FAULT, bad.message)
         self._account(fb)
         if status.halted:
-            self.underruns += int(CardStatus.UNDERRUN in status)
+            self.figures.underruns += int(CardStatus.UNDERRUN in status)
             self._finish(Outcome.FAULT, self.drive.fault_message())
             return
         self._supervise(fb)
-        estop.check(self, level)
+        self._check_estop(level)
         self._operator_requests(level)
         if self.pending_tail is not None:
             self._send_tail(level)  # a stream's last frames, the lead settling: nothing first
@@ -155,59 +155,59 @@ class MotionController(OperatorRequests):
         if not len(fb):
             return
         now_s = self.pacer.elapsed_s()
-        if self.first_motion_s is None:
-            self.first_motion_s = now_s
-        self.last_motion_s = now_s
-        self.executed = int(fb.seq[-1]) + 1
-        self.last_enc = fb.encoder_counts[-1]
-        self.line = int(self.hist.line[fb.seq[-1] % self.hist.capacity])
-        self.contour.update(fb, self.hist)
-        self.in_position.frames(fb.seq, fb.encoder_counts, self.pulses.counts)
+        if self.figures.first_motion_s is None:
+            self.figures.first_motion_s = now_s
+        self.figures.last_motion_s = now_s
+        self.figures.executed = int(fb.seq[-1]) + 1
+        self.figures.last_enc = fb.encoder_counts[-1]
+        self.figures.line = int(self.stream.hist.line[fb.seq[-1] % self.stream.hist.capacity])
+        self.checks.contour.update(fb, self.stream.hist)
+        self.checks.in_position.frames(fb.seq, fb.encoder_counts, self.stream.pulses.counts)
 
     def _supervise(self, fb: Feedback) -> None:
-        trip = self.ferr.check(fb)
+        trip = self.checks.ferr.check(fb)
         if trip is not None:
-            line = int(self.hist.line[trip.seq % self.hist.capacity])
+            line = int(self.stream.hist.line[trip.seq % self.stream.hist.capacity])
             self._begin_stop(Outcome.FAULT, f"{trip.axis.upper()} axis following error "
                              f"{abs(trip.ferror_mm):.3f} mm > limit {trip.limit_mm:.3f} mm "
                              f"at line {line}")
         problem = self.watch() if self.watch is not None else None
         if problem:
             self._begin_stop(Outcome.FAULT, problem)
-        if self._abort_message is not None:
-            self._begin_stop(Outcome.ABORTED, self._abort_message)
+        if self.requests.abort_message is not None:
+            self._begin_stop(Outcome.ABORTED, self.requests.abort_message)
 
     def _operator_requests(self, level: int) -> None:
         """Hold and override become the re-timer's target rate (resume: see _pause_step); a
         slower one first takes back what the card has queued beyond its low-water mark."""
         before = self.retimer.wanted
-        if self._hold_requested and not self.holding:
+        if self.requests.hold and not self.holding:
             self.holding = True
-        self._hold_requested = False
-        if self._resume_requested and self.holding and not self.pausing:
+        self.requests.hold = False
+        if self.requests.resume and self.holding and not self.pausing:
             self.holding = False  # resumed before the standstill: ramp back up from here
-            self._resume_requested = False
-        rate = 0.0 if self.holding else (self.override_pct / 100.0
-                                         if self._override_allowed() else 1.0)
+            self.requests.resume = False
+        override = self.requests.override_pct / 100.0 if self._override_allowed() else 1.0
+        rate = 0.0 if self.holding else override
         if rate < before and self.state is MotionState.RUNNING and not self.pausing \
                 and self.outcome is None:
-            take_back(self, level)
+            self.stream.take_back(self.drive, level, self._frames(self.settings.low_water_ms))
         self.retimer.set_target(rate)
 
     # -- streaming ------------------------------------------------------------------------
     def _refill(self, level: int) -> None:
-        if self.state is MotionState.WAITING and not self.sent \
+        if self.state is MotionState.WAITING and not self.stream.sent \
                 and not getattr(self.source, "primed", lambda: True)():
             return  # first motion once the reference buffer is full or planned to its end
         s = self.settings
         want = self._frames(s.high_water_ms) - level
         hold, low = self._frames(s.holdback_ms), self._frames(s.low_water_ms)
         if self.state is MotionState.RUNNING and not self.restarting:
-            self.min_fifo_frames = (level if self.min_fifo_frames is None
-                                    else min(level, self.min_fifo_frames))
+            low_fifo = self.figures.min_fifo_frames
+            self.figures.min_fifo_frames = level if low_fifo is None else min(level, low_fifo)
         self.restarting = self.restarting and level == 0  # after a pause: empty until refilled
         finished_before, _ = self.source.state()
-        ask = max(0, want + hold - len(self.held))
+        ask = max(0, want + hold - len(self.stream.held))
         rows = self.source.read(ask) if ask else np.zeros((0, self.n + 2))
         # Final only when a read came back short after the producer had finished.
         final = finished_before is SourceState.FINISHED and 0 < ask and len(rows) < ask
@@ -217,52 +217,48 @@ class MotionController(OperatorRequests):
             return
         if len(rows) and not self._start_ok(rows):
             return
-        self.held = np.vstack([self.held, rows]) if len(rows) else self.held
+        self.stream.held = np.vstack([self.stream.held, rows]) if len(rows) else self.stream.held
         if not self.retimer.identity and not final and ask:
             self._read_ahead()  # a ramp is planned on the rows it will cross
-        pause = pause_index(self.held) if len(self.held) else None
-        sendable = len(self.held) if final else max(0, len(self.held) - hold)
-        if self.state is MotionState.WAITING and not final and len(self.held) < hold + low:
+        pause = pause_index(self.stream.held) if len(self.stream.held) else None
+        sendable = len(self.stream.held) if final else max(0, len(self.stream.held) - hold)
+        if self.state is MotionState.WAITING and not final and len(self.stream.held) < hold + low:
             sendable = 0  # prime: first motion only with enough reference behind it
         # Everything up to a pause goes out whatever the holdback: the path is at rest there
         # (a stop along it is not needed), and the card idles after it, no underrun.
         limit = pause + 1 if pause is not None else sendable
-        before = self._before_send()
-        out, used = self.retimer.take(self.held, limit, max(want, 0),
+        before = self.stream.before_send()
+        out, used = self.retimer.take(self.stream.held, limit, max(want, 0),
                                       land=pause is not None or final)
-        consumed, self.held = self.held[:used].copy(), self.held[used:]  # (journal: a copy)
+        held = self.stream.held
+        consumed, self.stream.held = held[:used].copy(), held[used:]  # (journal: a copy)
         whole = self.retimer.frac == 0.0
         at_pause = pause is not None and used == pause + 1 and whole
         at_hold = self.retimer.at_rest and not at_pause
         self.program_pause = self.program_pause or at_pause
-        end = final and not len(self.held) and whole
+        end = final and not len(self.stream.held) and whole
         self._send(out, end=end, pause=at_pause or at_hold)
         if end or at_pause or at_hold:
-            self.journal.clear()  # the card ends its stream there: nothing to take back
+            self.stream.journal.clear()  # the card ends its stream there: nothing to take back
         else:
-            self.journal.record(len(out), consumed, before)
-        if self.sent and not final and pause is None and not self.pausing \
+            self.stream.journal.record(len(out), consumed, before)
+        if self.stream.sent and not final and pause is None and not self.pausing \
                 and level + len(out) < low:
-            self._begin_stop(Outcome.FAULT, f"feed hold at line {self.line}: reference points "
-                             "ran late (generator starved), stopped along the path")
-
-    def _before_send(self) -> Sent:
-        return Sent(0, self.held[:0], retimer_state(self.retimer), self.prev_mm, self.last_mm,
-                    self.pulses.counts, self.hist.count,
-                    None if self.precomp is None else self.precomp.state())
+            self._begin_stop(Outcome.FAULT, f"feed hold at line {self.figures.line}: reference "
+                             "points ran late (generator starved), stopped along the path")
 
     def _read_ahead(self, max_rows: int = 4096) -> None:
         """More held rows while re-timing: a ramp looks at the rows it will cross."""
-        if len(self.held) < max_rows:
-            rows = self.source.read(max_rows - len(self.held))
+        if len(self.stream.held) < max_rows:
+            rows = self.source.read(max_rows - len(self.stream.held))
             if len(rows):
-                self.held = np.vstack([self.held, rows])
+                self.stream.held = np.vstack([self.stream.held, rows])
 
     def _start_ok(self, rows: np.ndarray) -> bool:
         """The first reference point must be where the machine is (no jump at start)."""
-        if self.sent or len(self.held):
+        if self.stream.sent or len(self.stream.held):
             return True
-        problem = start_gap(rows[0, : self.n], self.start_cmd, self.pulse_mm)
+        problem = start_gap(rows[0, : self.n], self.figures.start_cmd, self.pulse_mm)
         if problem is not None:
             self._finish(Outcome.FAULT, problem)
         return problem is None
@@ -271,11 +267,12 @@ class MotionController(OperatorRequests):
         """Wanted rows (position, feed, line) out as they are or pre-compensated, a stream's end
         with the lead's settling (what exceeds the high-water mark goes out in later cycles)."""
         pos = rows[:, : self.n]
-        cmd = pos if self.precomp is None else self.precomp.push(pos)
-        if self.precomp is not None and (end or pause):
+        cmd = pos if self.stream.precomp is None else self.stream.precomp.push(pos)
+        if self.stream.precomp is not None and (end or pause):
             wanted = len(rows)
-            rows, cmd = with_lead_settled(self.precomp, rows, cmd, self.last_mm, self.line)
-            self.lead_frames += len(rows) - wanted
+            rows, cmd = with_lead_settled(self.stream.precomp, rows, cmd,  # type: ignore[arg-type]
+                                          self.stream.last_mm, self.figures.line)
+            self.figures.lead_frames += len(rows) - wanted
             room = max(0, self._tail_room() - self.drive.fifo_level())
             if len(cmd) > room:
                 self.pending_tail = (rows[room:], cmd[room:], end, pause)
@@ -298,20 +295,20 @@ class MotionController(OperatorRequests):
         if len(pos):
             feed = rows[:, self.n] if rows.shape[1] > self.n else np.zeros(len(pos))
             line = row_lines(rows) if rows.shape[1] > self.n + 1 else np.full(len(pos),
-                                                                              self.line)
-            self.hist.append(pos, feed, line.astype(np.int64), self.last_mm)
-            self.prev_mm = pos[-2] if len(pos) > 1 else self.last_mm
-            self.last_mm = pos[-1].copy()
+                                                                              self.figures.line)
+            self.stream.hist.append(pos, feed, line.astype(np.int64), self.stream.last_mm)
+            self.stream.prev_mm = pos[-2] if len(pos) > 1 else self.stream.last_mm
+            self.stream.last_mm = pos[-1].copy()
             self.state = MotionState.RUNNING if self.state is MotionState.WAITING else self.state
         if len(pos) or end or pause:
-            counts = self.pulses.counts
+            counts = self.stream.pulses.counts
             try:
-                self.drive.write_frames(self.pulses.frames(cmd), end_of_stream=end or pause)
+                self.drive.write_frames(self.stream.pulses.frames(cmd), end_of_stream=end or pause)
             except DriveError as exc:
-                self.pulses.counts = counts  # these frames were never queued
+                self.stream.pulses.counts = counts  # these frames were never queued
                 self._write_failed(exc)
                 return
-        self.sent += len(pos)
+        self.stream.sent += len(pos)
         self.sent_eos = self.sent_eos or end
         self.pausing = self.pausing or pause
 
@@ -321,7 +318,7 @@ class MotionController(OperatorRequests):
         # The card halted since this cycle read its status (an underrun after a stall of
         # the host, an amplifier fault): as a halt read at the cycle's start, not an
         # exception out of the loop with no result and no position.
-        self.underruns += int(isinstance(exc, UnderrunError))
+        self.figures.underruns += int(isinstance(exc, UnderrunError))
         self._finish(Outcome.FAULT, str(exc))
 
     def _pause_step(self, level: int) -> None:
@@ -331,22 +328,92 @@ class MotionController(OperatorRequests):
         if self.state not in (MotionState.PAUSED, MotionState.HELD):
             if level == 0:
                 self.state = MotionState.PAUSED if self.program_pause else MotionState.HELD
-                self._resume_requested = False  # a resume must come after the standstill
+                self.requests.resume = False  # a resume must come after the standstill
             return
         zero_override_lifted = (self.state is MotionState.HELD and not self.holding
-                                and self.override_pct > 0.0)
-        if not (self._resume_requested or zero_override_lifted):
+                                and self.requests.override_pct > 0.0)
+        if not (self.requests.resume or zero_override_lifted):
             self.pacer.idle()
-        if self._resume_requested or zero_override_lifted:
-            self._resume_requested = False
+        if self.requests.resume or zero_override_lifted:
+            self.requests.resume = False
             self.pausing = False
             self.program_pause = False
             self.restarting = True
             self.holding = False
             self.state = MotionState.RUNNING
 
+    # -- stops otherwise than planned: a fault during a stop, the e-stop ------------------
+    def _asked(self) -> str:
+        """The stop under way when nothing went wrong yet (a fault then names it too)."""
+        if self.holding:
+            return f"feed hold at line {self.figures.line}"
+        if self.pausing:
+            return f"program pause at line {self.figures.line}"
+        return "program end" if self.sent_eos else ""
+
     def _then_fault(self, message: str) -> None:
-        estop.then_fault(self, message)
+        """A fault during a stop (abort, e-stop, hold, program end) is a fault: it says what
+        was asked and what happened (an abort's fault was reported as an abort, and the daemon
+        went IDLE on a faulted drive)."""
+        before = self.message if self.outcome is not None else self._asked()
+        if before and message in before:
+            return
+        self.outcome = Outcome.FAULT
+        self.message = f"{before}; then {message}" if before else message
+
+    def _check_estop(self, level: int) -> None:
+        """Each cycle: an e-stop asked, or the drive's e-stop input open, starts the e-stop
+        (a category 1 stop: the fastest the drives allow, along the path, then disabled)."""
+        if self.estop_reason is not None:
+            return
+        reason = self.requests.estop_message
+        if reason is None and self.drive.estop_input():
+            reason = ESTOP_INPUT
+        if reason is not None:
+            self.estop_reason = reason
+            self._begin_estop(reason, level)
+
+    def _begin_estop(self, reason: str, level: int) -> None:
+        if self.outcome is None or self.outcome is Outcome.DONE:
+            self.outcome, self.message = Outcome.ABORTED, reason
+        elif reason not in self.message:
+            self.message = f"{self.message}; then {reason}"
+        if not self.stream.sent:
+            self.state = MotionState.FINISHED  # nothing moved
+            return
+        accel = self.config.interpolator.max_accel_mm_s2
+        st = self.stream
+        if self.state is MotionState.STOPPING:
+            # An abort's stop: its rows not yet sent are re-timed at Amax along themselves.
+            # Once all are sent (the stream has ended) nothing is added: the card stops where
+            # they end.
+            if len(self.pending_stop) and not self.sent_eos:
+                self.pending_stop = stop_along_path(st.prev_mm, st.last_mm, self.pending_stop,
+                                                    accel, self.period_s, amax_stop_distances_mm)
+            return
+        ends_at_rest = self.sent_eos or self.pausing or self.pending_tail is not None
+        if self.state in (MotionState.WAITING, MotionState.RUNNING) and not ends_at_rest:
+            # The frames queued beyond a couple are taken back (where the drive can): the stop
+            # starts 2 ms out instead of behind the whole FIFO.
+            st.take_back(self.drive, level, ESTOP_KEEP_FRAMES)
+            self.pending_stop = stop_along_path(st.prev_mm, st.last_mm, st.held[:, : self.n],
+                                                accel, self.period_s, amax_stop_distances_mm)
+            st.held = st.held[:0]
+            self.state = MotionState.STOPPING
+            return
+        if self.state in (MotionState.PAUSED, MotionState.HELD, MotionState.RUNNING):
+            # At rest, or coming to rest where the stream ends: settle there, then disable.
+            self.state = MotionState.SETTLING
+            self.settle_deadline_s = self.pacer.elapsed_s() + self.settings.settle_s
+
+    def _disable_drives(self) -> None:
+        """After the e-stop's stop: the drives disabled (a failure to is a fault, named)."""
+        if self.estop_reason is None:
+            return
+        try:
+            self.drive.disable()
+        except CncError as exc:
+            self._then_fault(f"the drives could not be disabled: {exc}")
 
     def _begin_stop(self, outcome: Outcome, message: str) -> None:
         if self.outcome is not None:
@@ -358,13 +425,14 @@ class MotionController(OperatorRequests):
             self._then_fault(message)
         else:
             self.outcome, self.message = outcome, message
-        if self.sent_eos or self.pausing or not self.sent or self.pending_tail is not None:
-            self.state = MotionState.SETTLING if self.sent else MotionState.FINISHED
+        if self.sent_eos or self.pausing or not self.stream.sent or self.pending_tail is not None:
+            self.state = MotionState.SETTLING if self.stream.sent else MotionState.FINISHED
             return
-        self.pending_stop = stop_along_path(self.prev_mm, self.last_mm, self.held[:, : self.n],
+        st = self.stream
+        self.pending_stop = stop_along_path(st.prev_mm, st.last_mm, st.held[:, : self.n],
                                             self.config.interpolator.max_accel_mm_s2,
                                             self.period_s)
-        self.held = np.zeros((0, self.n + 2))
+        self.stream.held = np.zeros((0, self.n + 2))
         self.state = MotionState.STOPPING
 
     def _send_stop(self, level: int) -> None:
@@ -373,7 +441,7 @@ class MotionController(OperatorRequests):
         self._send(rows, end=not len(self.pending_stop))
 
     def _settle(self, level: int, fb: Feedback) -> None:
-        if self.state is MotionState.WAITING and self.sent_eos and not self.sent:
+        if self.state is MotionState.WAITING and self.sent_eos and not self.stream.sent:
             self._finish(self.outcome or Outcome.DONE, self.message)  # a program that never
             return  # moves (G-code without motion, a jog of zero length): done at once
         if self.state in (MotionState.RUNNING, MotionState.STOPPING) and self.sent_eos \
@@ -384,16 +452,17 @@ class MotionController(OperatorRequests):
             return
         cmd, enc = self.drive.position_counts()
         now_s = self.pacer.elapsed_s()
-        if self.executed:  # the settling: where the tool overshoots a stop
-            self.contour.update_at(np.array([self.executed - 1]), enc, self.hist)
-        if self.first_motion_s is not None:
-            self.in_position.at_rest(enc, cmd, now_s - self.first_motion_s + self.period_s)
+        f = self.figures
+        if f.executed:  # the settling: where the tool overshoots a stop
+            self.checks.contour.update_at(np.array([f.executed - 1]), enc, self.stream.hist)
+        if f.first_motion_s is not None:
+            self.checks.in_position.at_rest(enc, cmd, now_s - f.first_motion_s + self.period_s)
         # Equal once is not settled: the 36 % overshoot crosses the target on its way.
         if not np.array_equal(cmd, enc):
-            self.settled_since_s = None
-        elif self.settled_since_s is None:
-            self.settled_since_s = now_s
-        held_s = 0.0 if self.settled_since_s is None else now_s - self.settled_since_s
+            self.figures.settled_since_s = None
+        elif self.figures.settled_since_s is None:
+            self.figures.settled_since_s = now_s
+        held_s = 0.0 if f.settled_since_s is None else now_s - f.settled_since_s
         if held_s >= SETTLE_HOLD_S or now_s >= self.settle_deadline_s:
             self._finish(self.outcome or Outcome.DONE, self.message)
 
@@ -411,7 +480,56 @@ class MotionController(OperatorRequests):
                                         and self.state is not MotionState.FINISHED):
             return
         self.next_progress_s = now_s + self.settings.progress_every_s
-        self.on_progress(build_progress(self, level, now_s))
+        self.on_progress(self._progress(level, now_s))
 
     def _result(self) -> MotionResult:
-        return build_result(self)
+        return build_result(self.config, self.figures, self.checks, self.outcome, self.message,
+                            self.stream.pulses.commanded_counts, self.stream.sent,
+                            self.pacer.late_cycles, self.drive)
+
+    def _progress(self, level: int, now_s: float) -> MotionProgress:
+        """Where the run is: state, line, feed, following error, card FIFO (level frames),
+        time."""
+        f, hist = self.figures, self.stream.hist
+        total = self.source.total_rows()
+        idx = (f.executed - 1) % hist.capacity
+        return MotionProgress(
+            state=self.state, line=f.line,
+            feed_mm_s=float(hist.feed_mm_s[idx]) if f.executed else 0.0,
+            ferror_um=float(np.abs(self.checks.ferr.last_mm).max()) * 1e3,
+            fifo_ms=level * self.period_s * 1e3, elapsed_s=now_s,
+            executed_s=f.executed * self.period_s,
+            planned_s=None if total is None else total * self.period_s,
+            override_pct=self.requests.override_pct,
+            position_mm=tuple(float(v) for v in f.last_enc * self.pulse_mm),
+            work_origin_mm=self.work_origin_mm)
+
+    # -- the operator's requests (see OperatorRequests) ------------------------------------
+    def request_resume(self) -> None:
+        self.requests.request_resume()
+
+    def request_hold(self) -> None:
+        self.requests.request_hold()
+
+    def set_override_off_lines(self, spans: list[list[int]]) -> None:
+        self.requests.set_override_off_lines(spans)
+
+    def set_feed_override(self, percent: float) -> None:
+        self.requests.set_feed_override(percent)
+
+    def request_abort(self, message: str = "aborted by operator") -> None:
+        self.requests.request_abort(message)
+
+    def request_estop(self, message: str = "e-stop") -> None:
+        self.requests.request_estop(message)
+
+    @property
+    def abort_requested(self) -> bool:
+        return self.requests.abort_requested
+
+    def _override_allowed(self) -> bool:
+        if not self.requests.override_off:
+            return True
+        held = self.stream.held
+        line = int(row_lines(held[:1])[0]) if len(held) else self.figures.line
+        return self.requests.override_allowed(line)

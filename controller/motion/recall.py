@@ -1,12 +1,18 @@
-"""Taking back frames queued in the card for a feed hold: a journal of what each send changed."""
+"""Taking back frames queued in the card for a feed hold: what the loop has sent (SendState),
+a journal of what each send changed, and the take-back that restores the state before them."""
 
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 import numpy as np
+
+from controller.motion.checks import RefHistory
+from controller.motion.pulses import PulseCounter
+from controller.motion.retime import Retimer
+from drivers.base import Drive
 
 JOURNAL_ENTRIES = 512  # sends remembered; more than a FIFO's worth at two frames a cycle
 RETIMER_FIELDS = ("rate", "target", "wanted", "ramp", "frac", "back", "recent", "rows_passed",
@@ -24,7 +30,7 @@ class Sent:
     last_mm: np.ndarray
     counts: np.ndarray  # the pulse counter's
     hist_count: int
-    precomp: Any = None  # the pre-compensator's state (None: not compensated)
+    precomp: tuple | None = None  # the pre-compensator's state (None: not compensated)
 
 
 class SendJournal:
@@ -61,35 +67,65 @@ class SendJournal:
         del self.entries[len(self.entries) - n:]
 
 
-def retimer_state(retimer: Any) -> dict[str, Any]:
+def retimer_state(retimer: Retimer) -> dict[str, Any]:
     state = {name: getattr(retimer, name) for name in RETIMER_FIELDS}
     state["ramp"] = copy.copy(state["ramp"])
     return state
 
 
-def restore_retimer(retimer: Any, state: dict[str, Any]) -> None:
+def restore_retimer(retimer: Retimer, state: dict[str, Any]) -> None:
     for name, value in state.items():
         setattr(retimer, name, value)
 
 
-def take_back(loop: Any, level: int, keep_frames: int | None = None) -> None:
-    """A hold or a lower override on a MotionController: take back the frames queued beyond
-    the low-water mark (where the drive can), undoing their sends, so the new ramp starts
-    there instead of behind the whole FIFO. The ramp is planned from the state restored.
-    keep_frames: fewer frames kept than the low-water mark (the e-stop's)."""
-    keep = loop._frames(loop.settings.low_water_ms) if keep_frames is None else keep_frames
-    undo = loop.journal.newest_within(level - keep)
-    total = sum(e.frames for e in undo)
-    if not undo or loop.drive.recall_frames(total, keep) != total:
-        return
-    oldest = undo[-1]
-    restore_retimer(loop.retimer, oldest.retimer)
-    loop.prev_mm, loop.last_mm = oldest.prev_mm, oldest.last_mm
-    loop.pulses.counts = oldest.counts
-    loop.hist.count = oldest.hist_count
-    if loop.precomp is not None:
-        loop.precomp.restore(oldest.precomp)
-    loop.sent -= total
-    loop.held = np.vstack([e.consumed for e in reversed(undo)] + [loop.held])
-    loop.journal.drop(len(undo))
-    loop.recalled_frames += total
+class Compensator(Protocol):
+    """The servo pre-compensator as a take-back sees it: its state saved and put back."""
+
+    def state(self) -> tuple: ...
+
+    def restore(self, state: tuple) -> None: ...
+
+
+@dataclass
+class SendState:
+    """What the motion loop has read and sent, all that a take-back restores: the reference
+    rows held (read, not sent), the last two points sent, the frame count, and the parts
+    whose state each send changes (re-timer, pulse counter, reference history, pre-
+    compensator). The loop owns one; only it and take_back write it."""
+
+    held: np.ndarray  # rows (position, feed, line) read from the source, not sent yet
+    prev_mm: np.ndarray
+    last_mm: np.ndarray
+    retimer: Retimer
+    pulses: PulseCounter
+    hist: RefHistory
+    precomp: Compensator | None  # None: not pre-compensated
+    sent: int = 0  # frames sent
+    recalled_frames: int = 0  # frames taken back from the card
+    journal: SendJournal = field(default_factory=SendJournal)
+
+    def before_send(self) -> Sent:
+        """The state a send starts from (its frames and rows filled in by the journal)."""
+        return Sent(0, self.held[:0], retimer_state(self.retimer), self.prev_mm, self.last_mm,
+                    self.pulses.counts, self.hist.count,
+                    None if self.precomp is None else self.precomp.state())
+
+    def take_back(self, drive: Drive, level: int, keep_frames: int) -> None:
+        """A hold, a lower override or an e-stop: take back the frames queued beyond
+        keep_frames (where the drive can), undoing their sends, so the new ramp starts there
+        instead of behind the whole FIFO. The ramp is planned from the state restored."""
+        undo = self.journal.newest_within(level - keep_frames)
+        total = sum(e.frames for e in undo)
+        if not undo or drive.recall_frames(total, keep_frames) != total:
+            return
+        oldest = undo[-1]
+        restore_retimer(self.retimer, oldest.retimer)
+        self.prev_mm, self.last_mm = oldest.prev_mm, oldest.last_mm
+        self.pulses.counts = oldest.counts
+        self.hist.count = oldest.hist_count
+        if self.precomp is not None:
+            self.precomp.restore(oldest.precomp)  # type: ignore[arg-type]
+        self.sent -= total
+        self.held = np.vstack([e.consumed for e in reversed(undo)] + [self.held])
+        self.journal.drop(len(undo))
+        self.recalled_frames += total

@@ -3,39 +3,33 @@ cycle (safe from a signal handler or another thread: nothing here acts by itself
 
 from __future__ import annotations
 
-import numpy as np
-
-from controller.motion.source import row_lines
-
 
 class OperatorRequests:
-    """Hold, resume, feed override (and the M49/M48 lines it does not touch), abort."""
+    """Hold, resume, feed override (and the M49/M48 lines it does not touch), abort, e-stop:
+    set by the operator's side, read (and the one-shot flags cleared) by the motion loop."""
 
-    _abort_message: str | None = None
-    _resume_requested = False
-    _hold_requested = False
-    override_pct = 100.0
-    override_off: list[tuple[int, int]] = []
-    work_origin_mm: tuple[float, ...] = ()  # for the progress reports' work position
-    held: np.ndarray
-    line: int
+    def __init__(self) -> None:
+        self.abort_message: str | None = None
+        self.estop_message: str | None = None
+        self.resume = False  # a resume asked, not yet acted on
+        self.hold = False  # a feed hold asked, not yet acted on
+        self.override_pct = 100.0
+        self.override_off: list[tuple[int, int]] = []
 
     def request_resume(self) -> None:
         """Operator: continue after a program pause or a feed hold (a flag read by the loop)."""
-        self._resume_requested = True
+        self.resume = True
 
     def request_hold(self) -> None:
         """Operator: feed hold, a planned deceleration along the path to a standstill."""
-        self._hold_requested = True
+        self.hold = True
 
     def set_override_off_lines(self, spans: list[list[int]]) -> None:
         """M49 ... M48 stretches [first, last] (last -1: to the end): lines run at 100 %."""
         self.override_off = [(a, b if b >= 0 else 1 << 62) for a, b in spans]
 
-    def _override_allowed(self) -> bool:
-        if not self.override_off:
-            return True
-        line = int(row_lines(self.held[:1])[0]) if len(self.held) else self.line
+    def override_allowed(self, line: int) -> bool:
+        """Whether the override applies at this program line (not within M49 ... M48)."""
         return not any(a <= line < b for a, b in self.override_off)
 
     def set_feed_override(self, percent: float) -> None:
@@ -45,9 +39,7 @@ class OperatorRequests:
 
     def request_abort(self, message: str = "aborted by operator") -> None:
         """Operator stop (SIGINT handler safe: only sets a flag read by the loop)."""
-        self._abort_message = message
-
-    estop_message: str | None = None
+        self.abort_message = message
 
     def request_estop(self, message: str = "e-stop") -> None:
         """Operator e-stop (category 1): the fastest stop along the path within Amax, then
@@ -56,4 +48,4 @@ class OperatorRequests:
 
     @property
     def abort_requested(self) -> bool:
-        return self._abort_message is not None or self.estop_message is not None
+        return self.abort_message is not None or self.estop_message is not None

@@ -15,7 +15,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("check", _OPS + "check_cmd", "check a program without moving anything"),
     ("inspect", _OPS + "inspect_cmd", "show NURBS blocks, sharp corners and PH segments"),
     ("simulate", _OPS + "simulate_cmd", "plan a program headless and report its errors"),
-    ("run", _OPS + "run_cmd", "run a program on the configured drive (sim card by default)"),
+    ("run", _OPS + "run.command", "run a program on the configured drive (sim card by default)"),
     ("status", _OPS + "control_cmd", "the daemon's state, job, position and last job"),
     ("abort", _OPS + "control_cmd", "stop the daemon's running job along the path"),
     ("estop", _OPS + "control_cmd", "e-stop: stop now and latch until reset"),

@@ -22,8 +22,8 @@ from controller.operator.client import (
     request_estop,
     socket_argument,
 )
-from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
-from controller.operator.run_remote import FINAL_EVENTS, RemoteOperator
+from controller.operator.run.exit_codes import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
+from controller.operator.run.remote import FINAL_EVENTS, RemoteOperator
 from controller.operator.words import axes_text, offsets_table
 
 # The README's exit codes everywhere: 0 done, 2 rejected (nothing moved), 3 fault, 4 aborted.

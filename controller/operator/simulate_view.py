@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TextIO
 
-from controller.operator.run_view import ProgramLines, lines_text
+from controller.operator.run.view import ProgramLines, lines_text
 from controller.runtime.simulate_stream import SampleBlock
 
 

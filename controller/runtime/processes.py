@@ -254,10 +254,10 @@ class Runtime:
                 # Rows produced but not yet executed (ring + held back + card FIFO) must cover
                 # a full refill; otherwise virtual time waits for the generator.
                 ctrl = self.controller
-                ahead = ring.written - (ctrl.executed if ctrl is not None else 0)
+                ahead = ring.written - (ctrl.figures.executed if ctrl is not None else 0)
                 aborted = ctrl is not None and (ctrl.abort_requested or ctrl.state not in (
                     MotionState.WAITING, MotionState.RUNNING))  # stopping needs no new rows
-                starting = ctrl is None or not ctrl.sent  # first motion: the ring full
+                starting = ctrl is None or not ctrl.stream.sent  # first motion: the ring full
                 return ((ahead >= need and not (starting and not source.primed())) or aborted
                         or watch() is not None or source.state()[0] is not SourceState.STREAMING)
             pacer: Any = VirtualPacer(self.settings.cycle_frames, period_s, drive.advance,

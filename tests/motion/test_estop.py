@@ -10,8 +10,7 @@ from runtime_helpers import assert_smooth
 from test_motion import CFG, on_circle, run
 
 from controller.errors import DriveError
-from controller.motion.estop import ESTOP_INPUT
-from controller.motion.loop import MotionController
+from controller.motion.loop import ESTOP_INPUT, MotionController
 from controller.motion.types import Outcome
 
 V_MM_S = 58.333  # the circle's feed (refgen.circle_chunks)
@@ -24,7 +23,7 @@ def _stop_after(ask: str) -> tuple[int, object, object, list]:
     at: list[int] = []
 
     def inject(card: object, ctrl: MotionController, _: object) -> None:
-        at.append(ctrl.executed)
+        at.append(ctrl.figures.executed)
         if ask == "abort":
             ctrl.request_abort()
         elif ask == "estop":

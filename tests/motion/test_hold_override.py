@@ -70,7 +70,7 @@ def run(events: list[tuple[float, str, float]], held_cycles: int = 20,
                 ctrl.request_hold()
             else:
                 ctrl.set_feed_override(value)
-                out.changes.append((ctrl.sent, value))
+                out.changes.append((ctrl.stream.sent, value))
         if p.state is MotionState.HELD and \
                 sum(s.state is MotionState.HELD for s in out.seen) == held_cycles:
             if when_held[0] == "resume":
@@ -83,14 +83,14 @@ def run(events: list[tuple[float, str, float]], held_cycles: int = 20,
     send = ctrl._send
 
     def recording_send(r: np.ndarray, end: bool, pause: bool = False) -> None:
-        rows.append((ctrl.sent, r.copy()))
+        rows.append((ctrl.stream.sent, r.copy()))
         send(r, end, pause)
 
     ctrl._send = recording_send  # type: ignore[method-assign]
     out.result = ctrl.run()
-    sent = as_executed(rows, ctrl.sent)
+    sent = as_executed(rows, ctrl.stream.sent)
     out.sent, out.feed = sent[:, :2], sent[:, 2]
-    out.recalled = ctrl.recalled_frames
+    out.recalled = ctrl.stream.recalled_frames
     return out
 
 
@@ -256,12 +256,12 @@ def test_m49_runs_its_lines_at_100_percent_whatever_the_override(tmp_path: Path)
     send = ctrl._send
 
     def record(r: np.ndarray, end: bool, pause: bool = False) -> None:
-        rows.append((ctrl.sent, r.copy()))
+        rows.append((ctrl.stream.sent, r.copy()))
         send(r, end, pause)
     ctrl._send = record  # type: ignore[method-assign]
     result = ctrl.run()
     assert result.outcome is Outcome.DONE
-    sent = as_executed(rows, ctrl.sent)
+    sent = as_executed(rows, ctrl.stream.sent)
     v = np.linalg.norm(np.diff(sent[:, :2], axis=0), axis=1) / T
     line = np.floor(np.abs(sent[1:, -1])).astype(int)
     assert np.isclose(v[line == 2].max(), 10.0, rtol=1e-3)  # 50 % of F1200

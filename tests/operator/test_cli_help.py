@@ -85,7 +85,7 @@ def test_from_line_asks_nothing_when_no_daemon_answers(
 
 def test_a_lost_position_is_said_plainly_in_the_text_summary(
         capsys: pytest.CaptureFixture[str]) -> None:
-    from controller.operator.run_view import PlainView
+    from controller.operator.run.view import PlainView
 
     summary = {"event": "fault", "message": "serial link lost", "motion_time_s": 1.0,
                "planned_time_s": 2.0, "contour_error_um": {"max": 1.0, "rms": 0.5},

@@ -1,4 +1,4 @@
-"""The status line's program text, read from the file as shown (run_view.ProgramLines)."""
+"""The status line's program text, read from the file as shown (run/view.py, ProgramLines)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controller.operator import run_view
-from controller.operator.run_view import ProgramLines
+from controller.operator.run import view as run_view
+from controller.operator.run.view import ProgramLines
 
 LINE = st.text(alphabet=st.characters(blacklist_categories=("Cs",),
                                       blacklist_characters="\r\n"), max_size=300)

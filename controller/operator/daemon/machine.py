@@ -1,28 +1,37 @@
 """The daemon's machine: ESTOP -> IDLE -> CHECKING -> RUNNING -> IDLE, and FAULT; one job at a
-time, run on the drive the daemon holds open; e-stop and faults latch until reset."""
+time, run on the drive the daemon holds open; e-stop and faults latch until reset.
+
+Kept whole: Machine is one state machine under one lock: the operator's commands, the job
+thread (check, approach, run, record) and the status all read and change the same state; its
+work offset table is a part of its own (OffsetStore), homing goes through manual.py."""
 
 from __future__ import annotations
 
 import hashlib
+import os
+import tempfile
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from controller.config import MachineConfig
-from controller.errors import CncError
+from controller.errors import CncError, NcError
 from controller.motion.realtime import realtime_threads
-from controller.motion.types import MotionState
+from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
 from controller.operator.daemon import manual
-from controller.operator.daemon.job import Emit, Job, State
-from controller.operator.daemon.job_run import JobRunner
+from controller.operator.daemon.check_process import CheckCancelled, check_in_child
+from controller.operator.daemon.job import Emit, Job, State, progress_event
 from controller.operator.daemon.journal import Journal
-from controller.operator.daemon.log import ERR, NOTICE, WARNING, EventLog
-from controller.operator.daemon.operations import OperatorCommands
+from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
+from controller.operator.daemon.offset_store import OffsetStore
 from controller.operator.daemon.protocol import ProtocolError
 from controller.operator.daemon.state_dir import StateDir
-from controller.runtime.processes import RuntimeOptions
+from controller.operator.run.from_line import approach_program
+from controller.operator.run.view import result_summary
+from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.base import CardStatus, Drive
 from drivers.errors import LostCommunicationError
 
@@ -36,7 +45,7 @@ ESTOP_INPUT = "e-stop input on the drive tripped"
 LEFTOVER_PREFIXES = ("job-", "approach-", ".journal.json.", ".offsets.json.")
 
 
-class Machine(JobRunner, OperatorCommands):
+class Machine:
     """All state changes go through here, under one lock; jobs run in a thread of their own."""
 
     def __init__(self, config: MachineConfig, drive: Drive, state_dir: Path, log: EventLog,
@@ -54,7 +63,10 @@ class Machine(JobRunner, OperatorCommands):
         self.state_files = StateDir(state_dir)  # checked: owned by us, written by no one else
         self.state_problems: list[str] = []  # state files kept aside at start-up, reported
         self.journal = Journal(self.state_files)
-        self.load_offsets()
+        self.feed_override_pct = 100.0  # of this and the next jobs
+        self.work_offsets = OffsetStore(config, self.state_files, log, self._lock,
+                                        self._position_mm)
+        self.state_problems += [p for p in (self.work_offsets.load(),) if p]
         self.last_job = self.journal.after_restart()
         # The program copies a crashed daemon left (up to 64 MiB each): links not followed.
         self.state_files.remove_leftovers(LEFTOVER_PREFIXES)
@@ -91,6 +103,66 @@ class Machine(JobRunner, OperatorCommands):
             timer.daemon = True
             timer.start()
         return job.number
+
+    def jog(self, axis: str, distance_mm: float | None, direction: int, feed_mm_min: float,
+            emit: Emit, timeout_s: float | None) -> tuple[int, str]:
+        """Jog one axis as a one-line job within the soft limits; (job, what it does)."""
+        with self._lock:
+            self.require_idle()  # a latched e-stop or fault is said before anything else
+            self.require_position("jog")
+        position = self._position_mm() or {}
+        text, note = manual.jog_program(self.config, position, axis, distance_mm, direction,
+                                        feed_mm_min)
+        job = self.start_job(f"jog {axis.upper()}", text.encode(), emit, manual_move=True,
+                             timeout_s=timeout_s)
+        self.log.log(NOTICE, note)
+        return job, note
+
+    def home(self, axes: list[str]) -> None:
+        manual.start_homing(self, axes)
+
+    def resume(self) -> None:
+        """Continue a job paused at a program pause (M0), held, or on its way to a hold."""
+        with self._lock:
+            job = self.job
+            waiting = job is not None and job.progress is not None and (
+                job.progress.state in (MotionState.PAUSED, MotionState.HELD) or job.holding)
+            if job is not None and job.cancel is not None:  # e-stopped or aborted: stopping
+                raise ProtocolError("stopping", f"the job is stopping ({job.cancel}): nothing "
+                                                "to resume")
+            if not waiting or job.runtime is None:
+                raise ProtocolError("not-paused", "no job is paused or held")
+            job.holding = False
+            job.runtime.request_resume()
+        self.log.log(NOTICE, f"job {job.number}: resumed at line {job.progress.line}")
+
+    def hold(self) -> None:
+        """Feed hold: the running job decelerates along the path and waits for resume."""
+        with self._lock:
+            job = self.job
+            if job is None or job.runtime is None or not self._is_running():
+                raise ProtocolError("not-running", "no job is running")
+            job.holding = True
+            job.runtime.request_hold()
+        self.log.log(NOTICE, f"job {job.number}: feed hold at line "
+                             f"{job.progress.line if job.progress else 0}")
+
+    def feed(self, percent: float) -> None:
+        """Feed override for this and the next jobs (0-150 %; 0 holds until raised)."""
+        with self._lock:
+            self.feed_override_pct = percent
+            job = self.job
+            if job is not None and job.runtime is not None:
+                job.runtime.set_feed_override(percent)
+        self.log.log(NOTICE, f"feed override {percent:g} %")
+
+    def offset(self, action: str, system: str | None, values: dict[str, float],
+               here: bool) -> dict[str, Any]:
+        """`cncctl offset` (see OffsetStore.change), only between jobs: a running program
+        reads the table it started with."""
+        with self._lock:
+            self.require_idle()
+            return self.work_offsets.change(action, system, values, here)
 
     def _time_out(self, job: Job) -> None:
         with self._lock:
@@ -257,6 +329,144 @@ class Machine(JobRunner, OperatorCommands):
     _last_job_started: Job | None = None
     scheduling: dict[str, Any] | None = None  # probed at start-up, then the last job's
 
+    # -- the job thread: check, approach, run, record ------------------------------------------
+    def _run_job(self, job: Job) -> None:
+        workdir = tempfile.mkdtemp(prefix="job-", dir=self.state_dir)
+        path = os.path.join(workdir, "program.nc")
+        try:
+            with open(path, "wb") as fh:
+                fh.write(job.text)
+            job.text = b""
+            self._check_and_run(job, path)
+        except Exception as exc:  # noqa: BLE001 - a job must never take the daemon down
+            self._finish(job, State.FAULT, f"job failed: {type(exc).__name__}: {exc}")
+            job.emit({"event": "fault", "message": f"job failed: {exc}"})
+        finally:
+            for p in (path, workdir):
+                try:
+                    os.unlink(p) if p == path else os.rmdir(p)
+                except OSError:
+                    pass
+            job.done.set()
+
+    def _check_and_run(self, job: Job, path: str) -> None:
+        self.log.log(INFO, f"job {job.number}: checking {job.name!r} ({job.sha256[:12]})")
+        start_mm = self._start_mm()
+        offsets = None if job.manual_move else self.work_offsets.table
+        try:
+            checked = check_in_child(path, self.config, offsets, start_mm, job.from_line,
+                                     lambda: job.cancel is not None, self._beat)
+            job.approach_mm = checked.approach_mm
+        except CheckCancelled:
+            with self._lock:
+                self._cancelled(job)
+            return
+        except NcError as exc:
+            message = NcError(job.name, exc.line, exc.col, exc.word, exc.message).format()
+            self.log.log(NOTICE, f"job {job.number} rejected: {message}")
+            self._finish(job, None, None)  # IDLE before the client hears: it may run again
+            job.emit({"event": "rejected", "message": message})
+            return
+        if job.approach_mm is not None and not self._approach(job, start_mm):
+            return
+        with self._lock:
+            if self._cancelled(job):
+                return
+            job.start_mm = start_mm
+            job.runtime = Runtime(path, self.config, replace(
+                self._options(job), offsets=offsets, from_line=job.from_line,
+                override_off_lines=checked.override_off_lines))
+            job.runtime.set_feed_override(self.feed_override_pct)
+            self.journal.start(job.name, job.sha256, job.lines)
+            self._beat()
+            self._set_state(State.RUNNING)
+        job.emit({"event": "start", "program": job.name, "config": self.config.name,
+                  "drive": self.config.drive.backend, "job": job.number})
+        result = job.runtime.run()
+        if result.outcome is Outcome.DONE and not job.manual_move:
+            self.work_offsets.store(checked.table, f"left by {job.name}")
+        self._record(job, result)
+
+    def _approach(self, job: Job, start_mm: tuple[float, float, float]) -> bool:
+        """Run from line: the straight move (Z up first, then XY, then Z down, on a mill) to
+        where the program stands at that line; False if it did not end there."""
+        text = approach_program(self.config, start_mm, job.approach_mm or start_mm)
+        if not text:
+            return True
+        fd, approach = tempfile.mkstemp(prefix="approach-", suffix=".nc", dir=self.state_dir)
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        try:
+            with self._lock:
+                if self._cancelled(job):  # no approach either
+                    return False
+                job.start_mm = start_mm
+                job.runtime = Runtime(approach, self.config, self._options(job))
+                # The journal names the program and the line to run from again, not the
+                # approach's own lines (nor the job before, as it did).
+                job.approaching = True
+                self.journal.start(job.name, job.sha256, job.lines)
+                self.journal.update(last_line=job.from_line)
+                self._set_state(State.RUNNING)
+            self.log.log(NOTICE, f"job {job.number}: approach to line {job.from_line}")
+            result = job.runtime.run()
+        finally:
+            os.unlink(approach)
+        with self._lock:  # the journal loop must not write the approach's lines after this
+            job.progress = None
+            job.approaching = False
+            if result.outcome is not Outcome.DONE:
+                self._record(job, result, line=job.from_line)
+        return result.outcome is Outcome.DONE
+
+    def _cancelled(self, job: Job) -> bool:
+        """A job aborted (or e-stopped) while checking ends here, nothing moved (under the
+        lock, before its runtime would start)."""
+        if job.cancel is None:
+            return False
+        self._finish(job, None, None)  # IDLE (or ESTOP) before the client hears
+        job.emit({"event": "aborted", "message": job.cancel})
+        return True
+
+    def _options(self, job: Job) -> RuntimeOptions:
+        base = self.runtime_options()
+
+        def progress(p: MotionProgress) -> None:
+            self._beat()
+            job.progress = p
+            if base.on_progress is not None:
+                base.on_progress(p)
+            event = progress_event(p)
+            job.emit(event)
+            self.publish("progress", event)
+        return replace(base, drive=self.drive, keep_drive_open=True, on_progress=progress,
+                       start_mm=job.start_mm, optional_stop=job.optional_stop)
+
+    def _record(self, job: Job, result: MotionResult, line: int | None = None) -> None:
+        """The job's result into the journal, the log and its connection; line: the program
+        line to record instead of the result's (an approach's lines are not the program's)."""
+        summary = result_summary(result)
+        sched = result.extra.get("scheduling")
+        if sched is not None:
+            self.scheduling = sched  # what the job's processes got (`cncctl status`)
+            if not sched["privileged"]:
+                self.log.warn_once("rt", f"scheduling: {sched['summary']}")
+        position = summary["final_position_mm"] if result.position_known else None
+        with self._lock:  # not interleaved with the journal loop's last-line writes
+            self.journal.update(state=result.outcome.value.upper(),
+                                last_line=result.line if line is None else line,
+                                position_mm=position, fault=result.message or None)
+            self.last_job = dict(self.journal.entry)
+        if result.outcome is Outcome.FAULT:
+            self.log.log(ERR, f"job {job.number} fault at line {result.line}: "
+                              f"{result.message}")
+            self._finish(job, State.FAULT, result.message)
+        else:
+            self.log.log(INFO, f"job {job.number} {result.outcome.value} at line "
+                               f"{result.line}{': ' + result.message if result.message else ''}")
+            self._finish(job, None, None)
+        job.emit(summary)
+
     # -- status and health --------------------------------------------------------------------
     def status(self) -> dict[str, Any]:
         with self._lock:
@@ -280,7 +490,7 @@ class Machine(JobRunner, OperatorCommands):
         out["drives"] = "disabled" if self.drive.disabled else "enabled"
         out["estop_input"] = self._estop_input_open()
         out["homed"] = manual.homed_status(self)
-        out.update(self.offsets_status())
+        out.update(self.work_offsets.status())
         out["last_homing"] = self.last_homing
         out["last_job"] = self.last_job
         out["state_problems"] = list(self.state_problems)

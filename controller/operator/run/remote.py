@@ -18,10 +18,10 @@ from controller.operator.client import (
     daemon_answers,
 )
 from controller.operator.daemon.protocol import MAX_PROGRAM_BYTES
-from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
-from controller.operator.run_from_line import confirm
-from controller.operator.run_keys import KeyControl, read_keys, stdin_fd
-from controller.operator.run_view import progress_from_event
+from controller.operator.run.exit_codes import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
+from controller.operator.run.from_line import confirm
+from controller.operator.run.keys import KeyControl, read_keys, stdin_fd
+from controller.operator.run.view import progress_from_event
 
 FINAL_EVENTS = {outcome.value: code for outcome, code in EXIT_CODES.items()}
 

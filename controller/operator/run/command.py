@@ -22,11 +22,11 @@ from controller.operator.client import (
     socket_argument,
 )
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
-from controller.operator.run_exit import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
-from controller.operator.run_from_line import HomingAborted, Sequence, run_from_line
-from controller.operator.run_keys import KeyControl, read_keys, stdin_fd
-from controller.operator.run_remote import run_on_daemon
-from controller.operator.run_view import JsonView, PlainView, ProgramLines, RichView
+from controller.operator.run.exit_codes import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
+from controller.operator.run.from_line import HomingAborted, Sequence, run_from_line
+from controller.operator.run.keys import KeyControl, read_keys, stdin_fd
+from controller.operator.run.remote import run_on_daemon
+from controller.operator.run.view import JsonView, PlainView, ProgramLines, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.errors import DriveUnavailableError
 
