@@ -43,3 +43,16 @@ def offsets_table(offsets: Mapping[str, Any], axes: Sequence[str]) -> str:
     rows.append(row("G92", offsets.get("g92_mm", {})))
     rows.append(row("work origin", offsets.get("work_origin_mm", {})))
     return "\n".join(rows)
+
+
+def fields_text(fields: Mapping[str, Any]) -> str:
+    """An event's fields as words: `program nc_programs/a.nc, drive sim, virtual time yes`."""
+    def word(value: Any) -> str:
+        if isinstance(value, bool):
+            return "yes" if value else "no"
+        if value is None:
+            return "none"
+        if isinstance(value, float):
+            return f"{value:g}"
+        return str(value)
+    return ", ".join(f"{key.replace('_', ' ')} {word(value)}" for key, value in fields.items())

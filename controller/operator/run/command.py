@@ -9,7 +9,7 @@ import sys
 from dataclasses import replace
 from typing import Any
 
-from controller.config import load_config
+from controller.config import CONFIG_HELP, load_config
 from controller.errors import CncError, ConfigError, NcError, OffsetsError
 from controller.motion.realtime import probe_scheduling
 from controller.motion.types import MotionProgress, MotionState, Outcome
@@ -33,7 +33,7 @@ from drivers.errors import DriveUnavailableError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("program", help="G-code program to run")
-    parser.add_argument("--config", help="machine configuration (file or built-in name)")
+    parser.add_argument("--config", help=CONFIG_HELP)
     parser.add_argument("--json", action="store_true", help="one JSON object per line")
     add_drive_option_argument(parser)
     parser.add_argument("--from-line", type=int, metavar="N",

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from typing import Any, TextIO
 
 from controller.motion.types import MotionProgress, MotionResult, MotionState
-from controller.operator.words import axes_text, pulses_text
+from controller.operator.words import axes_text, fields_text, pulses_text
 
 MAX_MARKS = 4096  # file positions a ProgramLines keeps, whatever the program's length
 SHOWN_CHARS = 256  # a line's text kept for the status line (it shows 32); the rest is skipped
@@ -168,8 +168,7 @@ class PlainView:
         self.lines, self.out, self._next_s = lines, out or sys.stdout, 0.0
 
     def event(self, name: str, **fields: Any) -> None:
-        extra = " ".join(f"{k}={v}" for k, v in fields.items())
-        print(f"cncctl: {name} {extra}".rstrip(), file=self.out, flush=True)
+        print(f"cncctl: {name} {fields_text(fields)}".rstrip(), file=self.out, flush=True)
 
     def progress(self, p: MotionProgress) -> None:
         if p.elapsed_s < self._next_s:
@@ -210,7 +209,7 @@ def _final_position_text(s: dict[str, Any]) -> str:
 def status_text(p: MotionProgress, lines: Sequence[str]) -> str:
     text = lines_text(lines, p.line)
     planned = f"/{p.planned_s:.2f}" if p.planned_s is not None else ""
-    return (f"[{p.state.value}] {p.executed_s:.2f}{planned} s  line {p.line} {text!r}  "
+    return (f"[{p.state.value}] {p.executed_s:.2f}{planned} s  line {p.line}: {text}  "
             f"feed {p.feed_mm_s:.1f} mm/s ({p.override_pct:g} %)  {position_text(p)}  "
             f"ferror {p.ferror_um:.0f} um  fifo {p.fifo_ms:.0f} ms")
 
@@ -246,8 +245,9 @@ class RichView(PlainView):
         self.live.start()
 
     def event(self, name: str, **fields: Any) -> None:
-        self.live.console.print(f"[bold]{name}[/] " + " ".join(f"{k}={v}" for k, v in
-                                                              fields.items()))
+        from rich.markup import escape
+
+        self.live.console.print(f"[bold]{name}[/] " + escape(fields_text(fields)))
 
     def progress(self, p: MotionProgress) -> None:
         self.bar.update(self.task, completed=p.executed_s, total=p.planned_s,
