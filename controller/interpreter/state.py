@@ -53,7 +53,7 @@ class InterpState:
                  track: ProgramOffsets | None = None) -> None:
         self.path = path
         self.config = config
-        self.out: list[NcBlock] = []
+        self.out: list[NcBlock] = []  # Moves appends here too: cleared, never replaced
         self.modal = Modal(pos=start_mm if start_mm is not None else (0.0, 0.0, 0.0))
         self.offsets = WorkOffsets(offsets if offsets is not None else OffsetTable(), track,
                                    config.has_axis("z"), config.name)
