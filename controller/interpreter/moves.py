@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
-from controller.blocks import ArcBlock, LineBlock, NcBlock, PathControl, Source
+from controller.blocks import ArcBlock, LineBlock, NcBlock, Source
 from controller.config import MachineConfig
 from controller.interpreter.arcs import center_ijk, center_r
 from controller.interpreter.codes import WordError, g_name
+from controller.interpreter.modal import Modal
 from controller.interpreter.nurbs_blocks import NurbsCollector, check_order, split_at_corners
+from controller.interpreter.work_offsets import WorkOffsets
 
 # G6.2's first control point must be the current position within this: a drive reports whole
 # pulses (1 um), so a program that ended at Y0.00059 stands at Y0.001 when run again.
@@ -17,32 +17,31 @@ _G6_LETTERS = frozenset("XYZRK")
 _AXES = frozenset("XYZ")
 
 
-class MotionMixin:
-    """Builds motion blocks from the modal state; mixed into InterpState, which sets what is
-    declared here (declared, not imported, so that this file does not import state.py)."""
+class Moves:
+    """The motion words of a line: G0/G1 lines, G2/G3 arcs, G5.2/G6.2 NURBS blocks.
 
-    path: str
-    config: MachineConfig
-    has_z: bool
-    rapid_mm_s: float
-    out: list[NcBlock]
-    pos: tuple[float, float, float]  # machine coordinates
-    origin: tuple[float, float, float] | None  # work origin (machine = program + origin)
-    scale: float
-    absolute: bool
-    arc_absolute: bool
-    feed_mm_s: float
-    motion: int | None
-    path_control: PathControl
-    nurbs: NurbsCollector | None
-    _src: Callable[[int], Source]
+    Reads the shared `modal` state and the work origin of `offsets`, moves `modal.pos` and
+    appends the blocks it builds to `out` (the list InterpState hands on). Owns the NURBS
+    block being collected."""
+
+    def __init__(self, modal: Modal, offsets: WorkOffsets, config: MachineConfig, path: str,
+                 out: list[NcBlock]) -> None:
+        self.modal = modal
+        self.offsets = offsets
+        self.config = config
+        self.path = path
+        self.out = out
+        self.has_z = config.has_axis("z")
+        self.rapid_mm_s = config.interpolator.rapid_feed_mm_s
+        self.nurbs: NurbsCollector | None = None  # the block of an open G5.2 or G6.2
 
     def move(self, motion: int | None, vals: dict[str, float], lineno: int,
              machine: bool = False) -> None:
         """The line's motion; `machine`: its X Y Z are machine coordinates (G53)."""
+        modal = self.modal
         if motion is not None:
-            self.motion = None if motion in (800, 53) else motion
-        mode = self.motion if motion is None else motion
+            modal.motion = None if motion in (800, 53) else motion
+        mode = modal.motion if motion is None else motion
         if mode == 800 and not _AXES.intersection(vals):
             return  # G80 alone cancels the motion mode
         if mode is None or mode == 800:
@@ -64,20 +63,21 @@ class MotionMixin:
             self._arc(mode == 20, end, vals, lineno)
 
     def _need_feed(self, motion: int | None) -> None:
-        if self.feed_mm_s <= 0.0:
-            word = g_name(motion if motion is not None else self.motion or 10)
+        if self.modal.feed_mm_s <= 0.0:
+            word = g_name(motion if motion is not None else self.modal.motion or 10)
             raise WordError(word, f"{word} feed move with no feed rate: program F first")
 
     def _end_point(self, vals: dict[str, float],
                    machine: bool = False) -> tuple[float, float, float]:
-        x, y, z = self.pos
-        s = self.scale
-        o = self.origin
-        if self.absolute and (o is None or machine):
+        modal = self.modal
+        x, y, z = modal.pos
+        s = modal.scale
+        o = self.offsets.origin
+        if modal.absolute and (o is None or machine):
             x = vals["X"] * s if "X" in vals else x
             y = vals["Y"] * s if "Y" in vals else y
             z = vals["Z"] * s if "Z" in vals else z
-        elif self.absolute:
+        elif modal.absolute:
             x = vals["X"] * s + o[0] if "X" in vals else x
             y = vals["Y"] * s + o[1] if "Y" in vals else y
             z = vals["Z"] * s + o[2] if "Z" in vals else z
@@ -85,44 +85,47 @@ class MotionMixin:
             x += vals.get("X", 0.0) * s
             y += vals.get("Y", 0.0) * s
             z += vals.get("Z", 0.0) * s
-        if z != self.pos[2] and not self.has_z:
+        if z != modal.pos[2] and not self.has_z:
             raise WordError("Z", f"Z move on a machine without a Z axis "
                                  f"(config '{self.config.name}')")
         return x, y, z
 
     def _line(self, end: tuple[float, float, float], rapid: bool, lineno: int) -> None:
-        if end == self.pos:
+        modal = self.modal
+        if end == modal.pos:
             return  # a zero-length move changes nothing
-        feed = self.rapid_mm_s if rapid else self.feed_mm_s
-        block = LineBlock(self.pos, end, feed, rapid, self.path_control, self._src(lineno))
+        feed = self.rapid_mm_s if rapid else modal.feed_mm_s
+        block = LineBlock(modal.pos, end, feed, rapid, modal.path_control,
+                          Source(self.path, lineno, lineno))
         _within_a_day(block.length_mm, self._capped(feed), "F")
         self.out.append(block)
-        self.pos = end
+        modal.pos = end
 
     def _arc(self, clockwise: bool, end: tuple[float, float, float], vals: dict[str, float],
              lineno: int) -> None:
-        sx, sy, sz = self.pos
+        modal = self.modal
+        sx, sy, sz = modal.pos
         ex, ey, ez = end
         if ez != sz:
             raise WordError("Z", "helical arcs (Z motion in G2/G3) are not supported")
         if "K" in vals:
             raise WordError("K", "K word in an XY-plane (G17) arc")
         turns = self._turns(vals)
-        inch = self.scale != 1.0
+        inch = modal.scale != 1.0
         has_ij = "I" in vals or "J" in vals
         if "R" in vals:
             if has_ij:
                 raise WordError("R", "arc with both R and I J: use one of them")
-            cx, cy = center_r(sx, sy, ex, ey, vals["R"] * self.scale, clockwise, inch)
+            cx, cy = center_r(sx, sy, ex, ey, vals["R"] * modal.scale, clockwise, inch)
         elif has_ij:
             cx, cy = center_ijk(sx, sy, ex, ey, *self._center(vals), inch)
         else:
             raise WordError(g_name(20 if clockwise else 30), "arc needs I J (centre) or R")
-        block = ArcBlock(self.pos, end, (cx, cy), clockwise, turns, self.feed_mm_s,
-                         self.path_control, self._src(lineno))
-        _within_a_day(block.length_mm, self._capped(self.feed_mm_s), "P" if turns else "F")
+        block = ArcBlock(modal.pos, end, (cx, cy), clockwise, turns, modal.feed_mm_s,
+                         modal.path_control, Source(self.path, lineno, lineno))
+        _within_a_day(block.length_mm, self._capped(modal.feed_mm_s), "P" if turns else "F")
         self.out.append(block)
-        self.pos = end
+        modal.pos = end
 
     def _pulse_mm(self) -> float:
         return min(a.pulse_mm for a in self.config.axes)
@@ -137,46 +140,50 @@ class MotionMixin:
         return int(p) - 1
 
     def _center(self, vals: dict[str, float]) -> tuple[float, float]:
-        s = self.scale
-        if self.arc_absolute:
+        modal = self.modal
+        s = modal.scale
+        if modal.arc_absolute:
             for letter in "IJ":
                 if letter not in vals:
                     raise WordError(letter if letter == "I" else "J",
                                     f"{letter} word missing in absolute-centre arc (G90.1)")
             return self._machine(0, vals["I"]), self._machine(1, vals["J"])
-        return self.pos[0] + vals.get("I", 0.0) * s, self.pos[1] + vals.get("J", 0.0) * s
+        return modal.pos[0] + vals.get("I", 0.0) * s, modal.pos[1] + vals.get("J", 0.0) * s
 
     def _machine(self, axis: int, value: float) -> float:
         """An absolute program coordinate (program units) in machine mm."""
-        mm = value * self.scale
-        return mm if self.origin is None else mm + self.origin[axis]
+        mm = value * self.modal.scale
+        origin = self.offsets.origin
+        return mm if origin is None else mm + origin[axis]
 
     def _program(self, axis: int, mm: float) -> float:
         """A machine coordinate (mm) in the program's frame and units."""
-        return (mm if self.origin is None else mm - self.origin[axis]) / self.scale
+        origin = self.offsets.origin
+        return (mm if origin is None else mm - origin[axis]) / self.modal.scale
 
     # ---- NURBS ------------------------------------------------------------------------------
     def _start_nurbs(self, mode: int, vals: dict[str, float], lineno: int) -> None:
         name = g_name(mode)
-        if not self.absolute:
+        if not self.modal.absolute:
             raise WordError(name, f"{name} NURBS in incremental mode (G91) is not supported")
         self._need_feed(mode)
-        if "Z" in vals and self._machine(2, vals["Z"]) != self.pos[2]:
+        if "Z" in vals and self._machine(2, vals["Z"]) != self.modal.pos[2]:
             raise WordError("Z", "NURBS must stay at constant Z (no Z motion)")
-        x0, y0, z0 = self.pos
+        x0, y0, z0 = self.modal.pos
         if mode == 52:
             self._start_g5(vals, lineno, x0, y0, z0)
         else:
             self._start_g6(vals, lineno, x0, y0, z0)
-        self.motion = None  # after the NURBS block, a new motion code is needed
+        self.modal.motion = None  # after the NURBS block, a new motion code is needed
 
     def _start_g5(self, vals: dict[str, float], lineno: int, x0: float, y0: float,
                   z0: float) -> None:
         order = check_order(vals["L"], "L") if "L" in vals else 3
         has_xy = _xy_flags(vals)
         w0 = vals.get("P", 1.0) if not has_xy else 1.0  # LinuxCNC: P alone weights point 0
-        self.nurbs = NurbsCollector("G5.2", order, x0, y0, w0, z0, self.feed_mm_s,
-                                    self.path_control, self.path, lineno, self._pulse_mm())
+        self.nurbs = NurbsCollector("G5.2", order, x0, y0, w0, z0, self.modal.feed_mm_s,
+                                    self.modal.path_control, self.path, lineno,
+                                    self._pulse_mm())
         if has_xy:
             self._g5_point(vals, lineno)
 
@@ -200,8 +207,8 @@ class MotionMixin:
                             f"the first G6.2 control point must be the current position "
                             f"X{self._program(0, x0):.4f} Y{self._program(1, y0):.4f}")
         self.nurbs = NurbsCollector("G6.2", order, x0, y0, vals.get("R", 1.0), z0,
-                                    self.feed_mm_s, self.path_control, self.path, lineno,
-                                    self._pulse_mm())
+                                    self.modal.feed_mm_s, self.modal.path_control, self.path,
+                                    lineno, self._pulse_mm())
         self.nurbs.add_knot(vals["K"], lineno, knot_only=False)
 
     def nurbs_line(self, gs: list[int], ms: list[int], vals: dict[str, float],
@@ -248,7 +255,7 @@ class MotionMixin:
         block = self.nurbs.finish(end_line, self.config.interpolator.max_feed_mm_s)
         self.nurbs = None
         self.out.extend(split_at_corners(block))
-        self.pos = (*block.end[:2], self.pos[2])
+        self.modal.pos = (*block.end[:2], self.modal.pos[2])
 
 
 def _xy_flags(vals: dict[str, float]) -> bool:

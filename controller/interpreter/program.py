@@ -150,10 +150,10 @@ class Interpreter:
         """Run from `line`: the state here starts the run, unless a NURBS block is open (G5.2:
         an error; G6.2: the state decides at the next line that does not belong to it)."""
         state = self.state
-        if state.nurbs is None:
+        if state.moves.nurbs is None:
             state.mark(line)
             return True
-        if state.nurbs.kind == "G5.2":
+        if state.moves.nurbs.kind == "G5.2":
             raise state.inside_nurbs(line)
         state.mark_pending = line
         return False
@@ -169,7 +169,7 @@ class Interpreter:
             if code is not None and _VALUE_LETTERS.issuperset(vals):
                 state = self.state
                 try:
-                    if state.nurbs is not None or not state.fast(code, vals, lineno):
+                    if state.moves.nurbs is not None or not state.fast(code, vals, lineno):
                         state.execute([] if code < 0 else [code], [], vals, lineno)
                 except WordError as exc:
                     raise self._error(Line(words, text), lineno, exc.word, exc.message) from None

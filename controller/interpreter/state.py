@@ -16,8 +16,9 @@ from controller.config import MachineConfig
 from controller.errors import NcError
 from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
 from controller.interpreter.line_state import LineState
-from controller.interpreter.moves import MAX_BLOCK_S, MotionMixin
-from controller.interpreter.work_offsets import AXIS_CODES, OffsetsMixin
+from controller.interpreter.modal import Modal
+from controller.interpreter.moves import MAX_BLOCK_S, Moves
+from controller.interpreter.work_offsets import AXIS_CODES, WorkOffsets
 from controller.offsets import OffsetTable, ProgramOffsets
 
 MM_PER_INCH = 25.4
@@ -38,8 +39,13 @@ _LINE_LETTERS = frozenset("XYZF")
 _ARC_LETTERS = frozenset("XYZFIJR")
 
 
-class InterpState(MotionMixin, OffsetsMixin):
-    """Position (machine mm), modal codes, offsets, feed and spindle; collects blocks in `out`."""
+class InterpState:
+    """The execution of one line on the interpreter's state; collects blocks in `out`.
+
+    The state is owned by parts: `modal` (position in machine mm, units, distance modes, feed,
+    motion mode, path control: shared with the others), `offsets` (the work offset table and
+    its origin) and `moves` (the motion words and the open NURBS block). Spindle, coolant,
+    tool and the run-from-line mark are this class's own."""
 
     def __init__(self, path: str, config: MachineConfig,
                  start_mm: tuple[float, float, float] | None = None,
@@ -47,16 +53,12 @@ class InterpState(MotionMixin, OffsetsMixin):
                  track: ProgramOffsets | None = None) -> None:
         self.path = path
         self.config = config
-        self.has_z = config.has_axis("z")
-        self.rapid_mm_s = config.interpolator.rapid_feed_mm_s
-        self.out: list[NcBlock] = []
-        self.pos = start_mm if start_mm is not None else (0.0, 0.0, 0.0)
-        self.scale = 1.0  # mm per program unit (G21 / G20)
-        self.absolute = True  # G90
-        self.arc_absolute = False  # G91.1 is LinuxCNC's default
-        self.feed_mm_s = 0.0
-        self.motion: int | None = None  # code10 of the modal motion; None after G80 / NURBS
-        self.path_control = PathControl()
+        self.out: list[NcBlock] = []  # Moves appends here too: cleared, never replaced
+        self.modal = Modal(pos=start_mm if start_mm is not None else (0.0, 0.0, 0.0))
+        self.offsets = WorkOffsets(offsets if offsets is not None else OffsetTable(), track,
+                                   config.has_axis("z"), config.name)
+        self.moves = Moves(self.modal, self.offsets, config, path, self.out)
+        self.track = track
         self.spindle_rpm = 0.0
         self.spindle_on = False
         self.spindle_code = 5  # M3, M4 or M5
@@ -64,16 +66,13 @@ class InterpState(MotionMixin, OffsetsMixin):
         self.css = False  # G96: S is a surface speed
         self.tool = 0
         self.ended = False
-        self.nurbs = None  # the NurbsCollector of an open G5.2 or G6.2 block
-        self.track = track
-        self.origin = None
-        self.set_offsets(offsets if offsets is not None else OffsetTable())
         self.mark_pending: int | None = None  # run from this line once the NURBS block ends
         self.at_line: LineState | None = None  # the state where the run from line starts
 
     # ---- one line ---------------------------------------------------------------------------
     def execute(self, gs: list[int], ms: list[int], vals: dict[str, float], lineno: int) -> None:
-        if self.nurbs is not None and self.nurbs_line(gs, ms, vals, lineno):
+        moves = self.moves
+        if moves.nurbs is not None and moves.nurbs_line(gs, ms, vals, lineno):
             if self.mark_pending is not None:
                 raise self.inside_nurbs(self.mark_pending)
             return
@@ -89,54 +88,56 @@ class InterpState(MotionMixin, OffsetsMixin):
         if axis_code and motion is not None and motion != 800:
             raise WordError(g_name(nonmodal), f"{g_name(nonmodal)} and {g_name(motion)} both "
                                               f"use axis words: put them on separate lines")
-        _check_letters(groups, vals, motion if motion is not None or axis_code else self.motion)
+        _check_letters(groups, vals,
+                       motion if motion is not None or axis_code else self.modal.motion)
         self._modes(groups, vals)
         self._feed_speed_tool(vals, ms, mgroups, lineno)
         if nonmodal == 40:
             self._dwell(vals, lineno)
         elif nonmodal is not None and nonmodal != 530:
-            self.offset_code(nonmodal, vals)
+            self.offsets.apply(nonmodal, vals, self.modal.pos, self.modal.scale)
         if axis_code:
             if motion is not None:
-                self.move(motion, {}, lineno)  # G80: cancels the motion mode
+                moves.move(motion, {}, lineno)  # G80: cancels the motion mode
         elif motion is not None or not _AXES.isdisjoint(vals):
             if nonmodal == 530:
                 self._need_straight(motion)
-            self.move(motion, vals, lineno, machine=nonmodal == 530)
+            moves.move(motion, vals, lineno, machine=nonmodal == 530)
         stop = mgroups.get("stopping")
         if stop is not None:
-            self.out.append(StopBlock(_STOPS[stop], self.pos, self._src(lineno)))
+            self.out.append(StopBlock(_STOPS[stop], self.modal.pos, self._src(lineno)))
             self.ended = stop in (2, 30)
-            if self.ended and self.offsets.active != 1:
-                self.select_system(540)  # LinuxCNC: M2/M30 go back to G54 (G92 stays)
+            if self.ended and self.offsets.table.active != 1:
+                self.offsets.select_system(540)  # LinuxCNC: M2/M30 go back to G54 (G92 stays)
 
     def fast(self, code: int, vals: dict[str, float], lineno: int) -> bool:
         """G0 G1 G2 G3 lines with only X Y Z F (and I J R for arcs): most lines of a program.
 
         `code` is the line's one G code (code10) or -1. Same result as the general path,
         without its group and letter bookkeeping; False means "use the general path"."""
+        modal = self.modal
         if code >= 0:
             mode = code
             if mode not in _FAST_MOTIONS:
                 return False
         else:
-            mode = self.motion
+            mode = modal.motion
             if mode not in _FAST_MOTIONS or _AXES.isdisjoint(vals):
                 return False
         if not (_ARC_LETTERS if mode >= 20 else _LINE_LETTERS).issuperset(vals):
             return False
         if "F" in vals:
-            if vals["F"] < 0 or 0 < vals["F"] * self.scale < MIN_FEED_MM_MIN:
+            if vals["F"] < 0 or 0 < vals["F"] * modal.scale < MIN_FEED_MM_MIN:
                 return False  # the general path reports it
-            self.feed_mm_s = vals["F"] * self.scale / 60.0
-        self.move(code if code >= 0 else None, vals, lineno)
+            modal.feed_mm_s = vals["F"] * modal.scale / 60.0
+        self.moves.move(code if code >= 0 else None, vals, lineno)
         return True
 
     def _src(self, lineno: int) -> Source:
         return Source(self.path, lineno, lineno)
 
     def _need_straight(self, motion: int | None) -> None:
-        mode = motion if motion is not None else self.motion
+        mode = motion if motion is not None else self.modal.motion
         if mode not in (0, 10):
             raise WordError("G53", "G53 (machine coordinates) needs G0 or G1 in force")
 
@@ -144,39 +145,41 @@ class InterpState(MotionMixin, OffsetsMixin):
         """Run from `line`: note the state here and drop what the earlier lines produced."""
         self.out.clear()
         self.mark_pending = None
-        x, y, z = self.pos
+        modal = self.modal
+        x, y, z = modal.pos
         self.at_line = LineState(
-            line=line, position_mm=(float(x), float(y), float(z)), offsets=self.offsets,
-            feed_mm_s=self.feed_mm_s, absolute=self.absolute, inch=self.scale != 1.0,
-            motion=None if self.motion is None else g_name(self.motion),
-            path_control=self.path_control, spindle=f"M{self.spindle_code}",
+            line=line, position_mm=(float(x), float(y), float(z)), offsets=self.offsets.table,
+            feed_mm_s=modal.feed_mm_s, absolute=modal.absolute, inch=modal.scale != 1.0,
+            motion=None if modal.motion is None else g_name(modal.motion),
+            path_control=modal.path_control, spindle=f"M{self.spindle_code}",
             spindle_rpm=self._rpm(), coolant=self.coolant, tool=self.tool)
 
     def inside_nurbs(self, line: int) -> NcError:
         """Run from a line inside a multi-line NURBS block: an error naming that line."""
-        first = self.nurbs.first_line
-        return NcError(self.path, line, 1, self.nurbs.kind,
-                       f"cannot run from line {line}: it is inside the {self.nurbs.kind} NURBS "
+        nurbs = self.moves.nurbs
+        first = nurbs.first_line
+        return NcError(self.path, line, 1, nurbs.kind,
+                       f"cannot run from line {line}: it is inside the {nurbs.kind} NURBS "
                        f"block that starts at line {first}; run from line {first}")
 
     def _modes(self, groups: dict[str, int], vals: dict[str, float]) -> None:
         if "units" in groups:
-            self.scale = MM_PER_INCH if groups["units"] == 200 else 1.0
+            self.modal.scale = MM_PER_INCH if groups["units"] == 200 else 1.0
         if "distance" in groups:
-            self.absolute = groups["distance"] == 900
+            self.modal.absolute = groups["distance"] == 900
         if "arc distance" in groups:
-            self.arc_absolute = groups["arc distance"] == 901
+            self.modal.arc_absolute = groups["arc distance"] == 901
         if "spindle mode" in groups:
             self.css = groups["spindle mode"] == 960
         if "coordinate system" in groups:
-            self.select_system(groups["coordinate system"])
+            self.offsets.select_system(groups["coordinate system"])
         path = groups.get("path control")
         if path == 610:
-            self.path_control = PathControl(PathMode.EXACT_STOP)
+            self.modal.path_control = PathControl(PathMode.EXACT_STOP)
         elif path == 611:
-            self.path_control = PathControl(PathMode.EXACT_PATH)
+            self.modal.path_control = PathControl(PathMode.EXACT_PATH)
         elif path == 640:
-            self.path_control = PathControl(PathMode.BLEND, self._tol(vals, "P"),
+            self.modal.path_control = PathControl(PathMode.BLEND, self._tol(vals, "P"),
                                             self._tol(vals, "Q"))
         # G17, G40, G43/G49 (no tool table: zero length), G94, G98/G99 and G97 change nothing
         # in phcnc's model; they are accepted because CAM headers use them.
@@ -186,7 +189,7 @@ class InterpState(MotionMixin, OffsetsMixin):
             return None
         if vals[letter] < 0:
             raise WordError(letter, f"G64 {letter} tolerance must not be negative")
-        return vals[letter] * self.scale
+        return vals[letter] * self.modal.scale
 
     def _feed_speed_tool(self, vals: dict[str, float], ms: list[int], mgroups: dict[str, int],
                          lineno: int) -> None:
@@ -194,10 +197,10 @@ class InterpState(MotionMixin, OffsetsMixin):
         if "F" in vals:
             if vals["F"] < 0:
                 raise WordError("F", "negative feed rate")
-            if 0 < vals["F"] * self.scale < MIN_FEED_MM_MIN:
+            if 0 < vals["F"] * self.modal.scale < MIN_FEED_MM_MIN:
                 raise WordError("F", f"feed F{vals['F']:g} is below the minimum of "
                                      f"{MIN_FEED_MM_MIN:g} mm/min (as grbl's)")
-            self.feed_mm_s = vals["F"] * self.scale / 60.0
+            self.modal.feed_mm_s = vals["F"] * self.modal.scale / 60.0
         if "S" in vals:
             if vals["S"] < 0:
                 raise WordError("S", "negative spindle speed")
@@ -247,16 +250,17 @@ class InterpState(MotionMixin, OffsetsMixin):
         if vals["P"] > MAX_BLOCK_S:
             raise WordError("P", f"G4 dwell of {vals['P']:.6g} s is longer than "
                                  f"{MAX_BLOCK_S / 3600:g} h")
-        self.out.append(DwellBlock(vals["P"], self.pos, self._src(lineno)))
+        self.out.append(DwellBlock(vals["P"], self.modal.pos, self._src(lineno)))
 
     def finish_program(self, lineno: int) -> None:
         """End of file: an open G6.2 block ends here; an open G5.2 block is an error."""
-        if self.nurbs is None:
+        nurbs = self.moves.nurbs
+        if nurbs is None:
             return
-        if self.nurbs.kind == "G5.2":
-            raise NcError(self.path, self.nurbs.first_line, 1, "G5.2",
+        if nurbs.kind == "G5.2":
+            raise NcError(self.path, nurbs.first_line, 1, "G5.2",
                           "G5.2 NURBS block not closed by G5.3 before the end of the program")
-        self.end_nurbs()
+        self.moves.end_nurbs()
 
 
 def _groups(codes: list[int], table: dict[int, str], name) -> dict[str, int]:  # noqa: ANN001

@@ -4,7 +4,6 @@ are what the current position shall read)."""
 
 from __future__ import annotations
 
-from controller.config import MachineConfig
 from controller.interpreter.codes import WordError
 from controller.offsets import (
     SYSTEMS,
@@ -22,19 +21,23 @@ _AXES = "XYZ"
 AXIS_CODES = frozenset((100, 920))  # G10 and G92 take the line's axis words for themselves
 
 
-class OffsetsMixin:
-    """Offset codes on the modal state; mixed into InterpState, which sets what is declared."""
+class WorkOffsets:
+    """The offset table in force and the work origin it gives; G54-G59, G10 and G92 change it.
 
-    config: MachineConfig
-    has_z: bool
-    pos: tuple[float, float, float]
-    scale: float
-    offsets: OffsetTable
-    origin: Point3 | None  # work origin (active system + G92); None when it is zero
-    track: ProgramOffsets | None
+    `track`, if given, is told every new table (what a caller reads after the program)."""
 
-    def set_offsets(self, table: OffsetTable) -> None:
-        self.offsets = table
+    def __init__(self, table: OffsetTable, track: ProgramOffsets | None, has_z: bool,
+                 config_name: str) -> None:
+        self.track = track
+        self.has_z = has_z
+        self.config_name = config_name  # named in the refusal of a Z offset without Z axis
+        self.table = table
+        self.origin: Point3 | None = None  # active system + G92; None when it is zero
+        self.set(table)
+
+    def set(self, table: OffsetTable) -> None:
+        """Put `table` in force: its origin becomes the program frame's."""
+        self.table = table
         origin = work_origin(table)
         self.origin = None if origin == ZERO_MM else origin
         if self.track is not None:
@@ -43,21 +46,22 @@ class OffsetsMixin:
     def select_system(self, code10: int) -> None:
         """G54 .. G59 (code10 540 .. 590): the machine stays, the program frame changes."""
         n = code10 // 10 - 53
-        if n != self.offsets.active:
-            self.set_offsets(select(self.offsets, n))
+        if n != self.table.active:
+            self.set(select(self.table, n))
 
-    def offset_code(self, code10: int, vals: dict[str, float]) -> None:
-        """G10 (100), G92 (920), G92.1 (921), G92.2 (922)."""
+    def apply(self, code10: int, vals: dict[str, float], pos: Point3, scale: float) -> None:
+        """G10 (100), G92 (920), G92.1 (921), G92.2 (922) at machine position `pos` (mm), with
+        `scale` mm per program unit."""
         if code10 == 100:
-            self._g10(vals)
+            self._g10(vals, pos, scale)
         elif code10 == 920:
-            self._g92(vals)
-        elif self.offsets.g92_mm != ZERO_MM:
+            self._g92(vals, pos, scale)
+        elif self.table.g92_mm != ZERO_MM:
             # G92.1 and G92.2 both clear the offset (LinuxCNC's G92.2 keeps parameters
             # 5211-5213, which phcnc does not have).
-            self.set_offsets(with_g92(self.offsets, ZERO_MM))
+            self.set(with_g92(self.table, ZERO_MM))
 
-    def _g10(self, vals: dict[str, float]) -> None:
+    def _g10(self, vals: dict[str, float], pos: Point3, scale: float) -> None:
         if "L" not in vals:
             raise WordError("G10", "G10 needs L2 (set a work origin) or L20 (set it so that "
                                    "the current position reads X Y Z)")
@@ -78,30 +82,30 @@ class OffsetsMixin:
         if p > SYSTEMS:
             raise WordError("P", f"{name} P{p:g}: coordinate systems G59.1-G59.3 are not "
                                  f"supported (P0..P{SYSTEMS} only)")
-        n = int(p) or self.offsets.active
-        old = self.offsets.systems_mm[n - 1]
+        n = int(p) or self.table.active
+        old = self.table.systems_mm[n - 1]
         origin = list(old)
-        g92 = self.offsets.g92_mm
+        g92 = self.table.g92_mm
         for i, letter in enumerate(_AXES):
             if letter in vals:
-                value = vals[letter] * self.scale
-                origin[i] = value if kind == 2.0 else self.pos[i] - g92[i] - value
+                value = vals[letter] * scale
+                origin[i] = value if kind == 2.0 else pos[i] - g92[i] - value
         self._check_z(vals, origin[2], old[2])
-        self.set_offsets(with_system(self.offsets, n, origin))
+        self.set(with_system(self.table, n, origin))
 
-    def _g92(self, vals: dict[str, float]) -> None:
+    def _g92(self, vals: dict[str, float], pos: Point3, scale: float) -> None:
         if not any(letter in vals for letter in _AXES):
             raise WordError("G92", "G92 needs at least one axis word (X, Y, Z)")
-        origin = self.offsets.systems_mm[self.offsets.active - 1]
-        old = self.offsets.g92_mm
+        origin = self.table.systems_mm[self.table.active - 1]
+        old = self.table.g92_mm
         g92 = list(old)
         for i, letter in enumerate(_AXES):
             if letter in vals:
-                g92[i] = self.pos[i] - origin[i] - vals[letter] * self.scale
+                g92[i] = pos[i] - origin[i] - vals[letter] * scale
         self._check_z(vals, g92[2], old[2])
-        self.set_offsets(with_g92(self.offsets, g92))
+        self.set(with_g92(self.table, g92))
 
     def _check_z(self, vals: dict[str, float], new: float, old: float) -> None:
         if "Z" in vals and not self.has_z and new != old:
             raise WordError("Z", f"Z offset on a machine without a Z axis "
-                                 f"(config '{self.config.name}')")
+                                 f"(config '{self.config_name}')")
