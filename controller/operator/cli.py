@@ -16,6 +16,8 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("inspect", _OPS + "inspect_cmd", "show NURBS blocks, sharp corners and PH segments"),
     ("simulate", _OPS + "simulate_cmd", "plan a program headless and report its errors"),
     ("run", _OPS + "run.command", "run a program on the configured drive (sim card by default)"),
+    ("identify", _OPS + "identify.command",
+     "excite the axes, fit their servo loops (eq. 27) and show them beside the model in force"),
     ("status", _OPS + "control_cmd", "the daemon's state, job, position and last job"),
     ("abort", _OPS + "control_cmd", "stop the daemon's running job along the path"),
     ("estop", _OPS + "control_cmd", "e-stop: stop now and latch until reset"),
