@@ -81,15 +81,23 @@ def fit_pct(measured: np.ndarray, model: np.ndarray) -> float:
 
 
 def fit_axis(commanded_mm: np.ndarray, measured_mm: np.ndarray, start: ServoParams,
-             sample_period_s: float, rest_samples: int = 0) -> AxisFit:
-    """Fit the loop to one axis's record (per-sample commanded and encoder positions, at rest
-    for its first rest_samples samples, whose mean error is the encoder's offset)."""
+             sample_period_s: float, rest_samples: int = 0,
+             measured_index: np.ndarray | None = None) -> AxisFit:
+    """Fit the loop to one axis's record: the commanded position of every sample, and the
+    encoder's at the samples measured_index (default: every sample; a serial card reports
+    some only). At rest for its first rest_samples samples, whose mean error is the encoder's
+    offset."""
     r = np.asarray(commanded_mm, float)
-    e_meas = r - np.asarray(measured_mm, float)
-    if rest_samples > 0:
-        e_meas = e_meas - e_meas[:rest_samples].mean()
+    idx = np.arange(len(r)) if measured_index is None else np.asarray(measured_index, int)
+    if len(idx) != len(measured_mm) or len(idx) < 10 or idx.min() < 0 or idx.max() >= len(r):
+        raise ValueError("the measured samples do not match the commanded ones")
+    e_meas = r[idx] - np.asarray(measured_mm, float)
+    if rest_samples > 0 and np.any(idx < rest_samples):
+        e_meas = e_meas - e_meas[idx < rest_samples].mean()
     v = np.diff(r, prepend=r[:1]) / sample_period_s
     n_fit = int(len(r) * FIT_SHARE)
+    fit_rows = idx < n_fit
+    i_fit, e_fit_meas = idx[fit_rows], e_meas[fit_rows]
     theta, scale = _theta_of(start)
 
     def residual(th: np.ndarray) -> np.ndarray | None:
@@ -97,7 +105,7 @@ def fit_axis(commanded_mm: np.ndarray, measured_mm: np.ndarray, start: ServoPara
         if usable(p, sample_period_s) is not None:
             return None
         with np.errstate(all="ignore"):
-            res = simulate_error_mm(p, v[:n_fit], sample_period_s) - e_meas[:n_fit]
+            res = simulate_error_mm(p, v[:n_fit], sample_period_s)[i_fit] - e_fit_meas
         return res if np.all(np.isfinite(res)) else None
 
     res = residual(theta)
@@ -105,7 +113,7 @@ def fit_axis(commanded_mm: np.ndarray, measured_mm: np.ndarray, start: ServoPara
         raise ValueError("the model in force is not a usable starting point")
     cost, lam, it = float(res @ res), 1e-3, 0
     for it in range(1, MAX_ITERATIONS + 1):  # noqa: B007 (the count is reported)
-        jac = np.empty((n_fit, len(theta)))
+        jac = np.empty((len(i_fit), len(theta)))
         for j in range(len(theta)):
             step = np.zeros_like(theta)
             step[j] = FD_STEP * max(1.0, abs(theta[j]))
@@ -129,9 +137,9 @@ def fit_axis(commanded_mm: np.ndarray, measured_mm: np.ndarray, start: ServoPara
         if not improved or gain < 1e-10 * cost:
             break
     params = params_of(theta, scale)
-    e_fit = simulate_error_mm(params, v, sample_period_s)
-    e_force = simulate_error_mm(start, v, sample_period_s)
-    held = slice(n_fit, None)
+    e_fit = simulate_error_mm(params, v, sample_period_s)[idx]
+    e_force = simulate_error_mm(start, v, sample_period_s)[idx]
+    held = ~fit_rows
     return AxisFit(params=params, fit_pct=fit_pct(e_meas[held], e_fit[held]),
                    fit_pct_in_force=fit_pct(e_meas[held], e_force[held]),
                    rms_um=1000.0 * float(np.sqrt(np.mean((e_meas[held] - e_fit[held]) ** 2))),

@@ -224,10 +224,11 @@ def _excite_and_fit(args: argparse.Namespace, config: MachineConfig, drive: Driv
 def _fit_and_report(config: MachineConfig, records: list[AxisRecord], out: str | None) -> int:
     fits: dict[str, AxisFit] = {}
     for rec in records:
-        axis = config.axis(rec.axis)
-        fits[rec.axis] = fit_axis(rec.commanded_counts * axis.pulse_mm,
-                                  rec.encoder_counts * axis.pulse_mm, axis.servo,
-                                  config.sample_period_s, rec.rest_samples)
+        try:
+            fits[rec.axis] = _fit(config, rec)
+        except ValueError as exc:
+            _say(f"{rec.axis.upper()}: {exc}; nothing written")
+            return EXIT_REFUSED_FIT
     lines: list[str] = []
     for name, fit in fits.items():
         lines += fit_lines(name, fit, MIN_FIT_PCT)
@@ -252,3 +253,9 @@ def _fit_and_report(config: MachineConfig, records: list[AxisRecord], out: str |
             return EXIT_FAULT
         _say(f"wrote {out}")
     return 0
+
+
+def _fit(config: MachineConfig, rec: AxisRecord) -> AxisFit:
+    axis = config.axis(rec.axis)
+    return fit_axis(rec.commanded_counts * axis.pulse_mm, rec.encoder_counts * axis.pulse_mm,
+                    axis.servo, config.sample_period_s, rec.rest_samples, rec.sample_index)

@@ -27,6 +27,7 @@ CYCLE_S = 0.01  # one loop cycle: ten frames at 1 ms
 LEAD_IN_S = 0.05  # at rest before the excitation: the encoder's offset is read there
 TAIL_S = 0.3  # at rest after it: the loop's settling is part of the record
 DRAIN_TIMEOUT_S = 5.0  # frames all written, the rest must be clocked within this
+QUIET_CYCLES = 5  # the FIFO empty and no report for this many cycles: the record is whole
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,8 +35,9 @@ class AxisRecord:
     """One axis's run: per executed frame, its commanded and encoder counts."""
 
     axis: str
-    commanded_counts: np.ndarray  # (n,) int64
-    encoder_counts: np.ndarray  # (n,) int64
+    commanded_counts: np.ndarray  # (n,) int64: every sample sent
+    sample_index: np.ndarray  # (m,) the samples the drive reported (a serial card: some)
+    encoder_counts: np.ndarray  # (m,) int64: the encoder at those samples
     rest_samples: int  # the lead-in at rest
     stopped: str | None  # why the excitation ended early (None: it ran whole)
     fault: str | None  # a drive fault or following error (the drive latched or was stopped)
@@ -75,6 +77,7 @@ def excite_axis(drive: Drive, config: MachineConfig, axis_index: int, excitation
     high = max(4 * cycle, int(config.runtime.card_fifo_high_water_ms / 1000.0 / period_s))
     high = min(high, drive.fifo_capacity() - 1)
     sent, faded, prev = 0, False, int(cmd0[axis_index])
+    seq_rows: list[np.ndarray] = []
     cmd_rows: list[np.ndarray] = []
     enc_rows: list[np.ndarray] = []
     fault: str | None = None
@@ -84,13 +87,15 @@ def excite_axis(drive: Drive, config: MachineConfig, axis_index: int, excitation
     def take() -> int:
         fb = drive.feedback()
         if len(fb):
+            seq_rows.append(fb.seq.copy())
             cmd_rows.append(fb.commanded_counts[:, axis_index].copy())
             enc_rows.append(fb.encoder_counts[:, axis_index].copy())
         return len(fb)
 
-    got = 0
+    got, quiet = 0, 0
     while True:
-        got += take()
+        fresh = take()
+        got += fresh
         status = drive.status()
         if status.halted:
             fault = drive.fault_message() or str(status)
@@ -112,13 +117,14 @@ def excite_axis(drive: Drive, config: MachineConfig, axis_index: int, excitation
                 frames[:, axis_index] = np.diff(chunk, prepend=prev)
                 drive.write_frames(frames, end_of_stream=sent + len(chunk) >= len(counts))
                 prev, sent = int(chunk[-1]), sent + len(chunk)
-        elif got >= len(counts):
-            break
+        elif drive.fifo_level() == 0:
+            quiet = quiet + 1 if not fresh else 0  # the last reports may still be on the way
+            if quiet >= QUIET_CYCLES:
+                break
         else:
             deadline_s = deadline_s if deadline_s is not None else idle_s + DRAIN_TIMEOUT_S
             if idle_s > deadline_s:
-                fault = f"{got} of {len(counts)} frames executed {DRAIN_TIMEOUT_S:g} s after " \
-                    "the last was sent"
+                fault = f"frames still queued {DRAIN_TIMEOUT_S:g} s after the last was sent"
                 break
         idle_s += cycle * period_s
         if virtual_time:
@@ -127,9 +133,30 @@ def excite_axis(drive: Drive, config: MachineConfig, axis_index: int, excitation
             time.sleep(CYCLE_S)
     if stop.reason is not None and "e-stop" in stop.reason:
         _disable(drive)
-    cmd = np.concatenate(cmd_rows) if cmd_rows else np.zeros(0, dtype=np.int64)
-    enc = np.concatenate(enc_rows) if enc_rows else np.zeros(0, dtype=np.int64)
-    return AxisRecord(axis.name, cmd, enc, lead, stop.reason, fault)
+    empty = np.zeros(0, dtype=np.int64)
+    seq, cmd, enc = (np.concatenate(r) if r else empty for r in (seq_rows, cmd_rows, enc_rows))
+    index = _align(counts, seq, cmd)
+    if index is None and fault is None and stop.reason is None:
+        fault = "the drive's feedback does not match the frames sent"
+    if index is None:
+        index, enc = empty, empty
+    return AxisRecord(axis.name, counts, index, enc, lead, stop.reason, fault)
+
+
+def _align(counts: np.ndarray, seq: np.ndarray, cmd: np.ndarray) -> np.ndarray | None:
+    """Each feedback row's sample in `counts`: the offset between the drive's frame numbers
+    and ours is the one under which every row's commanded counts are the ones sent (the
+    first row a drive reports need not be the first frame). None when no offset fits."""
+    if not len(seq):
+        return None
+    rel = seq - seq[0]
+    if rel.min() < 0 or rel.max() >= len(counts):
+        return None
+    for first in range(0, len(counts) - int(rel.max())):
+        index = rel + first
+        if np.array_equal(counts[index], cmd):
+            return index
+    return None
 
 
 def _faded(counts: np.ndarray, excitation: Excitation, sent: int, lead: int,
