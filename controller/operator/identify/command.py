@@ -40,6 +40,7 @@ EXIT_REFUSED_FIT = 1  # it moved, but the identified model is refused: nothing w
 EXIT_FAULT, EXIT_ABORTED = 3, 4
 MIN_FIT_PCT = 80.0  # held-out fit below this: the loop is not explained, nothing written
 MIN_WINDOW_SHARE = 0.5  # the travel may shrink the excitation to half, not further
+UNBOUNDED_MM = 1e6
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -151,13 +152,14 @@ def _plans(config: MachineConfig, drive: Drive, axes: list[int],
     for i in axes:
         a = config.axes[i]
         here = float(cmd[i]) * a.pulse_mm
+        # What Vmax and Amax alone allow; the window and the travel may cut it to half.
         wanted = design(config.sample_period_s, min(vmax, a.max_velocity_mm_s), amax,
-                        args.window, args.duration)
+                        UNBOUNDED_MM, args.duration)
         need = max(-wanted.excursion_mm[0], wanted.excursion_mm[1])
         room = min(args.window, here - a.travel_mm[0], a.travel_mm[1] - here)
         if room < MIN_WINDOW_SHARE * need:
             return [], (f"travel too short: {a.name.upper()} stands at {here:.3f} mm, "
-                        f"{max(room, 0.0):.3f} mm from its travel limit or the window; "
+                        f"{max(room, 0.0):.3f} mm from its travel limit or the --window; "
                         f"identify needs {need:.3f} mm either side")
         exc = wanted if room >= need else design(
             config.sample_period_s, min(vmax, a.max_velocity_mm_s), amax, room, args.duration)
