@@ -123,3 +123,13 @@ def test_identify_on_a_peer_in_its_own_process(backend: str, option: str) -> Non
     assert done.returncode == 0, done.stderr
     fit = next(line for line in done.stdout.splitlines() if "held-out" in line)
     assert float(fit.split(":")[1].split("%")[0]) > 90.0, fit  # the peer runs the model itself
+
+
+def test_a_drive_with_a_latched_fault_is_refused_before_any_motion(tmp_path: Path) -> None:
+    fault = tmp_path / "fault"
+    fault.write_text("")
+    done = _identify("x", "--config", XY, "--yes", "--virtual-time", "--drive-option",
+                     f"drive_fault_file={fault}")
+    assert done.returncode == 2, done.stderr
+    assert "halted" in done.stderr and "drive fault" in done.stderr
+    assert "exciting" not in done.stderr
