@@ -206,10 +206,15 @@ def _final_position_text(s: dict[str, Any]) -> str:
             "home or check the machine before the next job)")
 
 
+def _line_words(line: int, text: str) -> str:
+    """`line 4: G1 X10`; `line -` before the first line is reached."""
+    return f"line {line}: {text}" if line > 0 else "line -"
+
+
 def status_text(p: MotionProgress, lines: Sequence[str]) -> str:
     text = lines_text(lines, p.line)
     planned = f"/{p.planned_s:.2f}" if p.planned_s is not None else ""
-    return (f"[{p.state.value}] {p.executed_s:.2f}{planned} s  line {p.line}: {text}  "
+    return (f"[{p.state.value}] {p.executed_s:.2f}{planned} s  {_line_words(p.line, text)}  "
             f"feed {p.feed_mm_s:.1f} mm/s ({p.override_pct:g} %)  {position_text(p)}  "
             f"ferror {p.ferror_um:.0f} um  fifo {p.fifo_ms:.0f} ms")
 
