@@ -40,6 +40,16 @@ class ServoParams:
 
 
 @dataclass(frozen=True, slots=True)
+class ServoBand:
+    """How far the real loop may be from its model (`axes.<a>.servo_band`): its poles anywhere
+    within +-pole_pct of the model's and its velocity and acceleration lags within +-gain_pct
+    (controller/servo/model.mismatched); the generator then plans for every plant in it."""
+
+    pole_pct: float = 0.0
+    gain_pct: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
 class HomingConfig:
     """One axis's homing sequence (LinuxCNC HOME_* style), run by the drive (CiA 402 mode 6).
 
@@ -67,6 +77,7 @@ class AxisConfig:
     ferror_mm: float  # following-error limit at full speed (LinuxCNC FERROR)
     min_ferror_mm: float  # following-error floor (LinuxCNC MIN_FERROR)
     homing: HomingConfig | None = None  # None: no homing sequence (the position is absolute)
+    servo_band: ServoBand | None = None  # None: the plant is taken to be its model
 
     def ferror_limit_mm(self, v_mm_s: float) -> float:
         """LinuxCNC rule: max(MIN_FERROR, FERROR * |v| / Vmax)."""
@@ -178,8 +189,21 @@ def _read_axis(sec: Section, name: str) -> AxisConfig:
     )
     if "homing" in sec.data:
         axis = replace(axis, homing=_read_homing(sec.section("homing"), axis))
+    if "servo_band" in sec.data:
+        axis = replace(axis, servo_band=_read_band(sec.section("servo_band")))
     sec.finish()
     return axis
+
+
+# A band this wide is no longer a model of the loop (and a pole 50 % slower halves the bandwidth).
+MAX_BAND_PCT = 50.0
+
+
+def _read_band(sec: Section) -> ServoBand:
+    band = ServoBand(pole_pct=sec.float("pole_pct", 0.0, minval=0.0, maxval=MAX_BAND_PCT),
+                     gain_pct=sec.float("gain_pct", 0.0, minval=0.0, maxval=MAX_BAND_PCT))
+    sec.finish()
+    return band
 
 
 def _read_homing(sec: Section, axis: AxisConfig) -> HomingConfig:
@@ -291,6 +315,14 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         problem = pole_problem((sv.a4, sv.a3, sv.a2, sv.a1, sv.a0), period)
         if problem is not None:
             raise ConfigError(path, f"axes.{axis.name}.servo", problem)
+        if axis.servo_band is not None:
+            # Its fastest plant: every pole moved out by pole_pct (servo.model.mismatched).
+            k = 1.0 + axis.servo_band.pole_pct / 100.0
+            problem = pole_problem((sv.a4 / k**4, sv.a3 / k**3, sv.a2 / k**2, sv.a1 / k, sv.a0),
+                                   period)
+            if problem is not None:
+                raise ConfigError(path, f"axes.{axis.name}.servo_band.pole_pct",
+                                  f"the band's fastest plant: {problem}")
     if cfg.interpolator.servo_precompensation:
         for axis in axes[:2]:
             if abs(axis.servo.a0 - axis.servo.b0) > 1e-9 * axis.servo.a0:

@@ -40,15 +40,13 @@ from controller.generator.ph.construct import (
 from controller.generator.repeats import Repeats
 from controller.generator.sampling import Interpolation, Samples, interpolate
 from controller.geometry.path import Piece, PieceKind
+from controller.servo.band import band_acceleration_gain_s2, band_servos, predict_band
 from controller.servo.prediction import (
     ServoPrediction,
     ServoState,
-    acceleration_gain_s2,
-    axis_servos,
     planning_limit_mm,
-    predict,
 )
-from controller.servo.true_distance import true_error_mm
+from controller.servo.true_distance import true_error_mm, worst_true_error_mm
 
 # The first plan keeps kappa v^2 under this share of the planning limit / c2 (the steady contour
 # error); the rest of the limit is left for the transients the dynamics module then measures.
@@ -102,7 +100,8 @@ _MODELS: dict[tuple, BrakingModel] = {}  # per machine: the model memoises speed
 def _braking_model(config: MachineConfig) -> BrakingModel:
     ip = config.interpolator
     key = (config.sample_period_s, ip.max_accel_mm_s2, planning_limit_mm(config),
-           tuple(a.servo for a in config.axes), ip.servo_precompensation)
+           tuple(a.servo for a in config.axes), tuple(a.servo_band for a in config.axes),
+           ip.servo_precompensation)
     if key not in _MODELS:
         _MODELS[key] = BrakingModel(config, TARGET_FRACTION * planning_limit_mm(config))
     return _MODELS[key]
@@ -117,8 +116,9 @@ def _feed_input(config: MachineConfig, settings: RunSettings, reductions: tuple[
                 stop_accels: dict[int, float], geo: Geometry,
                 model: BrakingModel | None) -> FeedInput:
     ip = config.interpolator
-    c2_s2 = acceleration_gain_s2(config)
-    # Pre-compensated, c2 is about zero: the contour limit sets no normal-acceleration budget.
+    c2_s2 = band_acceleration_gain_s2(config)
+    # Pre-compensated, c2 is about zero: the contour limit sets no normal-acceleration budget
+    # (but for the plants of a servo band, which the compensation misses).
     budget = (INITIAL_BUDGET_SHARE * planning_limit_mm(config) / c2_s2 if c2_s2 > 1e-12
               else math.inf)
     # Stops are known by their order: a widened corner zone moves them along the path.
@@ -194,6 +194,7 @@ class Continuation:
     servo: ServoState  # servo model state at the cut
     end_mm: tuple[float, float, float]  # programmed end point of the last of those blocks
     history_xy: np.ndarray | None = None  # reference points up to the cut (its last one)
+    band: tuple[ServoState, ...] = ()  # with a servo band, every plant's state (band_servos)
 
 
 def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: MachineConfig,
@@ -205,17 +206,26 @@ def _attempt(geo: Geometry, inp: FeedInput, start_xy_mm: np.ndarray, config: Mac
     if feed.result != PlanResult.OK:
         return _Attempt(feed)
     samples = interpolate(geo.path, feed.profile, T, settings.interpolation)
-    pred = predict(samples.xy_mm, samples.phi_rad, start_xy_mm, axis_servos(config), T,
-                   None if cont is None else cont.servo)
+    servos = band_servos(config)
+    states = None if cont is None else (cont.band or (cont.servo,))
+    preds = predict_band(samples.xy_mm, samples.phi_rad, start_xy_mm, servos, T, states)
+    pred = preds[0]
     limit = planning_limit_mm(config)
-    true_mm = true_error_mm(samples.xy_mm, pred, exact_above_mm=EXACT_ABOVE_SHARE * limit,
-                            history_xy=None if cont is None else cont.history_xy)
+    history = None if cont is None else cont.history_xy
+    if len(preds) == 1:
+        true_mm = true_error_mm(samples.xy_mm, pred, exact_above_mm=EXACT_ABOVE_SHARE * limit,
+                                history_xy=history)
+        contour_mm = np.abs(pred.contour_mm)
+    else:  # a servo band: the worst plant at each sample
+        true_mm = worst_true_error_mm(samples.xy_mm, preds, EXACT_ABOVE_SHARE * limit,
+                                      history_xy=history)
+        contour_mm = np.max([np.abs(p.contour_mm) for p in preds], axis=0)
     n = len(samples.xy_mm)
     stops = stop_errors(true_mm, samples.s_mm, _stops_mm(geo), n, T)
     # In motion the true distance stands beside eq. 28 (at a sharp curve it can exceed it);
     # around stops it is handled by the stops' braking (a curvature budget cannot help there).
     moving = np.where(near_stops(len(true_mm), stops, T, len(true_mm) - n), 0.0, true_mm)
-    measure = np.maximum(np.abs(pred.contour_mm), moving)
+    measure = np.maximum(contour_mm, moving)
     return _Attempt(feed, samples, pred, tuple(find_violations(measure, limit)), tuple(stops))
 
 

@@ -7,6 +7,7 @@ import numpy as np
 from controller.config import MachineConfig
 from controller.generator.replan import Continuation, RunPlan
 from controller.geometry.path import Piece, chain, make_piece
+from controller.servo.band import band_servos, band_states_after
 from controller.servo.prediction import axis_servos, state_after
 from controller.servo.true_distance import NEAR_SAMPLES
 
@@ -69,5 +70,9 @@ def continuation_cut(run: RunPlan, tolerance_mm: float | None, end_mm: tuple[flo
         return None
     before = s.xy_mm[:k + 1] if cont is None or cont.history_xy is None else \
         np.vstack([cont.history_xy, s.xy_mm[:k + 1]])
+    band = band_servos(config)
+    states = () if len(band) == 1 else band_states_after(
+        s.xy_mm[:k + 1], run.start_xy_mm, band, config.sample_period_s,
+        None if cont is None else cont.band)
     return k, Continuation(tail, tolerance_mm, float(s.v_mm_s[k]), s.xy_mm[k].copy(), state,
-                           end_mm, before[-(NEAR_SAMPLES + 1):].copy())
+                           end_mm, before[-(NEAR_SAMPLES + 1):].copy(), states)

@@ -102,6 +102,14 @@ def residual_servo(p: ServoParams, sample_period_s: float) -> DiscreteServo:
     return _residual(p, compensation_filter(p, sample_period_s), sample_period_s)
 
 
+@lru_cache(maxsize=256)
+def mismatched_residual_servo(plant: ServoParams, model: ServoParams,
+                              sample_period_s: float) -> DiscreteServo:
+    """P - actual when the compensation inverts `model` but the loop is `plant` (a servo band's
+    plant, servo/band.py): residual_servo(p) is this with plant = model = p."""
+    return _residual(plant, compensation_filter(model, sample_period_s), sample_period_s)
+
+
 def _residual(p: ServoParams, comp: DiscreteServo, sample_period_s: float) -> DiscreteServo:
     plant = discretise(p, sample_period_s)
     diff = np.array([1.0, -1.0]) / sample_period_s

@@ -96,3 +96,28 @@ def window_distance_mm(ref: np.ndarray, points: np.ndarray, k: np.ndarray,
         out[lo:lo + WINDOW_BLOCK] = np.sqrt(squared_gap(px - ax, py - ay, abx, aby, den)
                                             .min(axis=1))
     return out
+
+
+def worst_true_error_mm(xy_mm: np.ndarray, preds: tuple[ServoPrediction, ...],
+                        exact_above_mm: float = 0.0, near: int = NEAR_SAMPLES,
+                        history_xy: np.ndarray | None = None) -> np.ndarray:
+    """Per sample, the largest true_error_mm over several plants' predictions of the same
+    reference (a servo band, servo/band.py), all plants in one pass: their bounds together,
+    then one exact search over every (sample, plant) whose bound is above exact_above_mm."""
+    ref = held_reference(xy_mm, preds[0])
+    acts = np.stack([ref - np.column_stack([p.ex_mm, p.ey_mm]) for p in preds])
+    k0 = 0 if history_xy is None else len(history_xy)
+    if k0:
+        ref = np.vstack([history_xy, ref])
+        acts = np.concatenate([np.broadcast_to(history_xy, (len(preds), k0, 2)), acts], axis=1)
+    n = len(ref)
+    if n < 2:
+        return np.hypot(*(acts - ref).transpose(2, 0, 1)).max(axis=0)[k0:]
+    own = np.arange(n)
+    before, at = np.clip(own - 1, 0, n - 2), np.clip(own, 0, n - 2)
+    bound = np.minimum(segment_distance(acts, ref[before], ref[before + 1]),
+                       segment_distance(acts, ref[at], ref[at + 1]))  # (plant, sample)
+    k, plant = np.nonzero((bound > exact_above_mm).T)  # sorted by sample: the search's order
+    if k.size:
+        bound[plant, k] = window_distance_mm(ref, acts[plant, k], k, near, bound[plant, k])
+    return bound.max(axis=0)[k0:]

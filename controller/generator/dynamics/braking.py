@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.servo.band import band_servos
 from controller.servo.model import tracking_error_mm
-from controller.servo.prediction import axis_servos
 
 SETTLE_AFTER_S = 0.06  # the model's settling after the stop
 
@@ -23,7 +23,8 @@ class BrakingModel:
     CRUISE_S = 0.03  # the cruise before the braking: the servo is in its steady lag by then
 
     def __init__(self, config: MachineConfig, target_mm: float) -> None:
-        self.servos = axis_servos(config)
+        # Every axis filter of the servo band's plants (the model's alone without one).
+        self.servos = list({id(s): s for pair in band_servos(config) for s in pair}.values())
         self.period_s = config.sample_period_s
         self.accel_mm_s2 = config.interpolator.max_accel_mm_s2
         self.target_mm = target_mm
