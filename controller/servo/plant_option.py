@@ -73,7 +73,7 @@ def _numbers(value: Any, key: str) -> list[float]:
             if isinstance(word, bool):
                 raise TypeError
             number = float(word)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise PlantOptionError(f"{key}: {name} = {_shown(word)} is not a number") from None
         if not math.isfinite(number) or abs(number) > MAX_COEFFICIENT:
             raise PlantOptionError(f"{key}: {name} = {_shown(word)} is not a finite number "
@@ -95,7 +95,7 @@ def _pct(options: Mapping[str, Any], key: str) -> float:
         if isinstance(value, bool):
             raise TypeError
         number = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise PlantOptionError(f"{key}: {value!r} is not a number") from None
     if not lo <= number <= hi:  # NaN fails here too
         raise PlantOptionError(f"{key}: {value!r} is not in [{lo:g}, {hi:g}]")
@@ -120,7 +120,7 @@ def plant_config(config: MachineConfig, options: Mapping[str, Any]) -> MachineCo
             axes.append(replace(axis, servo=mismatched(axis.servo, pole_pct, gain_pct)))
             continue
         plant = mismatched(parse_plant(options[key], period_s, key), pole_pct, gain_pct)
-        # Faster poles (plant_pole_pct < 0) may pass the Nyquist rate the given plant was under.
+        # Faster poles (plant_pole_pct > 0) may pass the Nyquist rate the given plant was under.
         problem = pole_problem((plant.a4, plant.a3, plant.a2, plant.a1, plant.a0), period_s)
         if problem is not None:
             raise PlantOptionError(f"{key}: with plant_pole_pct = {pole_pct:g}: {problem}")
