@@ -32,6 +32,7 @@ def _announce(path: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from drivers.errors import DriveUnavailableError
     from drivers.registry import simulated_peer  # late: only this backend's libraries load
 
     stop = threading.Event()
@@ -43,6 +44,9 @@ def run(args: argparse.Namespace) -> int:
         serve(config, parse_drive_options(args.option), _announce, stop)
     except ConfigError as exc:
         print(f"cncctl simdrive: config error: {exc}", file=sys.stderr)
+        return 2
+    except DriveUnavailableError as exc:  # a bad plant option: refused before the pty opens
+        print(f"cncctl simdrive: {exc}", file=sys.stderr)
         return 2
     except CncError as exc:
         print(f"cncctl simdrive: {exc}", file=sys.stderr)

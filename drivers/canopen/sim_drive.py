@@ -16,9 +16,11 @@ from canopen.sdo import SdoAbortedError
 from controller.config import AxisConfig, MachineConfig
 from controller.errors import DriveError
 from controller.servo.model import AxisServoStepper, discretise
+from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.canopen import cia402 as c
 from drivers.canopen.options import drive_layout
 from drivers.canopen.sim_homing import SimHoming402
+from drivers.sim.axes import plant_of
 from drivers.sim.switches import SWITCH_OPTIONS, SimSwitches
 
 SDO_ABORT_VALUE_RANGE = 0x06090030  # "value range of parameter exceeded"
@@ -267,12 +269,13 @@ class SimDriveSet:
     estop_input_file (every drive's e-stop input is open while that file exists).
     Homing (mode 6): true_start_mm, home_switch_mm (default: at the home offset the master
     writes; null: no switch), index_pitch_mm (drivers/sim/switches.py) and search_limit_mm
-    (default: the travel + 10 %: then statusword bit 13)."""
+    (default: the travel + 10 %: then statusword bit 13). Each axis's loop: plant_x, plant_y,
+    plant_z, plant_pole_pct, plant_gain_pct (controller/servo/plant_option.py)."""
 
     OPTIONS = frozenset({"drive_fault_after_s", "drive_fault_code", "lag_mm", "lag_after_s",
                          "silent_after_s", "sdo_abort_index", "fault_axis", "true_start_mm",
                          "home_switch_mm", "index_pitch_mm", "search_limit_mm",
-                         "estop_input_file"})
+                         "estop_input_file"}) | PLANT_OPTIONS
 
     def __init__(self, config: MachineConfig, options: dict[str, Any] | None = None,
                  channel: str = "cncsim", interface: str = "virtual",
@@ -282,6 +285,8 @@ class SimDriveSet:
         if unknown:
             raise DriveError(f"unknown simulated drive option(s): {', '.join(unknown)} "
                              f"(have: {', '.join(sorted(self.OPTIONS))})")
+        plant = plant_of(config, {k: v for k, v in options.items() if k in PLANT_OPTIONS},
+                         "simulated drive option ")
         layout = drive_layout(config)
         names = config.axis_names
         fault_axis = str(options.get("fault_axis", names[0]))
@@ -296,7 +301,7 @@ class SimDriveSet:
                                                  if k in SWITCH_OPTIONS}, np.zeros(len(names)),
                                     "simulated drive")
         search_limit_mm = _opt_float(options, "search_limit_mm")
-        for i, (axis, node_id, cpm) in enumerate(zip(config.axes, layout.node_ids,
+        for i, (axis, node_id, cpm) in enumerate(zip(plant.axes, layout.node_ids,
                                                      layout.counts_per_mm, strict=True)):
             inject = _injections(options) if axis.name == fault_axis else Injections(
                 sdo_abort_index=_opt_int(options, "sdo_abort_index"))

@@ -14,9 +14,10 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.errors import DriveError
+from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.homing import HomingPlan
 from drivers.serial import protocol as p
-from drivers.sim.axes import SimAxes
+from drivers.sim.axes import SimAxes, plant_of
 from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
 from drivers.sim.switches import SWITCH_OPTIONS, SimSwitches
@@ -43,7 +44,7 @@ PEER_OPTIONS: dict[str, Any] = {
     "index_pitch_mm": 1.0,  # encoder index marks at multiples of this
     "homing_fault_after_s": None,  # drive_fault_axis faults this long into a HOME
     "estop_input_file": None,  # a path: the e-stop input is open while this file exists
-}
+} | dict.fromkeys(PLANT_OPTIONS)  # each axis's own loop, mismatch (controller/servo/plant_option)
 LIST_OPTIONS = ("start_mm", "true_start_mm", "home_switch_mm")
 TEXT_OPTIONS = ("estop_input_file",)
 
@@ -56,7 +57,7 @@ def check_options(options: dict[str, Any]) -> dict[str, Any]:
                          f"(known: {', '.join(sorted(PEER_OPTIONS))})")
     merged = PEER_OPTIONS | options
     for key, value in merged.items():
-        if key in LIST_OPTIONS or value is None:
+        if key in LIST_OPTIONS or key in PLANT_OPTIONS or value is None:
             continue
         if key in TEXT_OPTIONS:
             if not isinstance(value, str) or not value:
@@ -84,7 +85,8 @@ class PeerCard:
         pulse_mm = np.array([a.pulse_mm for a in config.axes])
         start = self.opt["start_mm"] if self.opt["start_mm"] is not None else [0.0] * self.n
         self.fifo = FrameFifo(int(self.opt["fifo_frames"]), self.n)
-        self.axes = SimAxes(config, np.rint(np.asarray(start, float) / pulse_mm).astype(np.int64))
+        self.axes = SimAxes(peer_plant(config, self.opt),
+                            np.rint(np.asarray(start, float) / pulse_mm).astype(np.int64))
         self.axis_names = config.axis_names
         self.switches = SimSwitches(self.n, {k: v for k, v in self.opt.items()
                                              if k in SWITCH_OPTIONS and v is not None},
@@ -333,6 +335,12 @@ class PeerCard:
                 next_status_s = max(next_status_s + self.status_period_s, now_s)
 
 
+def peer_plant(config: MachineConfig, opt: dict[str, Any]) -> MachineConfig:
+    """The machine the card runs: its plant options given (not None) over the config's model."""
+    given = {k: v for k, v in opt.items() if k in PLANT_OPTIONS and v is not None}
+    return plant_of(config, given, "serial simdrive: option ")
+
+
 def _try_realtime(priority: int = 70) -> None:
     """A card keeps time in hardware; the simulated one asks for SCHED_FIFO to come close (a
     starved card would look like a silent one). Without the privilege it runs as it is."""
@@ -345,7 +353,7 @@ def _try_realtime(priority: int = 70) -> None:
 def serve(config: MachineConfig, options: dict[str, Any], announce: Callable[[str], None],
           stop: threading.Event) -> None:
     """`cncctl simdrive serial`: the card on a new pty; announce(path) once it can be opened."""
-    check_options(options)
+    peer_plant(config, check_options(options))  # a bad plant is refused before the pty opens
     master_fd, slave_fd = os.openpty()
     try:
         tty.setraw(slave_fd)

@@ -2,10 +2,24 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 
 from controller.config import MachineConfig
 from controller.servo.model import AxisServoStepper, discretise
+from controller.servo.plant_option import PlantOptionError, plant_config
+from drivers.errors import DriveUnavailableError
+
+
+def plant_of(config: MachineConfig, options: Mapping[str, Any], prefix: str) -> MachineConfig:
+    """The machine a simulated drive runs, from its plant options (servo/plant_option.py); a
+    bad one is refused before anything opens, the message prefix + the option's own."""
+    try:
+        return plant_config(config, options)
+    except PlantOptionError as exc:
+        raise DriveUnavailableError(f"{prefix}{exc}") from None
 
 
 class SimAxes:

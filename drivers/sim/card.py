@@ -10,11 +10,11 @@ from typing import Any
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.servo.model import mismatched_config
+from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, HomingError, LostCommunicationError
 from drivers.homing import plan_for
-from drivers.sim.axes import SimAxes
+from drivers.sim.axes import SimAxes, plant_of
 from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
 from drivers.sim.switches import SimSwitches, timeout_message
@@ -27,9 +27,11 @@ class SimCard(Drive):
 
     Options: realtime (bool, default True), fifo_frames (256), max_pulses_per_frame (127,
     an int8 frame as in the prototype protocol), start_mm (list, what the counters read at
-    power-up), plant_pole_pct and plant_gain_pct (0: a plant off the planner's model, see
-    mismatched). Homing (drivers/sim/homing.py): true_start_mm (list, where the table really
-    is at power-up; default start_mm), home_switch_mm (list, where each axis's home switch is,
+    power-up), plant_x, plant_y, plant_z (a0,a1,a2,a3,a4,b0,b1,b2: the axis's own eq. 27 loop
+    instead of the config's model), plant_pole_pct and plant_gain_pct (0: a plant off the
+    planner's model, see mismatched, on top of any plant_<axis>; servo/plant_option.py).
+    Homing (drivers/sim/homing.py): true_start_mm (list, where the table really is at
+    power-up; default start_mm), home_switch_mm (list, where each axis's home switch is,
     in that true frame; default each axis's homing home_mm, null: no switch), index_pitch_mm
     (1.0, encoder index marks at its multiples) and homed_at_start (false). E-stop input:
     estop_input_file (a path: the input reads tripped while that file exists, so that a
@@ -40,9 +42,8 @@ class SimCard(Drive):
     """
 
     OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm",
-                         "plant_pole_pct", "plant_gain_pct", "true_start_mm", "home_switch_mm",
-                         "index_pitch_mm", "homed_at_start", "estop_input_file",
-                         "drive_fault_file"})
+                         "true_start_mm", "home_switch_mm", "index_pitch_mm", "homed_at_start",
+                         "estop_input_file", "drive_fault_file"}) | PLANT_OPTIONS
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
@@ -52,10 +53,8 @@ class SimCard(Drive):
         start_mm = np.asarray(options.get("start_mm", np.zeros(self.n_axes)), dtype=float)
         self._fifo = FrameFifo(int(_option(options, "fifo_frames", 256, 16, 1_000_000)),
                                self.n_axes)
-        # The plant may differ from the planner's model (issue 17: a real table never is it);
-        # within -50..+100 % it stays a stable, damped loop.
-        plant = mismatched_config(config, _option(options, "plant_pole_pct", 0.0, -50, 100),
-                                  _option(options, "plant_gain_pct", 0.0, -50, 100))
+        # The plant may differ from the planner's model (issue 17: a real table never is it).
+        plant = plant_of(config, options, "sim: drive option ")
         self._axes = SimAxes(plant, np.rint(start_mm / self.pulse_mm).astype(np.int64))
         self._switches = SimSwitches(self.n_axes, options, self._axes.actual_mm.copy(), "sim")
         self._homing_run: SimAxesHoming | None = None
