@@ -27,7 +27,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="simulator option (repeatable), e.g. drive_fault_after_s=0.5")
 
 
+_announced: list[str] = []  # the device path, once the peer serves on it
+
+
 def _announce(path: str) -> None:
+    _announced.append(path)
     print(path, flush=True)
 
 
@@ -50,5 +54,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     except CncError as exc:
         print(f"cncctl simdrive: {exc}", file=sys.stderr)
-        return 3
+        # Refused before it served (a bad option: no device was printed) is 2, as everywhere;
+        # a failure while serving is 3.
+        return 3 if _announced else 2
     return 0

@@ -94,3 +94,16 @@ def test_a_bad_plant_on_a_peer_is_refused_with_exit_2(backend: str, option: str,
                          text=True, timeout=30, cwd=REPO)
     assert out.returncode == 2 and named in out.stderr, out
     assert out.stdout == "" and "Traceback" not in out.stderr  # no device was announced
+
+
+def test_any_bad_peer_option_is_refused_with_exit_2_before_a_device_is_printed() -> None:
+    """An unknown option exited 3 (a fault) although nothing had been served."""
+    import subprocess
+    import sys
+
+    for backend, option in (("serial", "bogus=1"), ("canopen", "heartbeat_ms=-5")):
+        done = subprocess.run([sys.executable, "-m", "controller.operator.cli", "simdrive",
+                               backend, "--option", option], capture_output=True, text=True,
+                              timeout=60)
+        assert done.returncode == 2, (backend, done.returncode, done.stderr)
+        assert done.stdout == "" and option.split("=")[0] in done.stderr
