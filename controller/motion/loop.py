@@ -164,7 +164,8 @@ class MotionController:
         self.figures.last_enc = fb.encoder_counts[-1]
         self.figures.line = int(self.stream.hist.line[fb.seq[-1] % self.stream.hist.capacity])
         self.checks.contour.update(fb, self.stream.hist)
-        self.checks.model.update(fb.seq, fb.encoder_counts, self.stream.hist)
+        self.checks.model.update(fb.seq, fb.commanded_counts, fb.encoder_counts,
+                                 self.stream.hist)
         self.checks.in_position.frames(fb.seq, fb.encoder_counts, self.stream.pulses.counts)
 
     def _supervise(self, fb: Feedback) -> None:

@@ -39,20 +39,24 @@ class ModelWatch:
         self.axis_max_mm = np.zeros(n)
         self.axis_sum_sq_mm2 = np.zeros(n)
         self.axis_n = 0
+        self.unmatched = 0  # rows whose step counter is not what was sent after their frame
         self.contour_max_mm = 0.0
         self.contour_sum_sq_mm2 = 0.0
         self.contour_n = 0
         self._seq: list[np.ndarray] = []
+        self._cmd: list[np.ndarray] = []
         self._enc: list[np.ndarray] = []
         self._rows = 0
         self._hist: RefHistory | None = None
 
-    def update(self, seq: np.ndarray, encoder_counts: np.ndarray, hist: RefHistory) -> None:
-        """Believed encoder rows measured after frames seq (increasing, maybe with gaps)."""
+    def update(self, seq: np.ndarray, commanded_counts: np.ndarray, encoder_counts: np.ndarray,
+               hist: RefHistory) -> None:
+        """Believed feedback rows after frames seq (increasing, maybe with gaps)."""
         if not len(seq):
             return
         self._hist = hist
         self._seq.append(np.asarray(seq, dtype=np.int64))
+        self._cmd.append(np.asarray(commanded_counts))
         self._enc.append(np.asarray(encoder_counts))
         self._rows += len(seq)
         if self._rows >= BATCH_ROWS:
@@ -62,17 +66,24 @@ class ModelWatch:
         hist = self._hist
         if not self._rows or hist is None:
             return
-        seq, enc = np.concatenate(self._seq), np.concatenate(self._enc)
-        self._seq, self._enc, self._rows = [], [], 0
+        seq, cmd, enc = (np.concatenate(r) for r in (self._seq, self._cmd, self._enc))
+        self._seq, self._cmd, self._enc, self._rows = [], [], [], 0
         oldest = max(0, hist.count - hist.capacity)
         if self.next_seq < oldest:  # frames gone from the ring (never at the ring's size):
             self.next_seq = oldest  # the models go on from there rather than stop
-        keep = seq >= self.next_seq
-        seq, enc = seq[keep], enc[keep]
+        # Rows of frames the models have run, or not sent (a drive numbering its rows
+        # otherwise), are left out.
+        keep = (seq >= self.next_seq) & (seq < hist.count)
+        self.unmatched += int(len(seq) - keep.sum())
+        seq, cmd, enc = seq[keep], cmd[keep], enc[keep]
         if not len(seq):
             return
         frames = np.arange(self.next_seq, int(seq[-1]) + 1)
         counts = hist.cmd_counts[frames % hist.capacity]
+        # A row is compared only where the drive's step counter is what was sent after its
+        # frame: a drive numbering its rows otherwise would read as a model gone wrong.
+        matched = (cmd == counts[seq - frames[0]]).all(axis=1)
+        self.unmatched += int(len(seq) - matched.sum())
         v_mm_s = np.diff(np.vstack([self.prev_counts, counts]), axis=0) * (
             self.pulse_mm / self.period_s)
         model_mm = counts * self.pulse_mm
@@ -80,6 +91,9 @@ class ModelWatch:
             err, self.states[i] = filter_block(servo, v_mm_s[:, i], self.states[i])
             model_mm[:, i] -= err
         self.prev_counts, self.next_seq = counts[-1].copy(), int(frames[-1]) + 1
+        seq, enc = seq[matched], enc[matched]
+        if not len(seq):
+            return
         res = enc * self.pulse_mm - model_mm[seq - frames[0]]
         self.axis_max_mm = np.maximum(self.axis_max_mm, np.abs(res).max(axis=0))
         self.axis_sum_sq_mm2 += np.square(res).sum(axis=0)
@@ -95,7 +109,8 @@ class ModelWatch:
             self.contour_n += int(normal.size)
 
     def summary_um(self) -> dict[str, Any]:
-        """{max, rms (normal to the path), samples, axes: {name: {max, rms}}}, in um."""
+        """{max, rms (normal to the path), samples, unmatched, axes: {name: {max, rms}}},
+        in um (samples: rows compared; unmatched: rows left out, see _measure)."""
         self._measure()  # the rows since the last batch
         axis_rms = np.sqrt(self.axis_sum_sq_mm2 / max(1, self.axis_n))
         return {
@@ -103,6 +118,7 @@ class ModelWatch:
             "rms": round(float(np.sqrt(self.contour_sum_sq_mm2 / max(1, self.contour_n))) * 1e3,
                          3),
             "samples": self.axis_n,
+            "unmatched": self.unmatched,
             "axes": {n: {"max": round(float(m) * 1e3, 3), "rms": round(float(r) * 1e3, 3)}
                      for n, m, r in zip(self.names, self.axis_max_mm, axis_rms, strict=True)},
         }
