@@ -131,6 +131,9 @@ class RuntimeConfig:
     card_fifo_high_water_ms: float
     in_position_tolerance_mm: float = 0.002  # a run's motion time ends this close to the end
     reference_buffer_s: float = 5.0  # reference points planned ahead of the motion loop
+    # A job warns (model_warning) where the measured contour leaves the servo model's
+    # prediction by more than this share of the contour limit (controller/motion/model_watch.py).
+    model_watch_share: float = 0.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -261,6 +264,7 @@ def _read_runtime(sec: Section) -> RuntimeConfig:
         in_position_tolerance_mm=sec.float("in_position_tolerance_mm", 0.002, above=0.0,
                                            maxval=1.0),
         reference_buffer_s=sec.float("reference_buffer_s", 5.0, minval=1.0, maxval=600.0),
+        model_watch_share=sec.float("model_watch_share", 0.5, above=0.0, maxval=100.0),
     )
     if cfg.card_fifo_low_water_ms >= cfg.card_fifo_high_water_ms:
         raise ConfigError(sec.path, "runtime.card_fifo_low_water_ms", "must be below high water")

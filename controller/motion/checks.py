@@ -22,10 +22,13 @@ class RefHistory:
         self.feed_mm_s = np.zeros(capacity)
         self.line = np.zeros(capacity, dtype=np.int64)
         self.phi_rad = np.full(capacity, np.nan)  # path tangent angle; NaN when at rest
+        # The card's step counter after each frame (what went out, pre-compensated and
+        # rounded to pulses): the model watch runs the servo model on it.
+        self.cmd_counts = np.zeros((capacity, n_axes), dtype=np.int64)
         self.count = 0
 
     def append(self, pos_mm: np.ndarray, feed_mm_s: np.ndarray, line: np.ndarray,
-               prev_mm: np.ndarray) -> None:
+               prev_mm: np.ndarray, cmd_counts: np.ndarray | None = None) -> None:
         d = np.diff(np.vstack([prev_mm[None, :], pos_mm]), axis=0)
         # Below the rest speed the tangent is undefined: no contour error is measured there.
         moving = np.hypot(d[:, 0], d[:, 1]) / self.period_s >= REST_SPEED_MM_S
@@ -33,6 +36,8 @@ class RefHistory:
         idx = np.arange(self.count, self.count + len(pos_mm)) % self.capacity
         self.pos_mm[idx], self.feed_mm_s[idx], self.line[idx], self.phi_rad[idx] = (
             pos_mm, feed_mm_s, line, phi)
+        if cmd_counts is not None:
+            self.cmd_counts[idx] = cmd_counts
         self.count += len(pos_mm)
 
 

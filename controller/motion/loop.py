@@ -17,8 +17,9 @@ from controller.errors import CncError, DriveError
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.in_position import InPosition
+from controller.motion.model_watch import ModelWatch
 from controller.motion.pacing import VirtualPacer, WallPacer
-from controller.motion.pulses import PulseCounter
+from controller.motion.pulses import PulseCounter, counts_of
 from controller.motion.recall import SendState
 from controller.motion.requests import OperatorRequests
 from controller.motion.result import RunChecks, RunFigures, build_result
@@ -83,6 +84,7 @@ class MotionController:
             ferr=FerrorCheck(self.config, start_cmd),
             fbcheck=FeedbackCheck(self.config, start_enc),
             contour=ContourStats(self.pulse_mm),
+            model=ModelWatch(self.config, start_cmd),
             in_position=InPosition(self.pulse_mm, self.settings.in_position_mm, self.period_s))
         start_mm = start_cmd * self.pulse_mm
         precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
@@ -162,6 +164,8 @@ class MotionController:
         self.figures.last_enc = fb.encoder_counts[-1]
         self.figures.line = int(self.stream.hist.line[fb.seq[-1] % self.stream.hist.capacity])
         self.checks.contour.update(fb, self.stream.hist)
+        self.checks.model.update(fb.seq, fb.commanded_counts, fb.encoder_counts,
+                                 self.stream.hist)
         self.checks.in_position.frames(fb.seq, fb.encoder_counts, self.stream.pulses.counts)
 
     def _supervise(self, fb: Feedback) -> None:
@@ -296,7 +300,8 @@ class MotionController:
             feed = rows[:, self.n] if rows.shape[1] > self.n else np.zeros(len(pos))
             line = row_lines(rows) if rows.shape[1] > self.n + 1 else np.full(len(pos),
                                                                               self.figures.line)
-            self.stream.hist.append(pos, feed, line.astype(np.int64), self.stream.last_mm)
+            self.stream.hist.append(pos, feed, line.astype(np.int64), self.stream.last_mm,
+                                    counts_of(cmd, self.pulse_mm))
             self.stream.prev_mm = pos[-2] if len(pos) > 1 else self.stream.last_mm
             self.stream.last_mm = pos[-1].copy()
             self.state = MotionState.RUNNING if self.state is MotionState.WAITING else self.state

@@ -11,6 +11,7 @@ from controller.config import MachineConfig
 from controller.motion.checks import ContourStats, FerrorCheck
 from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.in_position import InPosition
+from controller.motion.model_watch import ModelWatch
 from controller.motion.types import MotionResult, Outcome
 from drivers.base import Drive
 from drivers.errors import LostCommunicationError
@@ -40,6 +41,7 @@ class RunChecks:
     fbcheck: FeedbackCheck
     contour: ContourStats
     in_position: InPosition
+    model: ModelWatch
 
 
 def read_position(drive: Drive, fbcheck: FeedbackCheck,
@@ -73,6 +75,7 @@ def build_result(config: MachineConfig, figures: RunFigures, checks: RunChecks,
         # the servo settled to the last count after the last frame ran (the paper's method)
         total_s = max(total_s, f.settled_since_s - f.first_motion_s + period_s)
     min_fifo_ms = (f.min_fifo_frames or 0) * period_s * 1e3
+    residual_um = checks.model.summary_um()
     return MotionResult(
         outcome=outcome or Outcome.DONE,
         message=message,
@@ -91,4 +94,6 @@ def build_result(config: MachineConfig, figures: RunFigures, checks: RunChecks,
         position_known=known,
         time_to_first_motion_s=f.first_motion_s,
         settling_time_s=max(0.0, total_s - motion_s),
+        model_residual_um=residual_um,
+        model_warning=checks.model.warning(residual_um),
     )

@@ -88,3 +88,7 @@ class MotionResult:
     time_to_first_motion_s: float | None
     extra: dict[str, Any] = field(default_factory=dict)
     settling_time_s: float = 0.0  # after motion_time_s: in position until the last frame ran
+    # Measured minus modelled position (controller/motion/model_watch.py): max, rms (normal to
+    # the path), samples, axes; and the warning where the model no longer holds.
+    model_residual_um: dict[str, Any] = field(default_factory=dict)
+    model_warning: str | None = None

@@ -159,6 +159,12 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
         print(f"  last job {last['program']!r}: {last.get('state', '?').lower()} at line "
               f"{last.get('last_line')}" + (f" ({last['fault']})" if last.get("fault") else ""),
               flush=True)
+        residual = last.get("model_residual_um") or {}
+        if residual.get("samples"):
+            print(f"  model residual max {residual['max']:.1f} um rms {residual['rms']:.1f} um "
+                  "(measured against the servo model)")
+        if last.get("model_warning"):
+            print(f"  WARNING: {last['model_warning']}", flush=True)
 
 
 def _simple(client: DaemonClient, args: argparse.Namespace) -> int:

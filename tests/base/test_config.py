@@ -141,3 +141,17 @@ def test_reference_buffer_and_in_position_keys_default_and_are_checked(tmp_path:
                      ("reference_buffer: 5.0", "runtime.reference_buffer")):
         with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
             _load(tmp_path, BASE.replace(runtime, runtime + f"  {bad}\n"))
+
+
+def test_model_watch_share_defaults_to_half_and_is_checked(tmp_path: Path) -> None:
+    assert load_config(str(REPO / "config/xy_table.yaml")).runtime.model_watch_share == 0.5
+    runtime = "runtime:\n  nc_fifo_blocks: 64\n"
+    path = tmp_path / "machine.yaml"
+    path.write_text(BASE.replace(runtime, runtime + "  model_watch_share: 0.8\n"))
+    assert load_config(str(path)).runtime.model_watch_share == 0.8
+    for bad in ("model_watch_share: 0.0", "model_watch_share: -1.0", "model_watch_share: 101.0",
+                "model_watch_share: 'half'"):
+        with pytest.raises(ConfigError, match=r"runtime\.model_watch_share"):
+            _load(tmp_path, BASE.replace(runtime, runtime + f"  {bad}\n"))
+    with pytest.raises(ConfigError, match=r"runtime\.model_watch"):
+        _load(tmp_path, BASE.replace(runtime, runtime + "  model_watch: 0.5\n"))

@@ -135,6 +135,9 @@ def check_common(r: Run) -> None:
     assert np.abs(np.diff(v)).max() / T <= AMAX * (1 + 1e-6)  # tangential accel
     assert predicted_distance_mm(r.sent).max() <= planning_limit_mm(CFG) + 1e-9
     assert r.result.contour_error_um["max"] <= CFG.interpolator.contour_error_limit_mm * 1e3
+    # The frames a hold takes back are replaced in the history the model watch runs on: the
+    # card's own plant is still its model, to the encoder's quantisation.
+    assert r.result.model_residual_um["max"] < 1.0 and r.result.model_warning is None
     # On the path: every point sent lies on the plan's polyline, off it by no more than the
     # chord tolerance (points between rows follow the curve, outside the chords).
     gap_mm = path_distance(base.sent, r.sent).distance_mm.max()

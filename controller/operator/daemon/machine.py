@@ -455,7 +455,9 @@ class Machine:
         with self._lock:  # not interleaved with the journal loop's last-line writes
             self.journal.update(state=result.outcome.value.upper(),
                                 last_line=result.line if line is None else line,
-                                position_mm=position, fault=result.message or None)
+                                position_mm=position, fault=result.message or None,
+                                model_residual_um=result.model_residual_um,
+                                model_warning=result.model_warning)
             self.last_job = dict(self.journal.entry)
         if result.outcome is Outcome.FAULT:
             self.log.log(ERR, f"job {job.number} fault at line {result.line}: "

@@ -116,6 +116,8 @@ def result_summary(result: MotionResult) -> dict[str, Any]:
         "final_position_mm": {k: round(v, 6) for k, v in result.final_position_mm.items()},
         "position_known": result.position_known,
         "time_to_first_motion_s": result.time_to_first_motion_s,
+        "model_residual_um": result.model_residual_um,
+        **({"model_warning": result.model_warning} if result.model_warning else {}),
         **{k: v for k, v in result.extra.items()},
     }
 
@@ -188,12 +190,26 @@ class PlainView:
               f"{s['following_error_um_max']:.0f} um\n"
               f"  underruns {s['underruns']}, late cycles {s['late_cycles']}, "
               f"lowest FIFO {s['min_fifo_ms']:.0f} ms, final position "
-              f"{_final_position_text(s)}, pulses {pulses_text(s['pulses'])}", file=self.out,
-              flush=True)
+              f"{_final_position_text(s)}, pulses {pulses_text(s['pulses'])}"
+              f"{_model_text(s)}", file=self.out, flush=True)
 
     def close(self) -> None:
         if isinstance(self.lines, ProgramLines):
             self.lines.close()
+
+
+def _model_text(s: dict[str, Any]) -> str:
+    """The servo model against the encoder (a daemon of an older version may not send it),
+    and the warning where the model no longer holds."""
+    r = s.get("model_residual_um") or {}
+    if not r.get("samples"):
+        return ""
+    axes = " ".join(f"{n.upper()} {v['max']:.1f}" for n, v in r.get("axes", {}).items())
+    text = (f"\n  model residual max {r['max']:.1f} um rms {r['rms']:.1f} um normal to the path "
+            f"(per axis max {axes} um)")
+    if s.get("model_warning"):
+        text += f"\n  WARNING: {s['model_warning']}"
+    return text
 
 
 def _final_position_text(s: dict[str, Any]) -> str:
