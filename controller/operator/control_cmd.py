@@ -159,6 +159,12 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
         print(f"  last job {last['program']!r}: {last.get('state', '?').lower()} at line "
               f"{last.get('last_line')}" + (f" ({last['fault']})" if last.get("fault") else ""),
               flush=True)
+    ident = s.get("last_identify") or {}
+    if ident.get("event"):
+        fits = ", ".join(f"{k.upper()} {v['fit_pct']:.1f} %" for k, v in
+                         (ident.get("fits") or {}).items())
+        print(f"  last identify: {ident['event']}" + (f" (held-out fit {fits})" if fits else "")
+              + (f": {ident['message']}" if ident.get("message") else ""), flush=True)
 
 
 def _simple(client: DaemonClient, args: argparse.Namespace) -> int:

@@ -1,5 +1,6 @@
 """`cncctl identify` through a real cncd (its sim card a plant off the model): the fit, the
---output the client writes, the refusals, and abort, e-stop and a drive fault during it."""
+--output the client writes, the refusals, and abort, e-stop (both sockets and the drive's
+input) and a drive fault during it."""
 
 from __future__ import annotations
 
@@ -62,6 +63,8 @@ def test_identify_through_cncd_finds_the_plant_and_the_client_writes_the_config(
         last = status["last_identify"]
         assert last["event"] == "done" and abs(last["fits"]["x"]["fit_pct"] - identified) < 0.1
         assert "config_yaml" not in last  # kept in status without the config text
+        assert f"last identify: done (held-out fit X {identified:.1f} %)" in d.cncctl(
+            "status").stdout
         # Options only an embedded identify honours are refused, nothing sent.
         for words in (("--config", XY), ("--virtual-time",), ("--home",),
                       ("--drive-option", "plant_pole_pct=0")):
@@ -136,12 +139,31 @@ def test_abort_and_estop_stop_identify_along_its_path(tmp_path: Path) -> None:
         assert all(abs(v) < 0.01 for v in status["position_mm"].values()), status
         assert d.cncctl("identify", "x", "--yes").returncode == 2  # latched: reset first
 
+        d.cncctl("reset")  # the control socket's estop (cncctl uses the e-stop socket)
+        proc = _start_identify(d, "x")
+        time.sleep(0.5)
+        assert raw(d.socket_path, b'{"cmd": "estop"}\n')[0]["state"] == "ESTOP"
+        out, err = _end(proc)
+        assert proc.returncode == 4 and "e-stop by operator (control socket" in err, err
+        status = d.status()
+        assert status["state"] == "ESTOP" and status["drives"] == "disabled"
 
-def test_a_drive_fault_during_identify_latches_fault(tmp_path: Path) -> None:
-    fault = tmp_path / "drive-fault"
-    with running_cncd(tmp_path, *OFF_MODEL, "--drive-option",
-                      f"drive_fault_file={fault}") as d:
+
+def test_the_estop_input_then_a_drive_fault_during_identify(tmp_path: Path) -> None:
+    trip, fault = tmp_path / "estop-input", tmp_path / "drive-fault"
+    with running_cncd(tmp_path, *OFF_MODEL, "--drive-option", f"estop_input_file={trip}",
+                      "--drive-option", f"drive_fault_file={fault}") as d:
         d.cncctl("reset")
+        proc = _start_identify(d, "x")
+        time.sleep(0.5)
+        trip.touch()
+        out, err = _end(proc)
+        assert proc.returncode == 4 and "e-stop input" in err, err
+        status = _wait_state(d, "ESTOP")
+        assert status["drives"] == "disabled" and status["position_mm"] is not None
+        trip.unlink()
+        assert d.cncctl("reset").returncode == 0
+
         proc = _start_identify(d, "x")
         time.sleep(0.5)
         fault.touch()

@@ -85,6 +85,11 @@ def _serve(host: IdentifyHost, fields: dict[str, Any], request_id: Any, emit: Em
         _release(host, run)
         emit({"id": request_id, "ok": False, "error": exc.code, "message": exc.message})
         return
+    except CncError as exc:  # the drive could not be read: nothing moved
+        _release(host, run)
+        emit({"id": request_id, "ok": False, "error": "drive",
+              "message": f"the drive did not answer: {exc}"})
+        return
     except Exception as exc:  # noqa: BLE001 - a request never takes the daemon down
         _release(host, run)
         host.log.log(ERR, f"identify: internal error: {type(exc).__name__}: {str(exc)[:200]}")
