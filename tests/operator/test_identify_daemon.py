@@ -5,6 +5,7 @@ input) and a drive fault during it."""
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import time
 from pathlib import Path
@@ -113,7 +114,7 @@ def test_identify_is_refused_in_estop_while_a_job_runs_and_for_bad_fields(
         assert d.status()["state"] == "IDLE" and d.status()["last_identify"] is None
 
 
-def test_abort_and_estop_stop_identify_along_its_path(tmp_path: Path) -> None:
+def test_abort_estop_and_sigterm_stop_identify_along_its_path(tmp_path: Path) -> None:
     with running_cncd(tmp_path, *OFF_MODEL) as d:
         d.cncctl("reset")
         proc = _start_identify(d, "x", "y")
@@ -147,6 +148,14 @@ def test_abort_and_estop_stop_identify_along_its_path(tmp_path: Path) -> None:
         assert proc.returncode == 4 and "e-stop by operator (control socket" in err, err
         status = d.status()
         assert status["state"] == "ESTOP" and status["drives"] == "disabled"
+
+        d.cncctl("reset")  # SIGTERM: cncd stops it along its path, tells the client, exits
+        proc = _start_identify(d, "x")
+        time.sleep(0.5)
+        d.proc.send_signal(signal.SIGTERM)
+        out, err = _end(proc)
+        assert proc.returncode == 4 and "daemon stopping (SIGTERM)" in err, err
+        assert d.proc.wait(timeout=30) == 0
 
 
 def test_the_estop_input_then_a_drive_fault_during_identify(tmp_path: Path) -> None:

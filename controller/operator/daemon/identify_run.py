@@ -189,9 +189,9 @@ def _identify(host: IdentifyHost, run: IdentifyRun) -> None:
                                                   f"{str(exc)[:200]}"}
     try:
         host.end_identify(run, fault, outcome)
-    finally:
-        run.done.set()
         run.emit(outcome)
+    finally:
+        run.done.set()  # after the event is posted: a stopping daemon delivers it first
 
 
 def _fitted(host: IdentifyHost, records: list[AxisRecord]) -> dict[str, Any]:
