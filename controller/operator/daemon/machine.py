@@ -128,6 +128,7 @@ class Machine:
 
     identify_run: identify_run.IdentifyRun | None = None  # claimed, or exciting and fitting
     last_identify: dict[str, Any] | None = None  # how the last one ended (`status`)
+    _identify_started: identify_run.IdentifyRun | None = None
 
     def start_identifying(self, run: identify_run.IdentifyRun) -> None:
         """Under the lock: the claimed identify starts moving (an e-stop meanwhile stops)."""
@@ -136,6 +137,7 @@ class Machine:
                                 f"the machine went {self.state.value} meanwhile: nothing "
                                 "moved")
         run.moving = True
+        self._identify_started = run
         self._set_state(State.IDENTIFYING)
 
     def end_identify(self, run: identify_run.IdentifyRun, fault: str | None,
@@ -366,9 +368,11 @@ class Machine:
 
     def wait_idle(self, timeout_s: float) -> bool:
         """True once the last job started has ended and sent its last event."""
-        run = self.identify_run
-        if run is not None and not run.done.wait(timeout_s):
-            return False
+        # The last identify started, too: it leaves identify_run before its last event is
+        # posted, and a daemon stopping must deliver that event.
+        for run in (self.identify_run, self._identify_started):
+            if run is not None and not run.done.wait(timeout_s):
+                return False
         job = self._last_job_started
         return job is None or job.done.wait(timeout_s)
 
