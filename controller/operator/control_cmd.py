@@ -131,7 +131,7 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
     where = " ".join(f"{k.upper()}{v:.3f}" for k, v in pos.items()) or "unknown"
     print(f"{s['state']}" + (f": {s['fault']}" if s.get("fault") else ""), flush=True)
     if s.get("program"):
-        print(f"  job {s['job']} {s['program']!r} line {s['line']}  feed "
+        print(f"  job {s['job']} {s['program']} line {s['line']}  feed "
               f"{s['feed_mm_s']:.1f} mm/s  following error {s['ferror_um']:.0f} um")
     print(f"  feed override {s.get('feed_override_pct', 100.0):g} %")
     if s.get("drives") == "disabled":
@@ -156,7 +156,7 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
         print(f"  scheduling: {sched['summary']}")
     last = s.get("last_job") or {}
     if last.get("program"):
-        print(f"  last job {last['program']!r}: {last.get('state', '?').lower()} at line "
+        print(f"  last job {last['program']}: {last.get('state', '?').lower()} at line "
               f"{last.get('last_line')}" + (f" ({last['fault']})" if last.get("fault") else ""),
               flush=True)
         residual = last.get("model_residual_um") or {}
@@ -165,6 +165,12 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
                   "(measured against the servo model)")
         if last.get("model_warning"):
             print(f"  WARNING: {last['model_warning']}", flush=True)
+    ident = s.get("last_identify") or {}
+    if ident.get("event"):
+        fits = ", ".join(f"{k.upper()} {v['fit_pct']:.1f} %" for k, v in
+                         (ident.get("fits") or {}).items())
+        print(f"  last identify: {ident['event']}" + (f" (held-out fit {fits})" if fits else "")
+              + (f": {ident['message']}" if ident.get("message") else ""), flush=True)
 
 
 def _simple(client: DaemonClient, args: argparse.Namespace) -> int:

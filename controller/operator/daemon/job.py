@@ -21,6 +21,7 @@ class State(enum.StrEnum):
     CHECKING = "CHECKING"
     RUNNING = "RUNNING"
     HOMING = "HOMING"
+    IDENTIFYING = "IDENTIFYING"  # `cncctl identify` excites the axes, then fits their loops
     FAULT = "FAULT"
 
 

@@ -3,7 +3,8 @@ time, run on the drive the daemon holds open; e-stop and faults latch until rese
 
 Kept whole: Machine is one state machine under one lock: the operator's commands, the job
 thread (check, approach, run, record) and the status all read and change the same state; its
-work offset table is a part of its own (OffsetStore), homing goes through manual.py."""
+work offset table is a part of its own (OffsetStore), homing goes through manual.py,
+`identify` through identify_run.py."""
 
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from controller.config import MachineConfig
 from controller.errors import CncError, NcError
 from controller.motion.realtime import realtime_threads
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
-from controller.operator.daemon import manual
+from controller.operator.daemon import identify_run, manual
 from controller.operator.daemon.check_process import CheckCancelled, check_in_child
 from controller.operator.daemon.job import Emit, Job, State, progress_event
 from controller.operator.daemon.journal import Journal
@@ -120,6 +121,42 @@ class Machine:
 
     def home(self, axes: list[str]) -> None:
         manual.start_homing(self, axes)
+
+    def identify(self, fields: dict[str, Any], request_id: Any, emit: Emit) -> None:
+        """`identify`: answered on emit once the excitations are designed (or refused)."""
+        identify_run.serve(self, fields, request_id, emit)
+
+    identify_run: identify_run.IdentifyRun | None = None  # claimed, or exciting and fitting
+    last_identify: dict[str, Any] | None = None  # how the last one ended (`status`)
+    _identify_started: identify_run.IdentifyRun | None = None
+
+    def start_identifying(self, run: identify_run.IdentifyRun) -> None:
+        """Under the lock: the claimed identify starts moving (an e-stop meanwhile stops)."""
+        if self.identify_run is not run or self.state is not State.IDLE:
+            raise ProtocolError("estop" if self.state is State.ESTOP else "busy",
+                                f"the machine went {self.state.value} meanwhile: nothing "
+                                "moved")
+        run.moving = True
+        self._identify_started = run
+        self._set_state(State.IDENTIFYING)
+
+    def end_identify(self, run: identify_run.IdentifyRun, fault: str | None,
+                     outcome: dict[str, Any]) -> None:
+        """The identify is over: FAULT latches, an e-stop latched meanwhile stays (the drives
+        disabled), else IDLE; its outcome kept for `status` (the config text aside)."""
+        with self._lock:
+            if self.identify_run is run:
+                self.identify_run = None
+            self.last_identify = {k: v for k, v in outcome.items() if k != "config_yaml"}
+            if fault is not None:
+                self.fault = fault
+                self._set_state(State.FAULT)
+            elif self.state is not State.ESTOP:
+                self._set_state(State.IDLE)
+            if self.state is State.ESTOP:
+                self._disable_drive()
+        self.log.log(ERR if fault else NOTICE, f"identify {outcome.get('event')}"
+                     + (f": {outcome['message']}" if outcome.get("message") else ""))
 
     def resume(self) -> None:
         """Continue a job paused at a program pause (M0), held, or on its way to a hold."""
@@ -226,6 +263,9 @@ class Machine:
         the reply said RUNNING while a held job stopped)."""
         with self._lock:
             job = self.job
+            if self.identify_run is not None and job is None:
+                self.identify_run.request_stop(reason)
+                return self.state.value if self.state is State.ESTOP else State.IDLE.value
             if job is None:
                 raise ProtocolError("not-running", "no job is running")
             self._stop_job(job, reason)
@@ -242,9 +282,12 @@ class Machine:
                 # Said at once: `cncctl home` printed "None" while the homing thread ended.
                 self.last_homing = f"aborted by the e-stop ({reason})"
             self._set_state(State.ESTOP)
+            run = self.identify_run
+            if run is not None:
+                run.request_stop(reason)  # along its path; the loop then disables the drives
             if self.job is not None:
                 self._stop_job(self.job, reason, estop=True)
-            elif not homing:
+            elif not homing and (run is None or not run.moving):
                 self._disable_drive()
         self.log.log(ERR, f"e-stop: {reason}")
 
@@ -276,7 +319,7 @@ class Machine:
             if self._estop_input_open():
                 raise ProtocolError("estop", "the e-stop input on the drive is open "
                                              "(tripped): close it, then reset")
-            if self.job is not None:
+            if self.job is not None or self.identify_run is not None:
                 raise ProtocolError("busy", f"a job is {self.state.value.lower()}: abort it "
                                             "first")
             try:
@@ -318,11 +361,18 @@ class Machine:
         with self._lock:
             if self.state is State.HOMING:
                 self.drive.abort_homing(reason)
+            if self.identify_run is not None:
+                self.identify_run.request_stop(reason)
             if self.job is not None:
                 self._stop_job(self.job, reason)
 
     def wait_idle(self, timeout_s: float) -> bool:
         """True once the last job started has ended and sent its last event."""
+        # The last identify started, too: it leaves identify_run before its last event is
+        # posted, and a daemon stopping must deliver that event.
+        for run in (self.identify_run, self._identify_started):
+            if run is not None and not run.done.wait(timeout_s):
+                return False
         job = self._last_job_started
         return job is None or job.done.wait(timeout_s)
 
@@ -495,6 +545,7 @@ class Machine:
         out.update(self.work_offsets.status())
         out["last_homing"] = self.last_homing
         out["last_job"] = self.last_job
+        out["last_identify"] = self.last_identify
         out["state_problems"] = list(self.state_problems)
         out["scheduling"] = self.scheduling
         return out
@@ -529,6 +580,8 @@ class Machine:
                                         "(one job at a time; nothing was queued)")
         if self.state is State.HOMING:
             raise ProtocolError("busy", "homing")
+        if self.identify_run is not None:
+            raise ProtocolError("busy", "identifying (`cncctl abort` stops it)")
         if self.state is State.ESTOP:
             raise ProtocolError("estop", f"e-stop is latched ({self.fault}): reset first")
         if self.state is State.FAULT:

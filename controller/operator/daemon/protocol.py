@@ -9,7 +9,7 @@ from typing import Any
 MAX_LINE_BYTES = 64 * 1024  # any request line
 MAX_PROGRAM_BYTES = 64 * 1024 * 1024  # the program text that follows a run request
 COMMANDS = frozenset({"status", "run", "abort", "estop", "reset", "log", "subscribe",
-                      "resume", "hold", "feed", "home", "jog", "offset"})
+                      "resume", "hold", "feed", "home", "jog", "offset", "identify"})
 MAX_FEED_OVERRIDE_PCT = 150.0
 TOPICS = frozenset({"state", "progress", "log"})
 
@@ -155,6 +155,10 @@ def _check_feed(request: Request) -> None:
 
 def _check_home(request: Request) -> None:
     _known(request, {"axes"})
+    _axes(request)
+
+
+def _axes(request: Request) -> None:
     axes = request.fields.get("axes", [])
     if not isinstance(axes, list) or not all(isinstance(a, str) and len(a) == 1 for a in axes):
         raise ProtocolError("bad-field", "axes must be a list of axis letters")
@@ -197,9 +201,25 @@ def _check_offset(request: Request) -> None:
         raise ProtocolError("bad-field", "here must be true or false, system a name")
 
 
+def _check_identify(request: Request) -> None:
+    _known(request, {"axes", "window_mm", "duration_s", "follow", "plan_only", "from_mm"})
+    _follow(request)
+    _axes(request)
+    _number(request, "window_mm", 1e-3, 1e4)
+    _number(request, "duration_s", 1.0, 30.0)
+    f = request.fields
+    if not isinstance(f.get("plan_only", False), bool):
+        raise ProtocolError("bad-field", "plan_only must be true or false")
+    shown = f.get("from_mm", {})
+    if not isinstance(shown, dict) or not all(
+            isinstance(k, str) and len(k) == 1 and isinstance(v, int | float)
+            and not isinstance(v, bool) and abs(v) < 1e5 for k, v in shown.items()):
+        raise ProtocolError("bad-field", "from_mm must map axis letters to numbers")
+
+
 _CHECKS = {"offset": _check_offset, "run": _check_run, "log": _check_log,
            "subscribe": _check_subscribe, "feed": _check_feed, "home": _check_home,
-           "jog": _check_jog}
+           "jog": _check_jog, "identify": _check_identify}
 
 
 class LineReader:

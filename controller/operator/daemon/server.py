@@ -270,6 +270,10 @@ class Server:
             self._send(conn, reply_ok(rid, state=self.machine.state.value))
         elif cmd == "jog":
             self._start_jog(conn, request)
+        elif cmd == "identify":  # answered from a thread: the excitations take a moment
+            conn.following = request.fields.get("follow", True) and not request.fields.get(
+                "plan_only", False)
+            self.machine.identify(request.fields, rid, self.emitter(conn))
         elif cmd == "offset":
             f = request.fields
             table = self.machine.offset(f["action"], f.get("system"), f.get("values", {}),

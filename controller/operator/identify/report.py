@@ -108,17 +108,24 @@ def meaning_lines(m: Meaning) -> list[str]:
 
 
 def write_config(config: MachineConfig, identified: dict[str, ServoParams], path: str) -> None:
-    """The config file in force with the identified `servo` blocks, loaded back to check it
-    (removed again if it does not load). Drive options given on the command line are not
-    written: they belong to one invocation."""
+    """The config file in force with the identified `servo` blocks (see write_config_text)."""
     with open(config.path, encoding="utf-8") as fh:
-        data = yaml.safe_load(fh)
-    for name, p in identified.items():
-        data["axes"][name]["servo"] = {n: float(f"{getattr(normalised(p), n):.7g}")
+        source = fh.read()
+    write_config_text(source, config.name, config.path, identified, path)
+
+
+def write_config_text(source: str, name: str, source_path: str,
+                      identified: dict[str, ServoParams], path: str) -> None:
+    """`source`, a config file's text, with the identified `servo` blocks, written to `path`
+    and loaded back to check it (removed again if it does not load). Drive options given on
+    a command line are not written: they belong to one invocation."""
+    data = yaml.safe_load(source)
+    for axis, p in identified.items():
+        data["axes"][axis]["servo"] = {n: float(f"{getattr(normalised(p), n):.7g}")
                                        for n in NAMES}
     stamp = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
-    head = (f"# {config.name} with the servo loops of {', '.join(n.upper() for n in identified)}"
-            f" identified by `cncctl identify` on {stamp}\n# from {config.path}\n")
+    head = (f"# {name} with the servo loops of {', '.join(n.upper() for n in identified)}"
+            f" identified by `cncctl identify` on {stamp}\n# from {source_path}\n")
     part = path + ".part"
     with open(part, "w", encoding="utf-8") as fh:
         fh.write(head + yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
