@@ -169,6 +169,11 @@ def _back_to_csp(drive: CanopenDrive, link: Link, axes: tuple[int, ...], halt: b
             demands[i] = bringup.sdo_read(drive._nodes[i], drive.axes[i], c.POSITION_DEMAND,
                                           None, "position demand")
     link.rebase_axes(demands)
+    # The SYNC thread builds a cycle's RPDO1s under the lock and sends them after it: one built
+    # before the rebase, with the step counter of before homing, could reach a drive after
+    # the mode change below, and the jump of its target tripped the drive's following error
+    # (EMCY 0x8611) now and then. Two more cycles: every RPDO1 in flight carries the rebase.
+    _cycles(link, 2)
     for i in axes:
         if not halted:
             drive._nodes[i].controlword = c.CW_ENABLE_OPERATION
