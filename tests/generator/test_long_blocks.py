@@ -54,8 +54,8 @@ def test_line_parts_follow_the_line_end_to_end(x0: float, y0: float, x1: float, 
     assert all(p.source == SRC and p.feed_mm_s == feed for p in parts)
 
 
-@settings(max_examples=200, deadline=None)
-@given(st.floats(0.01, 50), st.floats(0, 2 * math.pi), st.booleans(), st.integers(0, 300),
+@settings(max_examples=80, deadline=None)
+@given(st.floats(0.01, 50), st.floats(0, 2 * math.pi), st.booleans(), st.integers(0, 120),
        st.floats(1 / 60, 50))
 def test_arc_parts_turn_as_the_arc_does(r: float, a0: float, clockwise: bool, turns: int,
                                         feed: float) -> None:
@@ -189,11 +189,11 @@ def test_an_arc_of_a_million_turns_starts_at_once_in_bounded_memory(tmp_path: Pa
     tracemalloc.start()
     try:
         steps = list(itertools.islice(plan_program(read_program(str(path), XY_TABLE),
-                                                   XY_TABLE), 40))
+                                                   XY_TABLE), 12))
         peak_mb = tracemalloc.get_traced_memory()[1] / 1e6
     finally:
         tracemalloc.stop()
-    assert sum(len(s.chunk) for s in steps) > 1000
+    assert sum(len(s.chunk) for s in steps) > 300
     assert peak_mb < 200, peak_mb
 
 
