@@ -30,7 +30,7 @@ def test_the_block_before_a_stop_keeps_its_feed(tmp_path: Path, text: str,
 def test_a_staircase_of_rising_feeds_is_climbed_step_by_step(tmp_path: Path) -> None:
     """F30 for 1 mm, F800 for 69 mm, then F3300: the F800 stretch rose in one segment from the
     F30 node to the next one, whose single shape could not cruise at F800 and rise again, so
-    it waited at 0.5 mm/s: 70 mm took 139 s (found by a black-box hunt). Each step up is a
+    it waited at 0.5 mm/s: 70 mm took 139 s. Each step up is a
     planning node now: about the 7.4 s at the programmed feeds."""
     text = "F30\nG1 Y1\nF800\nG1 Y70\nF3300\nG1 X-2 Y75\nG1 X0 Y79\nM2\n"
     rep = report(simulate(blocks_of(tmp_path, text), XY_TABLE, "ph-lookahead"), "p",

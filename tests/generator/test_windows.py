@@ -199,7 +199,7 @@ def test_a_slow_window_plans_again_only_its_last_seconds(tmp_path: Path) -> None
 
 
 def test_a_window_continuing_a_cruise_at_the_feed_cap_plans(tmp_path: Path) -> None:
-    """Found by a black-box hunt: feeds over the machine's cap, a window continued at the cap
+    """Feeds over the machine's cap, a window continued at the cap
     plus a rounding, and `simulate` failed ("feed planning failed: start speed above the
     limit") on a program `check` had passed."""
     prog = tmp_path / "caps.nc"
