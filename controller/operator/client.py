@@ -50,6 +50,21 @@ def connect_unix(sock: socket.socket, path: str, timeout_s: float) -> None:
             pause_s = min(pause_s * 2, 0.01)
 
 
+def refused_through_daemon(args: argparse.Namespace, socket_path: str,
+                           embedded_only: tuple[tuple[str, str, str], ...],
+                           what: str) -> str | None:
+    """Why a command cannot go through the daemon as asked (None: it can): the options of
+    `embedded_only` ((attribute, flag, why) each) that were given. A daemon owns its drive,
+    config and tables; such an option was once dropped without a word."""
+    given = [(flag, why) for attr, flag, why in embedded_only if getattr(args, attr, None)]
+    if not given:
+        return None
+    reasons = "; ".join(f"{flag}: {why}" for flag, why in given)
+    return (f"a cncd answers on {socket_path} and cannot honour {reasons}. Nothing was sent "
+            f"and nothing moved. Leave the option out to {what} through the daemon, or stop "
+            f"cncd (or point CNCD_SOCKET where none answers) for an embedded {what}")
+
+
 class DaemonUnavailable(CncError):
     """No daemon answers on the socket (absent, stopped, or not allowed to connect)."""
 

@@ -10,7 +10,7 @@ import sys
 from typing import Any
 
 from controller.errors import CncError
-from controller.operator.client import DaemonClient, DaemonError
+from controller.operator.client import DaemonClient, DaemonError, refused_through_daemon
 from controller.operator.identify.plan import confirm_start
 from controller.operator.identify.report import write_config_text
 from controller.operator.identify.result import params_from_wire
@@ -37,13 +37,7 @@ def _say(text: str) -> None:
 
 def refused_by_daemon(args: argparse.Namespace, socket_path: str) -> str | None:
     """Why this identify cannot go through the daemon as asked (None: it can)."""
-    given = [(flag, why) for attr, flag, why in _NOT_THROUGH_DAEMON if getattr(args, attr, None)]
-    if not given:
-        return None
-    reasons = "; ".join(f"{flag}: {why}" for flag, why in given)
-    return (f"a cncd answers on {socket_path} and cannot honour {reasons}. Nothing was sent "
-            "and nothing moved. Leave the option out to identify through the daemon, or stop "
-            "cncd (or point CNCD_SOCKET where none answers) for an embedded identify")
+    return refused_through_daemon(args, socket_path, _NOT_THROUGH_DAEMON, "identify")
 
 
 def identify_on_daemon(args: argparse.Namespace, socket_path: str, out: str | None) -> int:

@@ -19,6 +19,7 @@ from controller.operator.client import (
     NoDaemon,
     daemon_answers,
     default_socket_path,
+    refused_through_daemon,
     socket_argument,
 )
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
@@ -113,13 +114,8 @@ _NOT_THROUGH_DAEMON = (
 
 def _refused_by_daemon(args: argparse.Namespace, socket_path: str) -> str | None:
     """Why this run cannot go through the daemon as asked (None: it can)."""
-    given = [(flag, why) for attr, flag, why in _NOT_THROUGH_DAEMON if getattr(args, attr, None)]
-    if not given:
-        return None
-    reasons = "; ".join(f"{flag}: {why}" for flag, why in given)
-    return (f"cncctl: a cncd answers on {socket_path} and cannot honour {reasons}. Nothing "
-            "was sent and nothing moved. Leave the option out to run through the daemon, or "
-            "stop cncd (or point CNCD_SOCKET where none answers) for an embedded run")
+    refusal = refused_through_daemon(args, socket_path, _NOT_THROUGH_DAEMON, "run")
+    return None if refusal is None else f"cncctl: {refusal}"
 
 
 def run(args: argparse.Namespace) -> int:
