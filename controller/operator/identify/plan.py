@@ -4,15 +4,12 @@ operator's confirmation."""
 
 from __future__ import annotations
 
-import signal
-import sys
 from dataclasses import dataclass
-from typing import Any
 
 from controller.config import MachineConfig
 from controller.errors import ConfigError
 from controller.operator.identify.loop import LEAD_IN_S, TAIL_S
-from controller.operator.run.exit_codes import STOP_SIGNALS
+from controller.operator.run.keys import enter_to_go
 from controller.servo.excitation import Excitation, design
 
 MIN_WINDOW_SHARE = 0.5  # the travel may shrink the excitation to half, not further
@@ -94,19 +91,4 @@ def plan_axes(config: MachineConfig, commanded_counts: list[int], axes: list[int
 
 def confirm_start(yes: bool) -> bool:
     """Enter starts (or --yes); Ctrl-C, a stop signal or the end of standard input do not."""
-    if yes:
-        return True
-    previous: dict[int, Any] = {}
-
-    def cancel(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt
-    try:
-        for sig in STOP_SIGNALS:
-            previous[sig] = signal.signal(sig, cancel)
-        print("cncctl: press Enter to start, Ctrl-C to cancel", file=sys.stderr, flush=True)
-        return sys.stdin.readline() != ""
-    except (KeyboardInterrupt, OSError):
-        return False
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    return yes or enter_to_go("cncctl: press Enter to start, Ctrl-C to cancel")

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import sys
 from collections.abc import Callable
 from dataclasses import replace
@@ -17,7 +16,7 @@ from controller.interpreter.program import position_at_line
 from controller.motion.types import MotionResult, Outcome
 from controller.offsets import OffsetTable
 from controller.operator.check_cmd import check_program
-from controller.operator.run.exit_codes import STOP_SIGNALS
+from controller.operator.run.keys import enter_to_go
 from controller.runtime.processes import Runtime, RuntimeOptions, build_drive, open_drive
 from drivers.base import Drive
 from drivers.errors import HomingError
@@ -82,10 +81,6 @@ class Sequence:
             self.current.request_abort(message)
 
 
-def _cancel(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt
-
-
 def confirm(args: argparse.Namespace, text: str,
             aborted: Callable[[], bool] = lambda: False) -> bool:
     """The operator confirms the approach (Enter), unless --yes. Ctrl-C, SIGTERM and SIGHUP
@@ -93,21 +88,7 @@ def confirm(args: argparse.Namespace, text: str,
     came just before the question), which would leave the question waiting and, once
     answered, the approach moving."""
     print(text, file=sys.stderr, flush=True)
-    if args.yes:
-        return True
-    previous: dict[int, Any] = {}
-    try:
-        for sig in STOP_SIGNALS:  # inside the try: a signal as soon as one is in place
-            previous[sig] = signal.signal(sig, _cancel)
-        if aborted():
-            return False
-        print("press Enter to move there, Ctrl-C to cancel", file=sys.stderr, flush=True)
-        return sys.stdin.readline() != ""
-    except (KeyboardInterrupt, OSError):
-        return False
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    return args.yes or enter_to_go("press Enter to move there, Ctrl-C to cancel", aborted)
 
 
 def run_from_line(args: argparse.Namespace, config: MachineConfig, offsets: OffsetTable | None,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import termios
 import threading
@@ -11,6 +12,7 @@ from collections.abc import Callable
 from typing import Any, Protocol
 
 from controller.motion.types import MotionProgress, MotionState
+from controller.operator.run.exit_codes import STOP_SIGNALS
 
 OVERRIDE_STEP_PCT = 10.0
 MAX_OVERRIDE_PCT = 150.0
@@ -130,3 +132,27 @@ def stdin_fd() -> int | None:
         return sys.stdin.fileno()
     except (OSError, ValueError, AttributeError):
         return None
+
+
+def _cancel(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def enter_to_go(prompt: str, aborted: Callable[[], bool] = lambda: False) -> bool:
+    """Print prompt and wait for Enter: True. Ctrl-C, SIGTERM, SIGHUP or the end of standard
+    input: False. The stop signals raise here while it waits (a handler that only asks for an
+    abort would leave the question waiting, and once answered, the machine moving); aborted()
+    tells of one that came just before the question."""
+    previous: dict[int, Any] = {}
+    try:
+        for sig in STOP_SIGNALS:  # inside the try: a signal as soon as one is in place
+            previous[sig] = signal.signal(sig, _cancel)
+        if aborted():
+            return False
+        print(prompt, file=sys.stderr, flush=True)
+        return sys.stdin.readline() != ""
+    except (KeyboardInterrupt, OSError):
+        return False
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
