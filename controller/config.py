@@ -100,6 +100,11 @@ class InterpolatorConfig:
     # actual position follows the path itself (controller/servo/precompensation.py).
     # Off is the paper's method (Table IV); on, the contour limit rarely binds.
     servo_precompensation: bool = False
+    # The share of a feed transition whose acceleration is not constant: 1 is the paper's
+    # quintic (peak 15/8 of the mean); lower is shorter at the same Amax but with more jerk,
+    # which the pre-compensation and the dynamics module's contour check have to absorb
+    # (controller/generator/feed/shape.py).
+    ramp_share: float = 1.0
 
     @property
     def kappa_threshold_per_mm(self) -> float:
@@ -242,6 +247,7 @@ def _read_interpolator(sec: Section) -> InterpolatorConfig:
         rapid_feed_mm_s=sec.float("rapid_feed_mm_min", above=0.0, maxval=600000.0) / 60.0,
         max_dynamics_rounds=sec.int("max_dynamics_rounds", 20, minval=1, maxval=1000),
         servo_precompensation=sec.bool("servo_precompensation", False),
+        ramp_share=sec.float("ramp_share", 1.0, minval=0.01, maxval=1.0),
     )
     sec.finish()
     return cfg

@@ -23,6 +23,7 @@ from controller.config import MachineConfig
 from controller.errors import PlanningError
 from controller.generator.baselines import FORMULA_FEEDS, plan_formula_run
 from controller.generator.feed.planner import plan_feed
+from controller.generator.feed.shape import TransitionShape
 from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
 from controller.generator.ph.construct import BlockCurve, block_curve
 from controller.generator.repeats import Repeats
@@ -90,7 +91,8 @@ def _straight_move(block: LineBlock, config: MachineConfig,
     cap = config.interpolator.rapid_feed_mm_s if block.rapid else min(
         block.feed_mm_s, config.interpolator.max_feed_mm_s)
     plan = plan_feed(np.array([0.0, length]), np.array([cap, cap]),
-                     config.interpolator.max_accel_mm_s2)
+                     config.interpolator.max_accel_mm_s2,
+                     shape=TransitionShape(config.interpolator.ramp_share))
     T = config.sample_period_s  # noqa: N806
     k = max(int(np.ceil(plan.profile.duration_s / T - 1e-9)), 1)
     for i0, i1 in chunk_bounds(k):

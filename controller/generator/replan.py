@@ -29,6 +29,7 @@ from controller.generator.feed.path_plan import (
     plan_path_feed,
 )
 from controller.generator.feed.planner import PlanResult
+from controller.generator.feed.shape import TransitionShape
 from controller.generator.ph.construct import (
     BlockCurve,
     CornerInfo,
@@ -127,7 +128,8 @@ def _feed_input(config: MachineConfig, settings: RunSettings, reductions: tuple[
                      ip.chord_tolerance_mm, ip.reference_curvature_per_mm, budget,
                      settings.policy, reductions,
                      tuple((stops[i], a) for i, a in sorted(stop_accels.items())
-                           if i < len(stops)), None if model is None else model.accel_for)
+                           if i < len(stops)), None if model is None else model.accel_for,
+                     TransitionShape(ip.ramp_share))
 
 
 # The true distance is computed exactly only where the tool is this share of eps_max or more

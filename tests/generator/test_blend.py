@@ -94,7 +94,11 @@ def test_long_contour_is_planned_in_windows_without_stopping(tmp_path: Path) -> 
     speed = np.linalg.norm(np.diff(np.vstack([[0.0, 0.0], ref]), axis=0), axis=1) / 0.001
     assert speed[200:-200].min() > 0.95 * 50.0  # no stop at the window seams
     accel = np.diff(speed) / 0.001
-    assert np.abs(accel).max() <= IP.max_accel_mm_s2 * (1 + 1e-6)
+    # Chord speeds on a curve read slightly off the arc's (see test_windows); the planned
+    # speed keeps Amax exactly.
+    feed = np.concatenate([s.chunk.feed_mm_s for s in steps])
+    assert np.abs(np.diff(feed) / 0.001).max() <= IP.max_accel_mm_s2 * (1 + 1e-6)
+    assert np.abs(accel).max() <= IP.max_accel_mm_s2 * (1 + 2e-3)
     assert speed.max() <= 50.0 * (1 + 1e-9)
     poly_dev = _distance_to_points_polyline(ref, pts)
     assert poly_dev.max() <= 0.01 * (1 + 1e-6)

@@ -142,7 +142,7 @@ def test_invalid_input(s: np.ndarray, vlim: np.ndarray) -> None:
 
 
 def _naive_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.ndarray,
-                    accel: float) -> SegmentPlan:
+                    accel: float, shape: object = None) -> SegmentPlan:
     """Peak at once, brake at the end, ignoring vlim's shape: forces the repair rounds."""
     a, b = win.a, win.b
     vc = np.sqrt((16.0 * accel * (b - a) / 15.0 + vi * vi + vj * vj) / 2.0)

@@ -50,7 +50,11 @@ def test_a_long_g1_run_is_continued_from_window_to_window_without_stopping(
     assert moving.min() > 1.0  # no stop between the start and the end
     v = np.linalg.norm(np.diff(np.vstack([np.zeros((1, 2)), ref]), axis=0), axis=1) / T
     assert v.max() <= CFG.interpolator.max_feed_mm_s * (1 + 1e-6)
-    assert np.abs(np.diff(v) / T).max() <= CFG.interpolator.max_accel_mm_s2 * (1 + 1e-6)
+    # The planned speed keeps Amax exactly (mean value theorem); chord speeds of the reference
+    # on a curve read a little more where a braking at Amax enters a blend (1e-3 of Amax: a
+    # chord is shorter than its arc by (turn per sample)^2 / 24).
+    assert np.abs(np.diff(feed) / T).max() <= CFG.interpolator.max_accel_mm_s2 * (1 + 1e-6)
+    assert np.abs(np.diff(v) / T).max() <= CFG.interpolator.max_accel_mm_s2 * (1 + 2e-3)
     r = report(simulate(read_program(str(program), CFG), CFG, "ph-lookahead"), "w", "ph", CFG)
     assert r["contour_limit_met"]
 

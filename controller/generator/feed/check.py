@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller.generator.feed.profile import quintic_distance, quintic_speed
+from controller.generator.feed.profile import shaped_distance, shaped_speed
+from controller.generator.feed.shape import QUINTIC, TransitionShape
 from controller.numeric import clamp
 
 CHUNK_SAMPLES = 16  # check-sample intervals per chunk of the coarse pass over transitions
@@ -105,7 +106,8 @@ class Violations:
     phase_len_mm: np.ndarray
 
 
-def check_phases(ph: PhaseArrays, curve: LimitCurve, n_seg: int, tol: float) -> Violations:
+def check_phases(ph: PhaseArrays, curve: LimitCurve, n_seg: int, tol: float,
+                 shape: TransitionShape = QUINTIC) -> Violations:
     """Worst violation of v <= vlim in each segment: cruises by range minimum, transitions by
     dense samples (close enough that v between them is within tol/2 of linear) plus the exact
     speed at the grid samples inside them. Transition samples are only taken where a coarse
@@ -117,7 +119,7 @@ def check_phases(ph: PhaseArrays, curve: LimitCurve, n_seg: int, tol: float) -> 
     lengths = ph.length_mm
     cruise = ph.vs_mm_s == ph.ve_mm_s
     _merge(exc, loc, plen, *_cruise_excess(ph, lengths, cruise, curve))
-    for part in _transition_excess(ph, lengths, ~cruise, curve, tol):
+    for part in _transition_excess(ph, lengths, ~cruise, curve, tol, shape):
         _merge(exc, loc, plen, *part)
     return Violations(exc, loc, plen)
 
@@ -155,12 +157,13 @@ def _cruise_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
 
 
 def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
-                       curve: LimitCurve, tol: float) -> tuple[tuple[np.ndarray, ...], ...]:
+                       curve: LimitCurve, tol: float,
+                       shape: TransitionShape) -> tuple[tuple[np.ndarray, ...], ...]:
     dur, s0, vs, ve = ph.duration_s[mask], ph.s0_mm[mask], ph.vs_mm_s[mask], ph.ve_mm_s[mask]
     if len(dur) == 0:
         return ()
-    n = _sample_counts(dur, vs, ve, lengths[mask], curve.spacing_mm, tol)
-    ch = _Chunks.build(n, dur, s0, vs, ve, curve, tol)
+    n = _sample_counts(dur, vs, ve, lengths[mask], curve.spacing_mm, tol, shape)
+    ch = _Chunks.build(n, dur, s0, vs, ve, curve, tol, shape)
     # Dense samples only in the chunks that may hold an excess above tol/4 (the very samples a
     # full pass takes there, so the worst points found are the same).
     c = np.flatnonzero(ch.keep)
@@ -168,8 +171,8 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     k = np.repeat(ch.k[c], cnt)
     j = np.repeat(ch.j0[c], cnt) + np.arange(len(k)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
     tau = j / (n[k] - 1.0)
-    s = s0[k] + quintic_distance(tau, dur[k], vs[k], ve[k])
-    v = quintic_speed(tau, vs[k], ve[k])
+    s = s0[k] + shaped_distance(tau, dur[k], vs[k], ve[k], shape)
+    v = shaped_speed(tau, vs[k], ve[k], shape)
     e = v - curve.at(s)
     # Grid samples inside transitions (where vlim may kink): exact v, by Newton on s(tau) from
     # the interpolated tau; only those in kept chunks (elsewhere v - vlim <= tol/4 there too).
@@ -179,10 +182,10 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     g, gk = g[in_kept], gk[in_kept]
     tg = _seed_tau(curve.s_mm[g], gk, k, s, tau)
     for _ in range(3):
-        sg = s0[gk] + quintic_distance(tg, dur[gk], vs[gk], ve[gk])
-        vg = np.maximum(quintic_speed(tg, vs[gk], ve[gk]), 1e-12) * dur[gk]
+        sg = s0[gk] + shaped_distance(tg, dur[gk], vs[gk], ve[gk], shape)
+        vg = np.maximum(shaped_speed(tg, vs[gk], ve[gk], shape), 1e-12) * dur[gk]
         tg = clamp(tg - (sg - curve.s_mm[g]) / vg, 0.0, 1.0)
-    ge = quintic_speed(tg, vs[gk], ve[gk]) - curve.vlim_mm_s[g]
+    ge = shaped_speed(tg, vs[gk], ve[gk], shape) - curve.vlim_mm_s[g]
     seg = ph.seg[mask]
     ln = lengths[mask]
     return (seg[k], e, s, ln[k]), (seg[gk], ge, curve.s_mm[g], ln[gk])
@@ -222,7 +225,8 @@ class _Chunks:
 
     @classmethod
     def build(cls, n: np.ndarray, dur: np.ndarray, s0: np.ndarray, vs: np.ndarray,
-              ve: np.ndarray, curve: LimitCurve, tol: float) -> _Chunks:
+              ve: np.ndarray, curve: LimitCurve, tol: float,
+              shape: TransitionShape = QUINTIC) -> _Chunks:
         m = (n - 2) // CHUNK_SAMPLES + 1  # chunks per transition (n >= 2 samples)
         first = np.cumsum(m) - m
         # Chunk boundaries: m + 1 per transition, the last at sample n - 1.
@@ -230,8 +234,8 @@ class _Chunks:
         cb = np.arange(len(kb)) - np.repeat(first + np.arange(len(n)), m + 1)
         jb = np.minimum(cb * CHUNK_SAMPLES, n[kb] - 1)
         tau = jb / (n[kb] - 1.0)
-        sb = s0[kb] + quintic_distance(tau, dur[kb], vs[kb], ve[kb])
-        vb = quintic_speed(tau, vs[kb], ve[kb])
+        sb = s0[kb] + shaped_distance(tau, dur[kb], vs[kb], ve[kb], shape)
+        vb = shaped_speed(tau, vs[kb], ve[kb], shape)
         last = np.zeros(len(kb), bool)
         last[np.cumsum(m + 1) - 1] = True
         i0 = np.flatnonzero(~last)  # a chunk runs from boundary i0 to i0 + 1
@@ -249,7 +253,7 @@ class _Chunks:
 
 
 def _sample_counts(dur: np.ndarray, vs: np.ndarray, ve: np.ndarray, length: np.ndarray,
-                   h: float, tol: float) -> np.ndarray:
+                   h: float, tol: float, shape: TransitionShape = QUINTIC) -> np.ndarray:
     """Samples per transition so that v(s) between two check points deviates from its chord by
     at most tol/2: spacing sqrt(4 tol / |v''|), with |v''| = |j v - a^2| / v^3 <= (J vmax +
     A^2) / vmin^3 (peak jerk J = 10/sqrt(3) dV/T^2, peak a = 15 dV / (8T)); at least half a grid
@@ -258,8 +262,12 @@ def _sample_counts(dur: np.ndarray, vs: np.ndarray, ve: np.ndarray, length: np.n
     dv = np.abs(ve - vs)
     vmax, vmin = np.maximum(vs, ve), np.minimum(vs, ve)
     vmin = np.maximum(vmin, 0.05 * vmax)
-    jerk = 10.0 / np.sqrt(3.0) * dv / dur ** 2
-    acc = 15.0 * dv / (8.0 * dur)
+    if shape.is_quintic:
+        jerk = 10.0 / np.sqrt(3.0) * dv / dur ** 2
+        acc = 15.0 * dv / (8.0 * dur)
+    else:
+        jerk = shape.jerk_factor * dv / dur ** 2
+        acc = shape.peak_factor * dv / dur
     curv = (jerk * vmax + acc * acc) / vmin ** 3
     step = np.minimum(0.5 * h, np.sqrt(4.0 * tol / np.maximum(curv, 1e-300)))
     n = np.ceil(length / step) + 2

@@ -12,6 +12,7 @@ from controller.generator.feed.grid import PieceSamples, grid_step_mm, limit_sam
 from controller.generator.feed.limits import chord_error_feed_mm_s, corner_feed_mm_s
 from controller.generator.feed.planner import PlanResult, plan_feed
 from controller.generator.feed.profile import FeedProfile
+from controller.generator.feed.shape import QUINTIC, TransitionShape
 from controller.generator.feed.stop_approach import (
     STOP_MATCH_MM,
     approach_split,
@@ -53,6 +54,7 @@ class FeedInput:
     stop_accels: tuple[tuple[float, float], ...] = field(default=())
     # the dynamics module's first guess for stops without one: approach speed -> acceleration
     stop_accel_for: Callable[[float], float] | None = None
+    shape: TransitionShape = QUINTIC  # of every transition (interpolator.ramp_share)
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,7 +117,8 @@ def _concat(profiles: list[FeedProfile]) -> FeedProfile:
         parts.append(rows)
         t0 += prof.duration_s
         s0 += prof.length_mm
-    return FeedProfile.from_rows(np.concatenate(parts) if parts else np.empty((0, 5)))
+    shape = profiles[0].shape if profiles else QUINTIC
+    return FeedProfile.from_rows(np.concatenate(parts) if parts else np.empty((0, 5)), shape)
 
 
 def _section(s: np.ndarray, vlim: np.ndarray, a: float,
@@ -211,16 +214,18 @@ def plan_path_feed(path: Path, inp: FeedInput, cache: PieceSamples | None = None
         v0 = v_start_mm_s if a == 0.0 else 0.0
         accel = stop_accel_at(inp.stop_accels, b)
         if accel is None and inp.stop_accel_for is not None:
-            accel = model_stop_accel(s_sec, v_sec, inp.max_accel_mm_s2, inp.stop_accel_for)
+            accel = model_stop_accel(s_sec, v_sec, inp.max_accel_mm_s2, inp.stop_accel_for,
+                                     inp.shape)
         if accel is not None and accel >= inp.max_accel_mm_s2:
             accel = None
         if b not in extra:  # one per stop of the path, in order (the dynamics module's)
             used.append(inp.max_accel_mm_s2 if accel is None else accel)
         parts = [(s_sec, v_sec, inp.max_accel_mm_s2, v0, 0.0)] if accel is None else \
-            approach_split(s_sec, v_sec, inp.max_accel_mm_s2, accel, v0)
+            approach_split(s_sec, v_sec, inp.max_accel_mm_s2, accel, v0, inp.shape)
         for s_part, v_part, a_part, vs, ve in parts:
             plan = plan_feed(s_part - s_part[0], np.maximum(v_part, 1e-6), a_part, vs, ve,
-                             raise_cruises=raise_cruises, grid_step_mm=grid_step_mm(path))
+                             raise_cruises=raise_cruises, grid_step_mm=grid_step_mm(path),
+                             shape=inp.shape)
             if plan.result != PlanResult.OK:
                 result = plan.result
             profiles.append(plan.profile)

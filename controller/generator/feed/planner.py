@@ -11,10 +11,10 @@ import numpy as np
 
 from controller.generator.feed.check import LimitCurve, PhaseArrays, Violations, check_phases
 from controller.generator.feed.nodes import (
-    EFFECTIVE_ACCEL_FACTOR,
     STAIR_CAP,
     STAIR_STEP,
     Nodes,
+    effective_accel,
     initial_nodes,
 )
 from controller.generator.feed.profile import FeedProfile
@@ -24,6 +24,7 @@ from controller.generator.feed.segments import (
     plan_segments,
     segment_phases,
 )
+from controller.generator.feed.shape import QUINTIC, TransitionShape
 from controller.generator.feed.time_bound import fb_pass_speed_mm_s
 
 MAX_SPLIT_DEPTH = 8  # a segment split this often is flattened instead (always safe)
@@ -62,7 +63,8 @@ class FeedPlan:
 
 def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
               v_start_mm_s: float = 0.0, v_end_mm_s: float = 0.0,
-              raise_cruises: bool = True, grid_step_mm: float | None = None) -> FeedPlan:
+              raise_cruises: bool = True, grid_step_mm: float | None = None,
+              shape: TransitionShape = QUINTIC) -> FeedPlan:
     """Plan v(t) from s=0 at v_start to s=L at v_end, with v <= vlim(s) and |a| <= accel.
 
     The profile passes every node with zero acceleration. Nodes: the ends, the local minima of
@@ -78,24 +80,25 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     Segments a round leaves unchanged are not planned or checked again (see _Memo).
     s_mm may start anywhere; the profile's s runs from s_mm[0] to s_mm[-1]. grid_step_mm is the
     grid's typical step (default: its smallest); on any result but OK the profile is empty.
+    shape: the transitions' shape (the paper's quintic unless a config asks for another).
     """
     s = np.asarray(s_mm, float)
     vlim = np.asarray(vlim_mm_s, float)
     bad = _input_error(s, vlim, v_start_mm_s, v_end_mm_s)
     if bad is not None:
-        return FeedPlan(FeedProfile(()), bad)
+        return FeedPlan(FeedProfile((), shape), bad)
     curve = LimitCurve(s - s[0], vlim, grid_step_mm)
-    nodes = initial_nodes(curve, v_start_mm_s, v_end_mm_s, accel_mm_s2)
+    nodes = initial_nodes(curve, v_start_mm_s, v_end_mm_s, accel_mm_s2, shape)
     tol = LIMIT_TOLERANCE * float(vlim.max())
-    memo = _memo_for(curve, accel_mm_s2, tol)
+    memo = _memo_for(curve, accel_mm_s2, tol, shape)
     n_rounds = MAX_SPLIT_DEPTH + FLATTEN_ROUNDS + 2
     best: tuple[float, PhaseArrays, int] | None = None  # duration, phases, round
     raises = 0
     for rnd in range(1, n_rounds + MAX_CRUISE_RAISES + 1):
-        v = _node_speeds(nodes, accel_mm_s2, v_start_mm_s, v_end_mm_s)
+        v = _node_speeds(nodes, accel_mm_s2, v_start_mm_s, v_end_mm_s, shape)
         if isinstance(v, PlanResult):
-            return _result(best, s[0], v, rnd)
-        ph, viol = _plan_round(nodes, v, curve, accel_mm_s2, tol, memo)
+            return _result(best, s[0], v, rnd, shape)
+        ph, viol = _plan_round(nodes, v, curve, accel_mm_s2, tol, memo, shape)
         if not np.any(viol.excess_mm_s > 0.5 * tol):
             # The profile's duration (FeedProfile sums the durations in the same order).
             dur = float(np.cumsum(ph.duration_s)[-1]) if len(ph.duration_s) else 0.0
@@ -104,30 +107,31 @@ def plan_feed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
             if raise_cruises and raises < MAX_CRUISE_RAISES and _raise_cruises(nodes, ph, curve):
                 raises += 1
                 continue
-            return _result(best, s[0], PlanResult.OK, rnd)
+            return _result(best, s[0], PlanResult.OK, rnd, shape)
         if best is not None and rnd >= n_rounds - 1:
             # An improvement attempt did not settle: keep the last good plan.
-            return _result(best, s[0], PlanResult.OK, rnd)
+            return _result(best, s[0], PlanResult.OK, rnd, shape)
         if rnd == n_rounds - 1:  # last resort: flatten everything (safe by construction)
             viol = Violations(np.full(len(nodes.s) - 1, np.inf), viol.s_mm, viol.phase_len_mm)
         failed = _repair(nodes, viol, curve, 0.5 * tol, last=rnd > MAX_SPLIT_DEPTH)
         if failed is not None:
-            return _result(best, s[0], failed, rnd)
+            return _result(best, s[0], failed, rnd, shape)
         # Cruises that vlim lets rise later are raised in the same round as the repairs (the
         # next round plans both), which saves a round on the common case of both at once.
         if raise_cruises and raises < MAX_CRUISE_RAISES and rnd <= MAX_SPLIT_DEPTH \
                 and _raise_cruises(nodes, ph, curve):
             raises += 1
-    return _result(best, s[0], PlanResult.LIMIT_VIOLATED, rnd)
+    return _result(best, s[0], PlanResult.LIMIT_VIOLATED, rnd, shape)
 
 
 def _result(best: tuple[float, PhaseArrays, int] | None, s0: float, failed: PlanResult,
-            rnd: int) -> FeedPlan:
+            rnd: int, shape: TransitionShape) -> FeedPlan:
     """The best plan found (its profile built only now), else the empty plan with failed."""
     if best is None:
-        return FeedPlan(FeedProfile(()), failed, rnd)
+        return FeedPlan(FeedProfile((), shape), failed, rnd)
     ph = best[1]
-    profile = FeedProfile.from_arrays(ph.duration_s, ph.s0_mm + s0, ph.vs_mm_s, ph.ve_mm_s)
+    profile = FeedProfile.from_arrays(ph.duration_s, ph.s0_mm + s0, ph.vs_mm_s, ph.ve_mm_s,
+                                      shape=shape)
     return FeedPlan(profile, PlanResult.OK, best[2])
 
 
@@ -142,7 +146,7 @@ class _Memo:
     generator's raise_cruises attempt repeats its previous call, and its dynamics rounds change
     vlim only locally."""
 
-    globals_: tuple[float, float, float, float]
+    globals_: tuple[float, float, float, float, TransitionShape]
     planner: Callable[..., SegmentPlan]  # plan_segments (a test may swap it)
     rows: dict[tuple, tuple[float, ...]]
     key_bytes: int = 0
@@ -156,8 +160,8 @@ def clear_memo() -> None:
     _last_memo.clear()
 
 
-def _memo_for(curve: LimitCurve, accel: float, tol: float) -> _Memo:
-    key = (accel, tol, curve.spacing_mm, float(curve.vlim_mm_s.max()))
+def _memo_for(curve: LimitCurve, accel: float, tol: float, shape: TransitionShape) -> _Memo:
+    key = (accel, tol, curve.spacing_mm, float(curve.vlim_mm_s.max()), shape)
     for m in _last_memo:
         if m.globals_ == key and m.planner is plan_segments and m.key_bytes < MEMO_BYTES:
             return m
@@ -167,7 +171,7 @@ def _memo_for(curve: LimitCurve, accel: float, tol: float) -> _Memo:
 
 
 def _plan_round(nodes: Nodes, v: np.ndarray, curve: LimitCurve, accel: float, tol: float,
-                memo: _Memo) -> tuple[PhaseArrays, Violations]:
+                memo: _Memo, shape: TransitionShape = QUINTIC) -> tuple[PhaseArrays, Violations]:
     """Plan every segment between the nodes and check it against vlim (new segments only)."""
     win = SegmentWindows.build(curve, nodes.s)
     vi, vj = v[:-1], v[1:]
@@ -182,7 +186,7 @@ def _plan_round(nodes: Nodes, v: np.ndarray, curve: LimitCurve, accel: float, to
     # Rows hold positions relative to their segment's start: a segment that moved along the
     # path unchanged (a zone before it was widened) keeps its result.
     out[:, _POSITION_COLUMNS] += win.a[:, None]
-    sp = memo.planner(win.take(new), vi[new], vj[new], nodes.flat[new], accel)
+    sp = memo.planner(win.take(new), vi[new], vj[new], nodes.flat[new], accel, shape)
     # New segments get their results as remembered ones would: relative to the segment start
     # (x - a, then + a) and, where several new ones share a key (a circle's equal segments),
     # the one row kept for it. Otherwise a plan would differ in the last bits from the same
@@ -194,8 +198,8 @@ def _plan_round(nodes: Nodes, v: np.ndarray, curve: LimitCurve, accel: float, to
     out[new, :3] = rel[rep, :3]
     out[new, 1:3] += a_new[:, None]
     ph = segment_phases(SegmentPlan(win.a, win.b, vi, vj, out[:, 0], out[:, 1], out[:, 2]),
-                        accel)
-    viol = check_phases(ph.take(~known[ph.seg]), curve, len(keys), tol)
+                        accel, shape)
+    viol = check_phases(ph.take(~known[ph.seg]), curve, len(keys), tol, shape)
     rel[:, 3], rel[:, 4], rel[:, 5] = (viol.excess_mm_s[new], viol.s_mm[new] - a_new,
                                        viol.phase_len_mm[new])
     out[new, 3:] = rel[rep, 3:]
@@ -253,9 +257,11 @@ def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanR
     return None
 
 
-def _node_speeds(nodes: Nodes, accel: float, v0: float, v1: float) -> np.ndarray | PlanResult:
-    """Node speeds reachable by quintic transitions both ways (v^2 passes at 8A/15)."""
-    a_eff = EFFECTIVE_ACCEL_FACTOR * accel
+def _node_speeds(nodes: Nodes, accel: float, v0: float, v1: float,
+                 shape: TransitionShape) -> np.ndarray | PlanResult:
+    """Node speeds reachable by the transitions both ways (v^2 passes at 8A/15 for quintics,
+    at A over the shape's peak factor for another shape)."""
+    a_eff = effective_accel(accel, shape)
     v = fb_pass_speed_mm_s(nodes.s, nodes.cap, a_eff, v0, v1)
     # The passes work on v^2 shifted by 2 a s, so they round to ~1e-16 of that scale.
     slack = 1e-12 * (2.0 * a_eff * nodes.s[-1] + v0 * v0 + v1 * v1)

@@ -8,6 +8,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from controller.generator.feed.shape import QUINTIC, TransitionShape
 from controller.numeric import clamp
 
 # Peak |a| of the quintic transition is (15/8)|dV|/T (at tau = 1/2); T is chosen so it equals Amax.
@@ -15,17 +16,38 @@ PEAK_ACCEL_FACTOR = 15.0 / 8.0
 
 
 def transition_duration_s(v_start_mm_s: np.ndarray | float, v_end_mm_s: np.ndarray | float,
-                          accel_mm_s2: float) -> np.ndarray:
-    """Duration T = 15|Ve-Vs|/(8 Amax): the fastest quintic transition whose peak |a| is Amax."""
+                          accel_mm_s2: float, shape: TransitionShape = QUINTIC) -> np.ndarray:
+    """Duration T = 15|Ve-Vs|/(8 Amax): the fastest quintic transition whose peak |a| is Amax
+    (another shape: its peak factor for 15/8)."""
     dv = np.abs(np.asarray(v_end_mm_s, float) - np.asarray(v_start_mm_s, float))
-    return PEAK_ACCEL_FACTOR * dv / accel_mm_s2
+    if shape.is_quintic:
+        return PEAK_ACCEL_FACTOR * dv / accel_mm_s2
+    return shape.time_factor * dv / accel_mm_s2
 
 
 def transition_length_mm(v_start_mm_s: np.ndarray | float, v_end_mm_s: np.ndarray | float,
-                         accel_mm_s2: float) -> np.ndarray:
+                         accel_mm_s2: float, shape: TransitionShape = QUINTIC) -> np.ndarray:
     """Distance of that transition, T(Vs+Ve)/2 = 15|Ve^2-Vs^2|/(16 Amax)."""
     vs, ve = np.asarray(v_start_mm_s, float), np.asarray(v_end_mm_s, float)
-    return 15.0 * np.abs(ve * ve - vs * vs) / (16.0 * accel_mm_s2)
+    if shape.is_quintic:
+        return 15.0 * np.abs(ve * ve - vs * vs) / (16.0 * accel_mm_s2)
+    return shape.time_factor * np.abs(ve * ve - vs * vs) / (2.0 * accel_mm_s2)
+
+
+def shaped_distance(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray, ve: np.ndarray,
+                    shape: TransitionShape) -> np.ndarray:
+    """quintic_distance for any shape: T (vs tau + (ve - vs) G(tau))."""
+    if shape.is_quintic:
+        return quintic_distance(tau, duration_s, vs, ve)
+    return duration_s * (vs * tau + (ve - vs) * shape.distance(tau))
+
+
+def shaped_speed(tau: np.ndarray, vs: np.ndarray, ve: np.ndarray,
+                 shape: TransitionShape) -> np.ndarray:
+    """quintic_speed for any shape: vs + (ve - vs) g(tau)."""
+    if shape.is_quintic:
+        return quintic_speed(tau, vs, ve)
+    return vs + (ve - vs) * shape.speed(tau)
 
 
 def bernstein6_distance(tau: np.ndarray, duration_s: np.ndarray, vs: np.ndarray,
@@ -102,23 +124,27 @@ class FeedProfile:
     has tens of thousands of phases, and a Python tuple for each was a twentieth of planning a
     G1 walk. The tuples (phases) are made only when asked for."""
 
-    def __init__(self, phases: Iterable[FeedPhase] = ()) -> None:
+    def __init__(self, phases: Iterable[FeedPhase] = (),
+                 shape: TransitionShape = QUINTIC) -> None:
         self._arr = np.array(list(phases), dtype=float).reshape(-1, 5)
+        self.shape = shape
 
     @classmethod
-    def from_rows(cls, rows: np.ndarray) -> FeedProfile:
+    def from_rows(cls, rows: np.ndarray, shape: TransitionShape = QUINTIC) -> FeedProfile:
         """A profile of (n, 5) rows (t0, duration, s0, vs, ve), kept as they are."""
         profile = cls.__new__(cls)
         profile._arr = np.asarray(rows, float).reshape(-1, 5)
+        profile.shape = shape
         return profile
 
     @classmethod
     def from_arrays(cls, duration_s: np.ndarray, s0_mm: np.ndarray, v_start_mm_s: np.ndarray,
-                    v_end_mm_s: np.ndarray, t0_s: float = 0.0) -> FeedProfile:
+                    v_end_mm_s: np.ndarray, t0_s: float = 0.0,
+                    shape: TransitionShape = QUINTIC) -> FeedProfile:
         """Build from per-phase arrays; start times are the running sum of durations."""
         dur = np.asarray(duration_s, float)
         t0 = t0_s + np.concatenate(([0.0], np.cumsum(dur)[:-1])) if dur.size else dur
-        return cls.from_rows(np.column_stack((t0, dur, s0_mm, v_start_mm_s, v_end_mm_s)))
+        return cls.from_rows(np.column_stack((t0, dur, s0_mm, v_start_mm_s, v_end_mm_s)), shape)
 
     @cached_property
     def phases(self) -> tuple[FeedPhase, ...]:
@@ -135,7 +161,7 @@ class FeedProfile:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, FeedProfile):
             return NotImplemented
-        return bool(np.array_equal(self._arr, other._arr))
+        return self.shape == other.shape and bool(np.array_equal(self._arr, other._arr))
 
     __hash__ = None  # type: ignore[assignment]
 
@@ -171,5 +197,10 @@ class FeedProfile:
         t0, dur, s0, vs, ve = (arr[k, j] for j in range(5))
         # Zero-length phases never get selected unless at the very end; guard the division.
         tau = clamp((t - t0) / np.where(dur > 0.0, dur, 1.0), 0.0, 1.0)
-        s = s0 + bernstein6_distance(tau, dur, vs, ve)
-        return s, quintic_speed(tau, vs, ve), quintic_accel(tau, dur, vs, ve)
+        if self.shape.is_quintic:
+            s = s0 + bernstein6_distance(tau, dur, vs, ve)
+            return s, quintic_speed(tau, vs, ve), quintic_accel(tau, dur, vs, ve)
+        shape = self.shape
+        safe_t = np.where(dur > 0.0, dur, 1.0)
+        a = np.where(dur > 0.0, (ve - vs) / safe_t * shape.accel(tau), 0.0)
+        return s0 + shaped_distance(tau, dur, vs, ve, shape), shaped_speed(tau, vs, ve, shape), a

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -14,6 +15,7 @@ from controller.generator.feed.profile import (
     transition_duration_s,
     transition_length_mm,
 )
+from controller.generator.feed.shape import QUINTIC, TransitionShape
 from controller.numeric import clamp
 
 PEAK_RESOLUTION_BITS = 10  # the cruise-speed search narrows its bracket to 2^-10 (12: same plans
@@ -31,6 +33,15 @@ _W = bernstein6_weights(_SHAPE_TAU)
 _SHAPE_A = (_W[0] + 2.0 * _W[1] + 3.0 * (_W[2] + _W[3] + _W[4] + _W[5])) / 6.0
 _SHAPE_B = (_W[3] + 2.0 * _W[4] + 3.0 * _W[5]) / 6.0
 _SHAPE_C = quintic_speed(_SHAPE_TAU, 0.0, 1.0)
+
+
+@functools.lru_cache(maxsize=8)
+def _shape_tables(shape: TransitionShape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, B, C) of the shape samples: distance = T (vs A + ve B), speed = vs + (ve - vs) C."""
+    if shape.is_quintic:
+        return _SHAPE_A, _SHAPE_B, _SHAPE_C
+    big_g = shape.distance(_SHAPE_TAU)
+    return _SHAPE_TAU - big_g, big_g, shape.speed(_SHAPE_TAU)
 
 
 KEY_STEP_MM_S = 2.0 ** -20  # speeds in search keys: on this grid, so k * big + v is exact
@@ -162,7 +173,7 @@ class SegmentPlan:
 
 
 def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.ndarray,
-                  accel: float) -> SegmentPlan:
+                  accel: float, shape: TransitionShape = QUINTIC) -> SegmentPlan:
     """Highest cruise speed V per segment for which the acceleration vi -> V (started as early as
     possible) and the braking V -> vj (ended as late as possible) both fit under vlim.
 
@@ -173,7 +184,10 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     Each segment is planned on its own (see SegmentWindows.take)."""
     a, b = win.a, win.b
     low = np.maximum(vi, vj)
-    vc = np.sqrt((16.0 * accel * (b - a) / 15.0 + vi * vi + vj * vj) / 2.0)
+    if shape.is_quintic:
+        vc = np.sqrt((16.0 * accel * (b - a) / 15.0 + vi * vi + vj * vj) / 2.0)
+    else:
+        vc = np.sqrt((2.0 * accel * (b - a) / shape.time_factor + vi * vi + vj * vj) / 2.0)
     # Cruising at or below the segment's minimum of vlim is always safe: the fallback.
     safe = np.maximum(np.minimum(vc, win.curve.span_min(a, b)), low)
     high = np.maximum(np.minimum(vc, win.curve.span_max(a, b)), low)
@@ -185,22 +199,23 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     n = len(a)
     both = np.concatenate((allk, allk))
     e_both, d_both = _window(win, np.concatenate((vi, vi)), np.concatenate((vj, vj)),
-                             np.concatenate((high, safe)), both, accel, reach)
+                             np.concatenate((high, safe)), both, accel, reach, shape)
     e0, d0 = e_both[:n], d_both[:n]
     ok = (e0 <= d0) & ~flat
     todo = np.flatnonzero(~ok & ~flat & (high > safe))
     lo_v, lo_e0, lo_d0 = _peak_search(win, vi[todo], vj[todo], todo, safe[todo], high[todo],
                                       _gap(e0[todo], d0[todo]), accel, reach,
-                                      (e_both[n:][todo], d_both[n:][todo]))
+                                      (e_both[n:][todo], d_both[n:][todo]), shape)
     vp = np.where(ok, high, safe)
     vp[todo] = lo_v
     e0[todo], d0[todo] = lo_e0, lo_d0
     _prefer_no_wait(win, vi, vj, safe, vp, e0, d0, accel, flat, reach,
-                    (e_both[n:], d_both[n:]))
+                    (e_both[n:], d_both[n:]), shape)
     # Flat segments, and those whose window stays empty: accelerate at once, brake at the end
     # (safe when the node speeds are below the segment's minimum; otherwise the check splits or
     # flattens the segment).
-    sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
+    sa = transition_length_mm(vi, vp, accel, shape)
+    sd = transition_length_mm(vp, vj, accel, shape)
     bad = ~(e0 <= d0) | flat
     e0 = np.where(bad, a + sa, e0)
     d0 = np.where(bad, np.maximum(b - sd, a + sa), d0)
@@ -216,8 +231,8 @@ def _gap(e0: np.ndarray, d0: np.ndarray) -> np.ndarray:
 
 def _peak_search(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, k: np.ndarray,
                  safe: np.ndarray, high: np.ndarray, gap_high: np.ndarray, accel: float,
-                 reach: tuple[np.ndarray, np.ndarray],
-                 at_safe: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, ...]:
+                 reach: tuple[np.ndarray, np.ndarray], at_safe: tuple[np.ndarray, np.ndarray],
+                 shape: TransitionShape = QUINTIC) -> tuple[np.ndarray, ...]:
     """Highest cruise speed in [safe, high] whose window is not empty (the gap d0 - e0 falls
     with the speed; it is negative at high), to 2^-PEAK_RESOLUTION_BITS of the bracket, with
     the window there: the Illinois method on the gap for all segments at once (bisection where
@@ -237,7 +252,7 @@ def _peak_search(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, k: np.ndar
         with np.errstate(divide="ignore", invalid="ignore"):
             x = np.where(secant, a + (b - a) * (ga / (ga - gb)), 0.5 * (a + b))
         x = clamp(x, a + 0.5 * tol[live], b - 0.5 * tol[live])
-        e, d = _window(win, vi[live], vj[live], x, k[live], accel, reach)
+        e, d = _window(win, vi[live], vj[live], x, k[live], accel, reach, shape)
         g = _gap(e, d)
         good = g >= 0.0
         up, down = live[good], live[~good]
@@ -252,12 +267,14 @@ def _peak_search(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, k: np.ndar
 def _prefer_no_wait(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, safe: np.ndarray,
                     vp: np.ndarray, e0: np.ndarray, d0: np.ndarray, accel: float,
                     flat: np.ndarray, reach: tuple[np.ndarray, np.ndarray],
-                    at_safe: tuple[np.ndarray, np.ndarray]) -> None:
+                    at_safe: tuple[np.ndarray, np.ndarray],
+                    shape: TransitionShape = QUINTIC) -> None:
     """Where the highest cruise makes the profile wait at a node speed, a lower cruise may be
     faster overall: try levels between the safe one and the highest, keep the quickest (in place).
     The windows at the two ends are known (at_safe, and e0, d0 at vp) and not shaped again; the
     top level is vp itself only where safe + (vp - safe) rounds back to it."""
-    sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
+    sa = transition_length_mm(vi, vp, accel, shape)
+    sd = transition_length_mm(vp, vj, accel, shape)
     waits = (e0 - sa > win.a * (1.0 + 1e-12) + 1e-12) | (d0 + sd < win.b - 1e-12)
     k = np.flatnonzero(waits & (e0 <= d0) & ~flat & (vp > safe))
     if len(k) == 0:
@@ -268,16 +285,16 @@ def _prefer_no_wait(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, safe: n
     c0[:, 0], c1[:, 0] = at_safe[0][k], at_safe[1][k]  # frac 0: safe + 0 is safe
     top_known = levels[:, -1] == vp[k]
     c0[top_known, -1], c1[top_known, -1] = e0[k[top_known]], d0[k[top_known]]
-    shape = np.ones(levels.shape, bool)
-    shape[:, 0] = False
-    shape[top_known, -1] = False
-    rows, cols = np.nonzero(shape)
+    to_shape = np.ones(levels.shape, bool)
+    to_shape[:, 0] = False
+    to_shape[top_known, -1] = False
+    rows, cols = np.nonzero(to_shape)
     kk = k[rows]
     c0[rows, cols], c1[rows, cols] = _window(win, vi[kk], vj[kk], levels[rows, cols], kk, accel,
-                                             reach)
+                                             reach, shape)
     levels, c0, c1 = levels.ravel(), c0.ravel(), c1.ravel()
     kk = np.repeat(k, CRUISE_LEVELS)
-    dur = _segment_time_s(win.a[kk], win.b[kk], vi[kk], vj[kk], levels, c0, c1, accel)
+    dur = _segment_time_s(win.a[kk], win.b[kk], vi[kk], vj[kk], levels, c0, c1, accel, shape)
     dur = np.where(c0 <= c1, dur, np.inf).reshape(len(k), CRUISE_LEVELS)
     best = np.argmin(dur, axis=1)
     pick = np.arange(len(k)) * CRUISE_LEVELS + best
@@ -285,9 +302,11 @@ def _prefer_no_wait(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, safe: n
 
 
 def _segment_time_s(a: np.ndarray, b: np.ndarray, vi: np.ndarray, vj: np.ndarray,
-                    vp: np.ndarray, e0: np.ndarray, d0: np.ndarray, accel: float) -> np.ndarray:
+                    vp: np.ndarray, e0: np.ndarray, d0: np.ndarray, accel: float,
+                    shape: TransitionShape = QUINTIC) -> np.ndarray:
     """Time of: wait at vi, accelerate, cruise at vp from e0 to d0, brake, wait at vj."""
-    sa, sd = transition_length_mm(vi, vp, accel), transition_length_mm(vp, vj, accel)
+    sa = transition_length_mm(vi, vp, accel, shape)
+    sd = transition_length_mm(vp, vj, accel, shape)
     w0, w1 = np.maximum(e0 - sa - a, 0.0), np.maximum(b - d0 - sd, 0.0)
     # As in segment_phases, a wait shorter than eps is a rounding residue of the positions, not
     # a cruise: at a node speed of zero it took forever, and a braking to rest that ended 1e-15
@@ -298,12 +317,13 @@ def _segment_time_s(a: np.ndarray, b: np.ndarray, vi: np.ndarray, vj: np.ndarray
         t0 = np.where(w0 > eps, w0 / vi, 0.0)
         t1 = np.where(w1 > eps, w1 / vj, 0.0)
         tc = np.maximum(d0 - e0, 0.0) / vp
-    return (t0 + t1 + tc + transition_duration_s(vi, vp, accel)
-            + transition_duration_s(vp, vj, accel))
+    return (t0 + t1 + tc + transition_duration_s(vi, vp, accel, shape)
+            + transition_duration_s(vp, vj, accel, shape))
 
 
 def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray, k: np.ndarray,
-            accel: float, reach: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+            accel: float, reach: tuple[np.ndarray, np.ndarray],
+            shape: TransitionShape = QUINTIC) -> tuple[np.ndarray, np.ndarray]:
     """(end of the acceleration, start of the braking) for cruise speed vp in segments k.
 
     Between two samples a monotone transition stays inside their bounding box, so testing the
@@ -317,8 +337,8 @@ def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray,
         return np.empty(0), np.empty(0)
     a, b = win.a[k], win.b[k]
     v0, v1 = np.concatenate((vi, vp)), np.concatenate((vp, vj))
-    length = transition_length_mm(v0, v1, accel)
-    x, c = _shape(v0, v1, accel)
+    length = transition_length_mm(v0, v1, accel, shape)
+    x, c = _shape(v0, v1, accel, shape)
     first, last = win.reach_pair(c[:n, 1:], c[n:, :-1], k)
     rest = REST_FRACTION * win.big
     # Acceleration: earliest start with every box corner past where vlim reaches its speed;
@@ -332,20 +352,23 @@ def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray,
     return start + length[:n], end - sd
 
 
-def _shape(vs: np.ndarray, ve: np.ndarray, accel: float) -> tuple[np.ndarray, np.ndarray]:
+def _shape(vs: np.ndarray, ve: np.ndarray, accel: float,
+           shape: TransitionShape = QUINTIC) -> tuple[np.ndarray, np.ndarray]:
     """Samples (distance from start, speed) of the transitions vs -> ve, one row each."""
-    dur = transition_duration_s(vs, ve, accel)
-    x = (dur * vs)[:, None] * _SHAPE_A
-    x += (dur * ve)[:, None] * _SHAPE_B
-    v = (ve - vs)[:, None] * _SHAPE_C
+    dur = transition_duration_s(vs, ve, accel, shape)
+    table_a, table_b, table_c = _shape_tables(shape)
+    x = (dur * vs)[:, None] * table_a
+    x += (dur * ve)[:, None] * table_b
+    v = (ve - vs)[:, None] * table_c
     v += vs[:, None]
     return x, v
 
 
-def segment_phases(sp: SegmentPlan, accel: float) -> PhaseArrays:
+def segment_phases(sp: SegmentPlan, accel: float,
+                   shape: TransitionShape = QUINTIC) -> PhaseArrays:
     """Five phases per segment (cruise vi, accel, cruise V, decel, cruise vj), empty ones out."""
-    sa = transition_length_mm(sp.vi, sp.vp, accel)
-    sd = transition_length_mm(sp.vp, sp.vj, accel)
+    sa = transition_length_mm(sp.vi, sp.vp, accel, shape)
+    sd = transition_length_mm(sp.vp, sp.vj, accel, shape)
     acc0, dec1 = sp.acc_end - sa, sp.dec_start + sd
     s0 = np.column_stack([sp.a, acc0, sp.acc_end, sp.dec_start, dec1])
     lengths = np.column_stack([acc0 - sp.a, sa, sp.dec_start - sp.acc_end, sd, sp.b - dec1])
@@ -360,7 +383,7 @@ def segment_phases(sp: SegmentPlan, accel: float) -> PhaseArrays:
     # A cruise at zero speed can only be a rounding residue (waiting at rest is never planned).
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         cruise = np.where(vs > 0.0, lengths / vs, 0.0)
-    dur = np.where(vs == ve, cruise, transition_duration_s(vs, ve, accel))
+    dur = np.where(vs == ve, cruise, transition_duration_s(vs, ve, accel, shape))
     dur = np.where(lengths > 0.0, dur, 0.0)
     seg = np.repeat(np.arange(len(sp.a)), 5).reshape(-1, 5)
     keep = (dur > 0.0).ravel()

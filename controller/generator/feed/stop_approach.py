@@ -11,6 +11,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from controller.generator.feed.profile import transition_length_mm
+from controller.generator.feed.shape import QUINTIC, TransitionShape
+
 STOP_MATCH_MM = 1e-6  # a section end and a stop position closer than this are the same stop
 
 
@@ -22,23 +25,25 @@ def stop_accel_at(stops: tuple[tuple[float, float], ...], s_mm: float) -> float 
     return None
 
 
-def join_speed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, stop_accel_mm_s2: float) -> float:
+def join_speed(s_mm: np.ndarray, vlim_mm_s: np.ndarray, stop_accel_mm_s2: float,
+               shape: TransitionShape = QUINTIC) -> float:
     """The approach speed: the lowest vlim over the longest approach braking at the stop's
     acceleration could need, from the grid point before it on (so vlim interpolated anywhere
     in the approach, the split point too, is at least this)."""
     end = float(s_mm[-1])
-    reach = 15.0 * float(vlim_mm_s.max()) ** 2 / (16.0 * stop_accel_mm_s2)
+    reach = float(transition_length_mm(0.0, float(vlim_mm_s.max()), stop_accel_mm_s2, shape))
     first = max(int(np.searchsorted(s_mm, end - reach, side="right")) - 1, 0)
     return float(vlim_mm_s[first:].min())
 
 
 def model_stop_accel(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
-                     accel_for: Callable[[float], float]) -> float:
+                     accel_for: Callable[[float], float],
+                     shape: TransitionShape = QUINTIC) -> float:
     """The braking acceleration a model (accel_for: approach speed -> acceleration) gives this
     section's stop; lowered until the approach speed it leads to agrees (three passes)."""
     accel = accel_mm_s2
     for _ in range(3):
-        accel = min(accel, accel_for(join_speed(s_mm, vlim_mm_s, accel)))
+        accel = min(accel, accel_for(join_speed(s_mm, vlim_mm_s, accel, shape)))
     return accel
 
 
@@ -46,7 +51,8 @@ Part = tuple[np.ndarray, np.ndarray, float, float, float]  # s, vlim, accel, v s
 
 
 def approach_split(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
-                   stop_accel_mm_s2: float, v_start_mm_s: float) -> list[Part]:
+                   stop_accel_mm_s2: float, v_start_mm_s: float,
+                   shape: TransitionShape = QUINTIC) -> list[Part]:
     """A section ending at a stop, as two plans: up to the approach at the full acceleration,
     ending at the approach speed v_j, then the approach at the stop's gentler acceleration from
     v_j to rest. v_j is the lowest vlim over the longest approach that could be needed, so it
@@ -54,8 +60,8 @@ def approach_split(s_mm: np.ndarray, vlim_mm_s: np.ndarray, accel_mm_s2: float,
     too short for that is planned whole at the stop's acceleration."""
     whole = [(s_mm, vlim_mm_s, stop_accel_mm_s2, v_start_mm_s, 0.0)]
     end = float(s_mm[-1])
-    v_join = join_speed(s_mm, vlim_mm_s, stop_accel_mm_s2)
-    split = end - 15.0 * v_join ** 2 / (16.0 * stop_accel_mm_s2)
+    v_join = join_speed(s_mm, vlim_mm_s, stop_accel_mm_s2, shape)
+    split = end - float(transition_length_mm(0.0, v_join, stop_accel_mm_s2, shape))
     head = s_mm < split - SPLIT_GAP_MM
     if head.sum() < 2 or v_join <= 0.0:
         return whole
