@@ -74,6 +74,9 @@ def test_identify_through_cncd_finds_the_plant_and_the_client_writes_the_config(
             assert "exciting" not in refused.stderr and d.status()["last_identify"] == last
         again = d.cncctl("identify", "x", "--yes", "--output", str(out))
         assert again.returncode == 2 and "--force" in again.stderr
+    # The journal keeps it: a restarted cncd still says how the last identify went.
+    with running_cncd(tmp_path, *OFF_MODEL) as d:
+        assert d.status()["last_identify"] == {**last, "at": d.status()["last_identify"]["at"]}
     check = subprocess.run([*CNCCTL, "check", "nc_programs/naca2415.nc", "--config", str(out)],
                            capture_output=True, text=True, timeout=60, cwd=REPO)
     assert check.returncode == 0, check.stderr
@@ -182,3 +185,19 @@ def test_the_estop_input_then_a_drive_fault_during_identify(tmp_path: Path) -> N
         status = d.status()
         assert status["state"] == "FAULT" and "drive fault" in status["fault"]
         assert status["last_identify"]["event"] == "fault"
+
+
+def test_a_daemon_killed_during_identify_says_so_after_its_restart(tmp_path: Path) -> None:
+    with running_cncd(tmp_path, *OFF_MODEL) as d:
+        d.cncctl("reset")
+        proc = _start_identify(d, "x")
+        time.sleep(0.5)
+        d.proc.kill()
+        d.proc.wait(timeout=10)
+        _end(proc)
+        assert proc.returncode != 0
+    with running_cncd(tmp_path, *OFF_MODEL) as d:
+        status = d.status()
+        last = status["last_identify"]
+        assert last["event"] == "interrupted" and "nothing identified" in last["message"]
+        assert status["state"] == "ESTOP"  # as after any start: nothing moves by itself

@@ -109,3 +109,17 @@ def test_a_link_as_the_state_directory_is_refused(tmp_path: Path) -> None:
         StateDir(link)
     assert "a symbolic link" in _start_fails(tmp_path, link)
     assert sys.executable
+
+
+def test_the_journal_keeps_the_last_identify_across_jobs_and_restarts(tmp_path: Path) -> None:
+    from controller.operator.daemon.journal import Journal
+
+    state = StateDir(tmp_path / "state")
+    journal = Journal(state)
+    journal.identify({"event": "done", "fits": {"x": {"fit_pct": 97.5}}})
+    journal.start("part.nc", "0" * 64, 10)  # a job after it keeps it
+    assert journal.entry["identify"]["event"] == "done"
+    journal.identify({"event": "started", "axes": ["x"]})
+    again = Journal(state).after_restart()  # killed while it moved
+    assert again["identify"]["event"] == "interrupted"
+    assert again["state"] == "INTERRUPTED" and again["program"] == "part.nc"

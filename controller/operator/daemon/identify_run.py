@@ -37,6 +37,8 @@ class IdentifyHost(Protocol):
 
     def start_identifying(self, run: IdentifyRun) -> None: ...
 
+    def beat(self) -> None: ...
+
     def end_identify(self, run: IdentifyRun, fault: str | None,
                      outcome: dict[str, Any]) -> None: ...
 
@@ -162,7 +164,7 @@ def _identify(host: IdentifyHost, run: IdentifyRun) -> None:
                 run.emit({"event": "axis", "axis": plan.name,
                           "message": f"exciting {plan.name.upper()}"})
                 rec = excite_axis(host.drive, host.config, plan.index, plan.excitation,
-                                  run.stop, virtual_time=False)
+                                  run.stop, virtual_time=False, beat=host.beat)
                 records.append(rec)
                 if rec.fault is not None or rec.stopped is not None:
                     break

@@ -10,6 +10,7 @@ from typing import Any
 from controller.operator.daemon.state_dir import StateDir, StateFileError
 
 JOURNAL_NAME = "journal.json"
+IDENTIFY_KEY = "identify"  # the last `cncctl identify`, kept beside the last job
 
 
 class Journal:
@@ -45,13 +46,23 @@ class Journal:
             pass  # a full disk must not stop a running job; the journal is advisory
 
     def start(self, name: str, sha256: str, lines: int) -> None:
-        self.entry = {}
+        identify = self.entry.get(IDENTIFY_KEY)
+        self.entry = {} if identify is None else {IDENTIFY_KEY: identify}
         self.update(program=name, program_sha256=sha256, program_lines=lines, state="RUNNING",
                     last_line=0, position_mm=None, fault=None, started=round(time.time(), 3))
 
+    def identify(self, outcome: dict[str, Any]) -> None:
+        """How the last identify went (`started` while it moves), kept across jobs."""
+        self.update(**{IDENTIFY_KEY: {**outcome, "at": round(time.time(), 3)}})
+
     def after_restart(self) -> dict[str, Any]:
-        """The journal as found at start-up; a job still RUNNING there was interrupted."""
+        """The journal as found at start-up; a job still RUNNING there was interrupted, and so
+        was an identify still `started`."""
         if self.entry.get("state") in ("RUNNING", "CHECKING"):
             self.update(state="INTERRUPTED",
                         fault=self.entry.get("fault") or "daemon stopped during the job")
+        identify = self.entry.get(IDENTIFY_KEY)
+        if isinstance(identify, dict) and identify.get("event") == "started":
+            self.identify({"event": "interrupted",
+                           "message": "daemon stopped during identify: nothing identified"})
         return dict(self.entry)

@@ -25,7 +25,7 @@ from controller.motion.types import MotionProgress, MotionResult, MotionState, O
 from controller.operator.daemon import identify_run, manual
 from controller.operator.daemon.check_process import CheckCancelled, check_in_child
 from controller.operator.daemon.job import Emit, Job, State, progress_event
-from controller.operator.daemon.journal import Journal
+from controller.operator.daemon.journal import IDENTIFY_KEY, Journal
 from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.offset_store import OffsetStore
 from controller.operator.daemon.protocol import ProtocolError
@@ -69,6 +69,8 @@ class Machine:
                                         self._position_mm)
         self.state_problems += [p for p in (self.work_offsets.load(),) if p]
         self.last_job = self.journal.after_restart()
+        identify = self.last_job.pop(IDENTIFY_KEY, None)
+        self.last_identify = identify if isinstance(identify, dict) else None
         # The program copies a crashed daemon left (up to 64 MiB each): links not followed.
         self.state_files.remove_leftovers(LEFTOVER_PREFIXES)
         self.state_problems += [p for p in (self.journal.problem,) if p]
@@ -138,7 +140,9 @@ class Machine:
                                 "moved")
         run.moving = True
         self._identify_started = run
+        self._beat()
         self._set_state(State.IDENTIFYING)
+        self.journal.identify({"event": "started", "axes": [p.name for p in run.plans]})
 
     def end_identify(self, run: identify_run.IdentifyRun, fault: str | None,
                      outcome: dict[str, Any]) -> None:
@@ -148,6 +152,7 @@ class Machine:
             if self.identify_run is run:
                 self.identify_run = None
             self.last_identify = {k: v for k, v in outcome.items() if k != "config_yaml"}
+            self.journal.identify(self.last_identify)
             if fault is not None:
                 self.fault = fault
                 self._set_state(State.FAULT)
@@ -556,6 +561,8 @@ class Machine:
         quiet_s = time.monotonic() - self.beat_s
         if state is State.RUNNING and quiet_s > MOTION_STALL_S:
             return f"motion loop silent for {quiet_s:.1f} s"
+        if state is State.IDENTIFYING and quiet_s > MOTION_STALL_S:
+            return f"identify loop silent for {quiet_s:.1f} s"
         if state is State.CHECKING and quiet_s > CHECK_STALL_S:
             return f"program check silent for {quiet_s:.1f} s"
         return None
@@ -638,3 +645,7 @@ class Machine:
 
     def _beat(self, *_: object) -> None:
         self.beat_s = time.monotonic()
+
+    def beat(self) -> None:
+        """A sign of life of the identify loop (the watchdog's, as the motion loop's)."""
+        self._beat()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,8 +66,10 @@ def reference_counts(excitation: Excitation, start_count: int, pulse_mm: float) 
 
 
 def excite_axis(drive: Drive, config: MachineConfig, axis_index: int, excitation: Excitation,
-                stop: StopRequest, virtual_time: bool) -> AxisRecord:
-    """Run the excitation on one axis (the others hold), return what was recorded."""
+                stop: StopRequest, virtual_time: bool,
+                beat: Callable[[], None] | None = None) -> AxisRecord:
+    """Run the excitation on one axis (the others hold), return what was recorded; beat, if
+    given, is called every loop turn (the daemon's watchdog sees the loop alive)."""
     axis = config.axes[axis_index]
     period_s = config.sample_period_s
     cmd0, _ = drive.position_counts()
@@ -94,6 +97,8 @@ def excite_axis(drive: Drive, config: MachineConfig, axis_index: int, excitation
 
     got, quiet = 0, 0
     while True:
+        if beat is not None:
+            beat()
         fresh = take()
         got += fresh
         status = drive.status()
