@@ -559,14 +559,26 @@ def bench_program(program: str, config: MachineConfig, tolerances_um: list[float
 
 
 def ours_variants(config: MachineConfig) -> list[tuple[str, MachineConfig]]:
-    """Ours as configured first (the row the ratios are taken against), then the other way."""
+    """Ours as configured first (the row the ratios are taken against), then with the paper's
+    quintic transitions (ramp_share 1) where the config has others, then the paper's method
+    (quintic, no pre-compensation)."""
     ip = config.interpolator
-    other = replace(config, interpolator=replace(
-        ip, servo_precompensation=not ip.servo_precompensation))
-    label = {True: "ours: ph-lookahead, pre-compensated",
-             False: "ours: ph-lookahead, paper (no pre-compensation)"}
-    return [(label[ip.servo_precompensation], config),
-            (label[not ip.servo_precompensation], other)]
+
+    def label(cfg: MachineConfig) -> str:
+        c = cfg.interpolator
+        if not c.servo_precompensation and c.ramp_share == 1.0:
+            return "ours: ph-lookahead, paper (no pre-compensation)"
+        comp = "pre-compensated" if c.servo_precompensation else "no pre-compensation"
+        shape = "quintic" if c.ramp_share == 1.0 else f"ramp_share {c.ramp_share:g}"
+        return f"ours: ph-lookahead, {comp}, {shape}"
+
+    variants = [config]
+    if ip.ramp_share != 1.0 and ip.servo_precompensation:
+        variants.append(replace(config, interpolator=replace(ip, ramp_share=1.0)))
+    paper = replace(config, interpolator=replace(ip, servo_precompensation=False, ramp_share=1.0))
+    if paper.interpolator != ip:
+        variants.append(paper)
+    return [(label(cfg), cfg) for cfg in variants]
 
 
 def table(program: str, rows: list[Row], bound: float, markdown: bool) -> str:
