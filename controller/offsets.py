@@ -276,3 +276,5 @@ class ProgramOffsets:
     table: OffsetTable = field(default_factory=OffsetTable)
     # M49 ... M48: [first line, last line] stretches where the feed override is off
     override_off_lines: list[list[int]] = field(default_factory=list)
+    # tool changes (controller/io_events.py dicts, t_s None): the run times them as it goes
+    io_events: list[dict[str, Any]] = field(default_factory=list)

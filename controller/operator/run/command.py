@@ -25,6 +25,7 @@ from controller.operator.client import (
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 from controller.operator.run.exit_codes import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
 from controller.operator.run.from_line import HomingAborted, Sequence, run_from_line
+from controller.operator.run.io_announce import ToolChanges
 from controller.operator.run.keys import KeyControl, read_keys, stdin_fd
 from controller.operator.run.remote import run_on_daemon
 from controller.operator.run.view import JsonView, PlainView, ProgramLines, RichView
@@ -75,20 +76,29 @@ def _view(args: argparse.Namespace, path: str) -> Any:
 class _Announcer:
     """Says once per standstill (M0 pause, feed hold) how to continue; passes progress on."""
 
-    def __init__(self, inner: Any, keys: KeyControl) -> None:
+    def __init__(self, inner: Any, keys: KeyControl, tools: ToolChanges | None = None) -> None:
         self.inner, self.keys, self.last = inner, keys, MotionState.WAITING
+        self.tools = tools
 
     def progress(self, p: MotionProgress) -> None:
         self.keys.progress(p)
         if p.state is not self.last and p.state is MotionState.PAUSED:
-            print(f"cncctl: paused at line {p.line} (M0): press Enter to resume, Ctrl-C to "
-                  "stop", file=sys.stderr, flush=True)
+            change = None if self.tools is None else self.tools.prompt(p.line)
+            print(f"cncctl: {change or f'paused at line {p.line} (M0)'}: press Enter to "
+                  "resume, Ctrl-C to stop", file=sys.stderr, flush=True)
+            if self.tools is not None:
+                self.tools.at_pause(p)
         elif p.state is not self.last and p.state is MotionState.HELD:
             where = " ".join(f"{n}{v:.3f}" for n, v in zip("XYZ", p.position_mm, strict=False))
             print(f"cncctl: held at line {p.line}, {where}: press space or Enter to resume",
                   file=sys.stderr, flush=True)
         self.last = p.state
         self.inner(p)
+
+
+def _event_to(view: Any) -> Any:
+    """An I/O event dict (controller/io_events.py) out through the view's event line."""
+    return lambda e: view.event(e["event"], **{k: v for k, v in e.items() if k != "event"})
 
 
 def _daemon_socket(args: argparse.Namespace) -> str | None:
@@ -162,7 +172,8 @@ def run(args: argparse.Namespace) -> int:
         runtime = Sequence()
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
                                                   flush=True), abort_at_pause_without_keys=True)
-    options = replace(options, on_progress=_Announcer(view.progress, keys).progress)
+    tools = ToolChanges(track.io_events, _event_to(view))
+    options = replace(options, on_progress=_Announcer(view.progress, keys, tools).progress)
     if not shared_drive:
         runtime.options = options
     fd = stdin_fd()
