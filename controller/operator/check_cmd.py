@@ -7,7 +7,7 @@ import json
 import sys
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Literal, overload
 
 from controller.blocks import ArcBlock, LineBlock, NurbsBlock
@@ -27,6 +27,7 @@ from controller.operator.drive_args import (
     config_with_drive_options,
     probe_drive,
 )
+from controller.tools import ToolTableError, load_tool_table
 
 _AXES = ("x", "y", "z")
 
@@ -159,6 +160,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--offsets", metavar="FILE",
                         help="work offset table (JSON, as cncd keeps it in its state "
                              "directory) in force for the check")
+    parser.add_argument("--tools", metavar="TBL", help="tool table (LinuxCNC tool.tbl) in "
+                        "force, in place of the config's tools.table_file")
     add_drive_option_argument(parser)
 
 
@@ -167,10 +170,13 @@ def run(args: argparse.Namespace) -> int:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
         offsets = load_offsets(args.offsets, missing_ok=False) \
             if args.offsets is not None else None
+        if args.tools is not None:
+            config = replace(config, tools=config.tools.with_table(
+                load_tool_table(args.tools, missing_ok=False)))
         summary = check_program(args.program, config, offsets=offsets)
         assert summary is not None  # summary=True
         probe_drive(config)
-    except (ConfigError, OffsetsError) as exc:
+    except (ConfigError, OffsetsError, ToolTableError) as exc:
         print(f"cncctl: config error: {exc}", file=sys.stderr)
         _json_error(args, "config", str(exc))
         return 2

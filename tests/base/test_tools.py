@@ -19,6 +19,7 @@ from controller.tools import (
     save_tool_table,
 )
 
+REPO = Path(__file__).resolve().parents[2]
 LINUXCNC_SIM_TBL = """T1 P1 D0.125000 Z+0.511000 ;1/8 end mill
 T2 P2 D0.062500 Z+0.100000 ;1/16 end mill
 T3 P3 D0.201000 Z+1.273000 ;#7 tap drill
@@ -86,7 +87,7 @@ def test_the_file_is_written_atomically_and_read_strictly(tmp_path: Path) -> Non
 
 
 def _mill_with(tmp_path: Path, tools_yaml: str) -> Path:
-    text = Path(load_config("xyz_mill").path).read_text() + tools_yaml
+    text = (REPO / "config" / "xyz_mill.yaml").read_text() + tools_yaml
     path = tmp_path / "mill.yaml"
     path.write_text(text)
     return path

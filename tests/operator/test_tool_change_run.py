@@ -8,15 +8,13 @@ import subprocess
 import time
 from pathlib import Path
 
-from daemon_helpers import CNCCTL
-
-from controller.config import load_config
+from daemon_helpers import CNCCTL, REPO
 
 
 def mill_with_tools(tmp_path: Path) -> Path:
     (tmp_path / "tool.tbl").write_text("T1 P1 Z10.5 D6 ;end mill\nT2 P2 Z-3 D3\n")
     config = tmp_path / "mill.yaml"
-    config.write_text(Path(load_config("xyz_mill").path).read_text()
+    config.write_text((REPO / "config" / "xyz_mill.yaml").read_text()
                       + "tools:\n  change_position_mm: [0.0, 0.0, 50.0]\n"
                         "  table_file: tool.tbl\n")
     return config

@@ -35,6 +35,7 @@ class CheckOutcome:
     approach_mm: tuple[float, float, float] | None = None
     table: OffsetTable = field(default_factory=OffsetTable)
     override_off_lines: list[list[int]] = field(default_factory=list)
+    io_events: list[dict[str, Any]] = field(default_factory=list)  # tool changes (M6)
 
 
 def check_in_child(path: str, config: MachineConfig, offsets: OffsetTable | None,
@@ -86,6 +87,7 @@ def _child(send: Any, path: str, config: MachineConfig, offsets: OffsetTable | N
         check_program(path, config, offsets=offsets, start_mm=start_mm, from_line=from_line,
                       track=track, summary=False)
         outcome.table, outcome.override_off_lines = track.table, track.override_off_lines
+        outcome.io_events = track.io_events
         send.send(("ok", outcome))
     except NcError as exc:
         send.send(("nc", (exc.path, exc.line, exc.col, exc.word, exc.message)))

@@ -43,6 +43,8 @@ class Job:
     manual_move: bool = False  # a jog: machine coordinates, no offsets
     approach_mm: tuple[float, float, float] | None = None  # where line from_line starts
     approaching: bool = False  # the approach is moving (its lines are not the program's)
+    tool_changes: list[dict[str, Any]] = field(default_factory=list)  # M6s the check found
+    emitted_lines: set[int] = field(default_factory=set)  # tool changes already announced
     done: threading.Event = field(default_factory=threading.Event)
 
 

@@ -30,7 +30,9 @@ from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.offset_store import OffsetStore
 from controller.operator.daemon.protocol import ProtocolError
 from controller.operator.daemon.state_dir import StateDir
+from controller.operator.daemon.tool_store import ToolStore
 from controller.operator.run.from_line import approach_program
+from controller.operator.run.io_announce import tool_change_at, tool_prompt
 from controller.operator.run.view import result_summary
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.base import CardStatus, Drive
@@ -43,7 +45,7 @@ ESTOP_INPUT_POLL_S = 0.02  # the drive's e-stop input is read this often (a job'
 ESTOP_INPUT = "e-stop input on the drive tripped"
 
 
-LEFTOVER_PREFIXES = ("job-", "approach-", ".journal.json.", ".offsets.json.")
+LEFTOVER_PREFIXES = ("job-", "approach-", ".journal.json.", ".offsets.json.", ".tool.tbl.")
 
 
 class Machine:
@@ -67,7 +69,8 @@ class Machine:
         self.feed_override_pct = 100.0  # of this and the next jobs
         self.work_offsets = OffsetStore(config, self.state_files, log, self._lock,
                                         self._position_mm)
-        self.state_problems += [p for p in (self.work_offsets.load(),) if p]
+        self.tools = ToolStore(config, self.state_files, log, self._lock)
+        self.state_problems += [p for p in (self.work_offsets.load(), self.tools.load()) if p]
         self.last_job = self.journal.after_restart()
         # The program copies a crashed daemon left (up to 64 MiB each): links not followed.
         self.state_files.remove_leftovers(LEFTOVER_PREFIXES)
@@ -200,6 +203,14 @@ class Machine:
         with self._lock:
             self.require_idle()
             return self.work_offsets.change(action, system, values, here)
+
+    def tool(self, fields: dict[str, Any]) -> dict[str, Any]:
+        """`cncctl tool` (see ToolStore.change): a change only between jobs (e-stop or fault
+        latched is fine: nothing moves)."""
+        with self._lock:
+            if fields["action"] != "list" and self.job is not None:
+                raise ProtocolError("busy", "a job is running: change tools between jobs")
+            return self.tools.change(fields)
 
     def _time_out(self, job: Job) -> None:
         with self._lock:
@@ -403,8 +414,9 @@ class Machine:
         self.log.log(INFO, f"job {job.number}: checking {job.name!r} ({job.sha256[:12]})")
         start_mm = self._start_mm()
         offsets = None if job.manual_move else self.work_offsets.table
+        config = self.tools.job_config(self.config)  # the tool table in force for this job
         try:
-            checked = check_in_child(path, self.config, offsets, start_mm, job.from_line,
+            checked = check_in_child(path, config, offsets, start_mm, job.from_line,
                                      lambda: job.cancel is not None, self._beat)
             job.approach_mm = checked.approach_mm
         except CheckCancelled:
@@ -423,7 +435,8 @@ class Machine:
             if self._cancelled(job):
                 return
             job.start_mm = start_mm
-            job.runtime = Runtime(path, self.config, replace(
+            job.tool_changes = checked.io_events
+            job.runtime = Runtime(path, config, replace(
                 self._options(job), offsets=offsets, from_line=job.from_line,
                 override_off_lines=checked.override_off_lines))
             job.runtime.set_feed_override(self.feed_override_pct)
@@ -488,6 +501,8 @@ class Machine:
                 base.on_progress(p)
             event = progress_event(p)
             job.emit(event)
+            for io in tool_change_at(job.tool_changes, p, job.emitted_lines):
+                job.emit(io)
             self.publish("progress", event)
         return replace(base, drive=self.drive, keep_drive_open=True, on_progress=progress,
                        start_mm=job.start_mm, optional_stop=job.optional_stop)
@@ -523,12 +538,14 @@ class Machine:
     def status(self) -> dict[str, Any]:
         with self._lock:
             job, p = self.job, (self.job.progress if self.job else None)
-            state = self.state.value
+            state, out_tool = self.state.value, None
             if p is not None and p.state is MotionState.PAUSED and self.state is State.RUNNING:
                 state = "PAUSED"  # at a program pause (M0): `cncctl resume` continues
+                out_tool = tool_prompt(job.tool_changes, p.line)  # type: ignore[union-attr]
             if p is not None and p.state is MotionState.HELD and self.state is State.RUNNING:
                 state = "HELD"  # feed hold (or 0 % override): `cncctl resume` continues
             out: dict[str, Any] = {"state": state, "fault": self.fault,
+                                   "tool_change": out_tool,
                                    "program": job.name if job else None,
                                    "job": job.number if job else None}
             # On the approach of a run from line N: N, not the approach's own lines.

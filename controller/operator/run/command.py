@@ -30,6 +30,7 @@ from controller.operator.run.keys import KeyControl, read_keys, stdin_fd
 from controller.operator.run.remote import run_on_daemon
 from controller.operator.run.view import JsonView, PlainView, ProgramLines, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
+from controller.tools import ToolTableError, load_tool_table
 from drivers.errors import DriveUnavailableError
 
 
@@ -47,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --from-line: do not ask before the approach")
     parser.add_argument("--offsets", metavar="FILE",
                         help="embedded runs: work offset table (JSON) in force")
+    parser.add_argument("--tools", metavar="TBL",
+                        help="embedded runs: tool table (LinuxCNC tool.tbl) in force, in place "
+                             "of the config's tools.table_file")
     parser.add_argument("--optional-stop", action="store_true",
                         help="M1 pauses like M0 (optional stop on)")
     parser.add_argument("--virtual-time", action="store_true",
@@ -119,6 +123,7 @@ _NOT_THROUGH_DAEMON = (
     ("drive_option", "--drive-option", "the daemon's drive is set in its config"),
     ("home", "--home", "home through the daemon first: `cncctl home`"),
     ("offsets", "--offsets", "the daemon keeps its own table: `cncctl offset`"),
+    ("tools", "--tools", "the daemon keeps its own tool table: `cncctl tool`"),
 )
 
 
@@ -145,12 +150,15 @@ def run(args: argparse.Namespace) -> int:
             return EXIT_REJECTED if isinstance(exc, NoDaemon) else 3
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
+        if args.tools is not None:
+            config = replace(config, tools=config.tools.with_table(
+                load_tool_table(args.tools, missing_ok=False)))
         offsets = load_offsets(args.offsets, missing_ok=False) \
             if args.offsets is not None else None
         track = ProgramOffsets()
         check_program(args.program, config, offsets=offsets, from_line=args.from_line,
                       track=track, summary=False)
-    except (NcError, ConfigError, OffsetsError) as exc:
+    except (NcError, ConfigError, OffsetsError, ToolTableError) as exc:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
     needs_homing = any(a.homing is not None for a in config.axes) and not config.allow_unhomed
