@@ -5,7 +5,7 @@ from __future__ import annotations
 # G codes are keyed by ten times their number (G61.1 -> 611) so that lookups are exact integers.
 G_GROUP: dict[int, str] = {
     0: "motion", 10: "motion", 20: "motion", 30: "motion", 52: "motion", 53: "motion",
-    62: "motion", 800: "motion",
+    62: "motion", 800: "motion", 382: "motion", 383: "motion", 384: "motion", 385: "motion",
     40: "non-modal", 100: "non-modal", 530: "non-modal",
     920: "non-modal", 921: "non-modal", 922: "non-modal",
     170: "plane",
@@ -36,8 +36,6 @@ G_UNSUPPORTED: dict[int, str] = {
     300: "home positions (G30) are not supported", 301: "home positions are not supported",
     330: "spindle-synchronized motion is not supported",
     331: "rigid tapping is not supported",
-    382: "probing is not supported", 383: "probing is not supported",
-    384: "probing is not supported", 385: "probing is not supported",
     410: "cutter radius compensation is not supported",
     411: "cutter radius compensation is not supported",
     420: "cutter radius compensation is not supported",

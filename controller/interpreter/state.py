@@ -18,6 +18,7 @@ from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
 from controller.interpreter.line_state import LineState
 from controller.interpreter.modal import Modal
 from controller.interpreter.moves import MAX_BLOCK_S, Moves
+from controller.interpreter.probing import PROBE_CODE10, Probing
 from controller.interpreter.tool_length import ToolState
 from controller.interpreter.work_offsets import AXIS_CODES, WorkOffsets
 from controller.offsets import OffsetTable, ProgramOffsets
@@ -33,7 +34,7 @@ _USES: dict[int, frozenset[str]] = {
     0: _AXES, 10: _AXES, 20: _AXES | set("IJRP") | {"K"}, 30: _AXES | set("IJRP") | {"K"},
     52: frozenset("XYZPL"), 62: frozenset("XYZRKPQ"), 40: frozenset("P"),
     640: frozenset("PQ"), 430: frozenset("H"), 431: frozenset("Z"),
-    100: _AXES | set("LPR"), 920: _AXES,
+    100: _AXES | set("LPR"), 920: _AXES, 382: _AXES, 383: _AXES, 384: _AXES, 385: _AXES,
 }
 _ALWAYS = frozenset("FST")
 _FAST_MOTIONS = frozenset((0, 10, 20, 30))
@@ -63,6 +64,8 @@ class InterpState:
         self.tools = ToolState(config, self.modal, self.offsets, path, self.out)
         if track is not None:
             self.tools.events = track.io_events  # the caller reads them after the program
+        self.probing = Probing(self.modal, self.offsets, self.moves, path, self.out,
+                               None if track is None else track.probes)
         self.track = track
         self.spindle_rpm = 0.0
         self.spindle_on = False
@@ -108,7 +111,10 @@ class InterpState:
         elif motion is not None or not _AXES.isdisjoint(vals):
             if nonmodal == 530:
                 self._need_straight(motion)
-            moves.move(motion, vals, lineno, machine=nonmodal == 530)
+            if (motion if motion is not None else self.modal.motion) in PROBE_CODE10:
+                self.probing.probe(motion or self.modal.motion, vals, lineno)  # type: ignore
+            else:
+                moves.move(motion, vals, lineno, machine=nonmodal == 530)
         stop = mgroups.get("stopping")
         if stop is not None:
             self.out.append(StopBlock(_STOPS[stop], self.modal.pos, self._src(lineno)))

@@ -10,7 +10,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Literal, overload
 
-from controller.blocks import ArcBlock, LineBlock, NurbsBlock
+from controller.blocks import ArcBlock, LineBlock, NurbsBlock, ProbeBlock
 from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import ConfigError, DriveError, NcError, OffsetsError
 from controller.interpreter.extent import (
@@ -50,7 +50,9 @@ class CheckSummary:
 
 
 _GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
-             NurbsBlock: nurbs_length_and_box}  # NURBS: from dense samples, 64 per knot span
+             NurbsBlock: nurbs_length_and_box,
+             ProbeBlock: line_length_and_box}
+# NURBS: from dense samples, 64 per knot span; G38: the whole move, the farthest it can go
 
 CHECK_BEAT_BLOCKS = 4096  # on_block is called every this many blocks
 
@@ -104,6 +106,8 @@ def check_program(path: str, config: MachineConfig,
         geometry = _GEOMETRY.get(kind)
         if geometry is None:
             continue
+        if kind is ProbeBlock and not summary:
+            _refuse_probe_run(block)  # type: ignore[arg-type]
         if not summary and kind is NurbsBlock and travel.holds(nurbs_hull_box(block)):
             continue
         length, (blo, bhi) = geometry(block)
@@ -131,6 +135,15 @@ def check_program(path: str, config: MachineConfig,
         nominal_time_s=time_s, nurbs_blocks=kinds[NurbsBlock], nurbs_control_points=nurbs_points,
         extents_mm={name: [lo[i], hi[i]] for i, name, _, _ in limits},
         travel_mm={name: [tlo, thi] for _, name, tlo, thi in limits})
+
+
+def _refuse_probe_run(block: ProbeBlock) -> None:
+    """The check before a run: a probe is refused before any motion. The motion controller
+    does not yet stop on the probe input (docs/gcode.md, "Probing"), and a probe move run to
+    its end would drive the probe into the work."""
+    raise NcError(block.source.path, block.source.first_line, 1, block.code,
+                  f"{block.code}: probing is checked (`cncctl check`) but not run yet: the "
+                  "motion controller does not stop on the probe input; nothing moved")
 
 
 def _json_error(args: argparse.Namespace, kind: str, message: str) -> None:
