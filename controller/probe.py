@@ -54,6 +54,7 @@ class ProbeResults:
     barrier: bool = False
     parameters: dict[int, float] = field(default_factory=dict)  # #5061-#5063, #5070 last set
     stopped_at: int | None = None  # the line of the probe the stream ended at (barrier)
+    seen: dict[int, str] = field(default_factory=dict)  # every probe read: line -> G38.x
 
 
 def stop_distance_mm(v_mm_s: float, accel_mm_s2: float) -> float:

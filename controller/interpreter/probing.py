@@ -43,6 +43,7 @@ class Probing:
                                   "(a move of zero length)")
         self.out.append(ProbeBlock(name, start, end, self.modal.feed_mm_s,
                                    Source(self.path, lineno, lineno)))
+        self.results.seen[lineno] = name
         result = self.results.by_line.get(lineno)
         if result is not None and not result.tripped and code10 in (382, 384):
             raise WordError(name, f"{name}: the probe move ended without "

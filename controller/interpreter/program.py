@@ -269,6 +269,9 @@ class Interpreter:
             raise NcError(self.path, lineno, col, word,
                           f"parameter #{number} out of range 1..{MAX_PARAMETER}")
         if number not in self.params:
+            probed = self.state.probing.results.parameters  # #5061-#5063, #5070 (G38)
+            if number in probed:
+                return probed[number]
             raise NcError(self.path, lineno, col, word, f"parameter #{number} is not set")
         return self.params[number]
 

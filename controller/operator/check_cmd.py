@@ -106,8 +106,6 @@ def check_program(path: str, config: MachineConfig,
         geometry = _GEOMETRY.get(kind)
         if geometry is None:
             continue
-        if kind is ProbeBlock and not summary:
-            _refuse_probe_run(block)  # type: ignore[arg-type]
         if not summary and kind is NurbsBlock and travel.holds(nurbs_hull_box(block)):
             continue
         length, (blo, bhi) = geometry(block)
@@ -137,13 +135,13 @@ def check_program(path: str, config: MachineConfig,
         travel_mm={name: [tlo, thi] for _, name, tlo, thi in limits})
 
 
-def _refuse_probe_run(block: ProbeBlock) -> None:
-    """The check before a run: a probe is refused before any motion. The motion controller
-    does not yet stop on the probe input (docs/gcode.md, "Probing"), and a probe move run to
-    its end would drive the probe into the work."""
-    raise NcError(block.source.path, block.source.first_line, 1, block.code,
-                  f"{block.code}: probing is checked (`cncctl check`) but not run yet: the "
-                  "motion controller does not stop on the probe input; nothing moved")
+def refuse_probes(path: str, seen: dict[int, str], why: str) -> None:
+    """A run that cannot probe (through cncd, a drive without a probe input, run from line):
+    an NcError naming the first probe, before any motion."""
+    if seen:
+        line = min(seen)
+        raise NcError(path, line, 1, seen[line], f"{seen[line]}: probing is checked (`cncctl "
+                      f"check`) but cannot run here: {why}; nothing moved")
 
 
 def _json_error(args: argparse.Namespace, kind: str, message: str) -> None:

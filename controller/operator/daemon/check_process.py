@@ -19,7 +19,7 @@ from controller.config import MachineConfig
 from controller.errors import CncError, NcError
 from controller.interpreter.program import position_at_line
 from controller.offsets import OffsetTable, ProgramOffsets
-from controller.operator.check_cmd import check_program
+from controller.operator.check_cmd import check_program, refuse_probes
 from controller.runtime.stages import memory_ceiling
 
 CHECK_POLL_S = 0.02  # how often the job thread looks at its cancel flag while the child checks
@@ -86,6 +86,8 @@ def _child(send: Any, path: str, config: MachineConfig, offsets: OffsetTable | N
         track = ProgramOffsets()
         check_program(path, config, offsets=offsets, start_mm=start_mm, from_line=from_line,
                       track=track, summary=False)
+        refuse_probes(path, track.probes.seen, "cncd does not run probes yet (an embedded "
+                      "`cncctl run` on the sim card does)")
         outcome.table, outcome.override_off_lines = track.table, track.override_off_lines
         outcome.io_events = track.io_events
         send.send(("ok", outcome))

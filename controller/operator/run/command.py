@@ -27,6 +27,7 @@ from controller.operator.run.exit_codes import EXIT_CODES, EXIT_REJECTED, STOP_S
 from controller.operator.run.from_line import HomingAborted, Sequence, run_from_line
 from controller.operator.run.io_announce import ToolChanges
 from controller.operator.run.keys import KeyControl, read_keys, stdin_fd
+from controller.operator.run.probing import run_probing
 from controller.operator.run.remote import run_on_daemon
 from controller.operator.run.view import JsonView, PlainView, ProgramLines, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
@@ -175,7 +176,9 @@ def run(args: argparse.Namespace) -> int:
     # where it stands (read from the drive opened once for the run), not from X0 Y0, which
     # faulted the second run ("reference starts at 0 but the machine is at 5") or, for a
     # G0 X0 Y0, reported done with nothing moved. The simulated card starts at 0 when opened.
-    shared_drive = args.from_line is not None or args.home or config.drive.backend != "sim"
+    probing = track.probes.seen  # G38 lines: a stretch per probe (run/probing.py)
+    shared_drive = args.from_line is not None or args.home or config.drive.backend != "sim" \
+        or bool(probing)
     if shared_drive:
         runtime = Sequence()
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
@@ -207,6 +210,9 @@ def run(args: argparse.Namespace) -> int:
                    drive=config.drive.backend, virtual_time=args.virtual_time)
         if not shared_drive:
             result = runtime.run()
+        elif probing:
+            result = run_probing(args, config, offsets, options, runtime, probing,
+                                 _event_to(view))
         else:
             result = run_from_line(args, config, offsets, options, runtime, start_keys)
             if result is None:
