@@ -1,6 +1,7 @@
 (io_demo.nc: machine I/O on the xyz_mill: a manual tool change, tool lengths and a probe)
 (tools: T1 and T2 must be in the tool table in force: cncctl tool set T1 Z... D...)
-(it checks with: cncctl check nc_programs/io_demo.nc --config xyz_mill --tools TBL)
+(check: cncctl check nc_programs/io_demo.nc --config xyz_mill --tools TBL; run it on the)
+(sim card with --drive-option probe_workpiece_mm=-50,-50,-50,50,50,0: the top face at Z0)
 G21 G90 G94 G17 G54
 G0 Z20
 T1 M6                     (to the change position, spindle off, wait for the operator)

@@ -17,7 +17,7 @@ from typing import Any
 from controller.config import MachineConfig
 from controller.io_events import io_event
 from controller.motion.loop import ESTOP_KEEP_FRAMES
-from controller.motion.types import MotionResult, MotionState, Outcome
+from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
 from controller.probe import ProbeResult, ProbeResults
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.base import Drive
@@ -103,7 +103,8 @@ def run_with_probes(path: str, config: MachineConfig, options: RuntimeOptions, d
     start = drive.commanded_xyz_mm()
     from_line = None
     last_line = _line_count(path)
-    t_s = 0.0  # the time of the stretches before this one
+    clock = _RunClock(options.on_progress)  # one time line over the stretches
+    options = replace(options, on_progress=clock.progress if options.on_progress else None)
     while True:
         watch = ProbeWatch(lines, drive, config, start)
         runtime = Runtime(path, config, replace(
@@ -114,6 +115,7 @@ def run_with_probes(path: str, config: MachineConfig, options: RuntimeOptions, d
         if seq.abort is not None:
             runtime.request_abort(seq.abort)
         result = runtime.run()
+        t_s = clock.stretch_done(runtime)
         if watch.line is None or watch.error is not None or result.outcome is Outcome.FAULT \
                 or (result.outcome is Outcome.ABORTED and not watch.tripped):
             return result
@@ -121,7 +123,6 @@ def run_with_probes(path: str, config: MachineConfig, options: RuntimeOptions, d
         line, code = watch.line, lines[watch.line]
         probe = ProbeResult(line, watch.tripped, watch.trip_mm or stop, stop)
         results.by_line[line] = probe
-        t_s += result.motion_time_s + result.settling_time_s
         on_event(io_event("probe", t_s, line, code=code, **{
             k: v for k, v in probe.describe().items() if k != "line"}))
         if not probe.tripped and code in ("G38.2", "G38.4"):
@@ -131,6 +132,26 @@ def run_with_probes(path: str, config: MachineConfig, options: RuntimeOptions, d
         if line >= last_line:
             return replace(result, outcome=Outcome.DONE, message="")
         from_line = line + 1
+
+
+class _RunClock:
+    """The run's time over its stretches: each runtime's clock starts at 0, so progress is
+    passed on with the time of the stretches before it added (a view that paces its reports
+    by time would hold them back otherwise), and events are timed on the same line."""
+
+    def __init__(self, inner: Callable[[MotionProgress], None] | None) -> None:
+        self.inner = inner
+        self.before_s = 0.0
+
+    def progress(self, p: MotionProgress) -> None:
+        if self.inner is not None:
+            self.inner(replace(p, elapsed_s=p.elapsed_s + self.before_s))
+
+    def stretch_done(self, runtime: Runtime) -> float:
+        """The run's time at the end of this stretch."""
+        ctrl = runtime.controller
+        self.before_s += ctrl.pacer.elapsed_s() if ctrl is not None else 0.0
+        return self.before_s
 
 
 def _line_count(path: str) -> int:
