@@ -93,45 +93,80 @@ def _take_back(ctrl: Any) -> None:
         ctrl.stream.take_back(ctrl.drive, ctrl.drive.fifo_level(), ESTOP_KEEP_FRAMES)
 
 
-def run_with_probes(path: str, config: MachineConfig, options: RuntimeOptions, drive: Drive,
-                    lines: dict[int, str], seq: Any,
-                    on_event: Callable[[dict[str, Any]], None]) -> MotionResult:
-    """The whole program, a stretch per probe, on `drive` (open, kept open); `seq.current` is
-    the runtime now running (operator requests go to it); every probe's result goes to
-    on_event as a `probe` event."""
-    results = ProbeResults(barrier=True)
-    start = drive.commanded_xyz_mm()
-    from_line = None
-    last_line = _line_count(path)
-    clock = _RunClock(options.on_progress)  # one time line over the stretches
-    options = replace(options, on_progress=clock.progress if options.on_progress else None)
-    while True:
-        watch = ProbeWatch(lines, drive, config, start)
-        runtime = Runtime(path, config, replace(
-            options, drive=drive, keep_drive_open=True, start_mm=options.start_mm or start,
-            from_line=from_line, probes=ProbeResults(dict(results.by_line), barrier=True),
-            probe_watch=watch))
-        seq.current = runtime
-        if seq.abort is not None:
-            runtime.request_abort(seq.abort)
-        result = runtime.run()
-        t_s = clock.stretch_done(runtime)
-        if watch.line is None or watch.error is not None or result.outcome is Outcome.FAULT \
-                or (result.outcome is Outcome.ABORTED and not watch.tripped):
-            return result
-        stop = drive.commanded_xyz_mm()
-        line, code = watch.line, lines[watch.line]
-        probe = ProbeResult(line, watch.tripped, watch.trip_mm or stop, stop)
-        results.by_line[line] = probe
-        on_event(io_event("probe", t_s, line, code=code, **{
-            k: v for k, v in probe.describe().items() if k != "line"}))
-        if not probe.tripped and code in ("G38.2", "G38.4"):
-            return replace(result, outcome=Outcome.ABORTED, message=(
-                f"line {line}: {code}: the probe move ended without "
-                f"{'making' if code == 'G38.2' else 'losing'} contact"))
-        if line >= last_line:
-            return replace(result, outcome=Outcome.DONE, message="")
-        from_line = line + 1
+class ProbeRun:
+    """The whole program, a stretch (a Runtime) per probe, on `drive` (open, kept open):
+    operator requests go to the stretch now running (the override to every one), an abort
+    asked between two stretches stops the next at once; every probe's result goes to
+    on_event as a `probe` event. Used as a Runtime is (run, request_*, controller)."""
+
+    def __init__(self, path: str, config: MachineConfig, options: RuntimeOptions,
+                 drive: Drive, lines: dict[int, str],
+                 on_event: Callable[[dict[str, Any]], None]) -> None:
+        self.path, self.config, self.drive, self.lines = path, config, drive, lines
+        self.on_event = on_event
+        self.clock = _RunClock(options.on_progress)  # one time line over the stretches
+        self.options = replace(options, on_progress=self.clock.progress
+                               if options.on_progress else None)
+        self.current: Runtime | None = None
+        self.abort: str | None = None
+        self.override_pct = 100.0
+
+    @property
+    def controller(self) -> Any:
+        return self.current.controller if self.current is not None else None
+
+    def request_abort(self, message: str = "aborted by operator") -> None:
+        self.abort = message
+        if self.current is not None:
+            self.current.request_abort(message)
+
+    def request_hold(self) -> None:
+        if self.current is not None:
+            self.current.request_hold()
+
+    def request_resume(self) -> None:
+        if self.current is not None:
+            self.current.request_resume()
+
+    def set_feed_override(self, percent: float) -> None:
+        self.override_pct = percent
+        if self.current is not None:
+            self.current.set_feed_override(percent)
+
+    def run(self) -> MotionResult:
+        results = ProbeResults(barrier=True)
+        start = self.drive.commanded_xyz_mm()
+        from_line = None
+        last_line = _line_count(self.path)
+        while True:
+            watch = ProbeWatch(self.lines, self.drive, self.config, start)
+            runtime = Runtime(self.path, self.config, replace(
+                self.options, drive=self.drive, keep_drive_open=True,
+                start_mm=self.options.start_mm or start, from_line=from_line,
+                probes=ProbeResults(dict(results.by_line), barrier=True), probe_watch=watch))
+            runtime.set_feed_override(self.override_pct)
+            self.current = runtime
+            if self.abort is not None:
+                runtime.request_abort(self.abort)
+            result = runtime.run()
+            t_s = self.clock.stretch_done(runtime)
+            if watch.line is None or watch.error is not None \
+                    or result.outcome is Outcome.FAULT \
+                    or (result.outcome is Outcome.ABORTED and not watch.tripped):
+                return result
+            stop = self.drive.commanded_xyz_mm()
+            line, code = watch.line, self.lines[watch.line]
+            probe = ProbeResult(line, watch.tripped, watch.trip_mm or stop, stop)
+            results.by_line[line] = probe
+            self.on_event(io_event("probe", t_s, line, code=code, **{
+                k: v for k, v in probe.describe().items() if k != "line"}))
+            if not probe.tripped and code in ("G38.2", "G38.4"):
+                return replace(result, outcome=Outcome.ABORTED, message=(
+                    f"line {line}: {code}: the probe move ended without "
+                    f"{'making' if code == 'G38.2' else 'losing'} contact"))
+            if line >= last_line:
+                return replace(result, outcome=Outcome.DONE, message="")
+            from_line = line + 1
 
 
 class _RunClock:

@@ -72,8 +72,7 @@ def test_a_probe_already_in_contact_is_refused_at_its_start(tmp_path: Path) -> N
     assert probe["tripped"] and 0.0 <= probe["trip_mm"][2] < 0.05
 
 
-def test_a_drive_without_a_probe_input_or_cncd_refuses_before_any_motion(
-        tmp_path: Path) -> None:
+def test_a_drive_without_a_probe_input_refuses_before_any_motion(tmp_path: Path) -> None:
     code, events, err = run(tmp_path, "G0 X5\nF300\nG38.2 Z-5\nM2\n")
     assert code == 2 and ":3:1: error: G38.2: probing is checked" in err
     assert "has no probe input" in err and not [e for e in events if e["event"] == "done"]
@@ -83,5 +82,28 @@ def test_a_drive_without_a_probe_input_or_cncd_refuses_before_any_motion(
         done = subprocess.run([*CNCCTL, "run", str(program), "--socket", d.socket_path],
                               capture_output=True, text=True, timeout=60,
                               stdin=subprocess.DEVNULL)
-        assert done.returncode == 2 and "cncd does not run probes yet" in done.stderr
+        assert done.returncode == 2 and "the sim drive has no probe input" in done.stderr
         assert d.status()["position_mm"] == {"x": 0.0, "y": 0.0, "z": 0.0}
+
+
+def test_a_probe_through_cncd(tmp_path: Path) -> None:
+    config = tmp_path / "mill_probe.yaml"
+    config.write_text(Path(MILL).read_text().replace(
+        "drive:\n  backend: sim\n",
+        'drive:\n  backend: sim\n  options: {probe_workpiece_mm: "-20,-20,-50,20,20,0"}\n'))
+    program = tmp_path / "probe.nc"
+    program.write_text("G21 G90 F600\nG0 X5 Y5 Z3\nG38.2 Z-3\nG91 G0 Z1\nG90 G0 Z#5063\n"
+                       "M2\n")
+    with running_cncd(tmp_path, "--config", str(config)) as d:
+        d.cncctl("reset")
+        done = subprocess.run([*CNCCTL, "run", str(program), "--json", "--socket",
+                               d.socket_path], capture_output=True, text=True, timeout=60,
+                              stdin=subprocess.DEVNULL)
+        events = [json.loads(line) for line in done.stdout.splitlines()]
+        assert done.returncode == 0, done.stderr
+        (probe,) = [e for e in events if e["event"] == "probe"]
+        assert probe["line"] == 3 and probe["tripped"] and -0.05 < probe["trip_mm"][2] <= 0
+        final = events[-1]
+        assert final["event"] == "done"
+        assert final["final_position_mm"]["z"] == pytest.approx(probe["trip_mm"][2], abs=0.0011)
+        assert d.status()["state"] == "IDLE"

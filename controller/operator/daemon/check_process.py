@@ -36,6 +36,7 @@ class CheckOutcome:
     table: OffsetTable = field(default_factory=OffsetTable)
     override_off_lines: list[list[int]] = field(default_factory=list)
     io_events: list[dict[str, Any]] = field(default_factory=list)  # tool changes (M6)
+    probe_lines: dict[int, str] = field(default_factory=dict)  # G38 lines: line -> code
 
 
 def check_in_child(path: str, config: MachineConfig, offsets: OffsetTable | None,
@@ -86,8 +87,10 @@ def _child(send: Any, path: str, config: MachineConfig, offsets: OffsetTable | N
         track = ProgramOffsets()
         check_program(path, config, offsets=offsets, start_mm=start_mm, from_line=from_line,
                       track=track, summary=False)
-        refuse_probes(path, track.probes.seen, "cncd does not run probes yet (an embedded "
-                      "`cncctl run` on the sim card does)")
+        if from_line is not None:
+            refuse_probes(path, track.probes.seen, "run from line is not combined with "
+                                                   "probes yet")
+        outcome.probe_lines = track.probes.seen
         outcome.table, outcome.override_off_lines = track.table, track.override_off_lines
         outcome.io_events = track.io_events
         send.send(("ok", outcome))

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from controller.motion.types import MotionProgress
+from controller.runtime.probe_run import ProbeRun
 from controller.runtime.processes import Runtime
 
 Emit = Callable[[dict[str, Any]], None]
@@ -33,7 +34,7 @@ class Job:
     text: bytes
     lines: int
     emit: Emit  # events for the connection that started it (and the state subscribers)
-    runtime: Runtime | None = None
+    runtime: Runtime | ProbeRun | None = None  # ProbeRun: a program with probes (G38)
     cancel: str | None = None  # abort or e-stop asked while checking
     start_mm: tuple[float, float, float] | None = None  # where the machine stood
     progress: MotionProgress | None = None

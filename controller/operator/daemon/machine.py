@@ -22,6 +22,7 @@ from controller.config import MachineConfig
 from controller.errors import CncError, NcError
 from controller.motion.realtime import realtime_threads
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
+from controller.operator.check_cmd import refuse_probes
 from controller.operator.daemon import identify_run, manual
 from controller.operator.daemon.check_process import CheckCancelled, check_in_child
 from controller.operator.daemon.job import Emit, Job, State, progress_event
@@ -34,6 +35,7 @@ from controller.operator.daemon.tool_store import ToolStore
 from controller.operator.run.from_line import approach_program
 from controller.operator.run.io_announce import tool_change_at, tool_prompt
 from controller.operator.run.view import result_summary
+from controller.runtime.probe_run import ProbeRun
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.base import CardStatus, Drive
 from drivers.errors import LostCommunicationError
@@ -419,6 +421,9 @@ class Machine:
             checked = check_in_child(path, config, offsets, start_mm, job.from_line,
                                      lambda: job.cancel is not None, self._beat)
             job.approach_mm = checked.approach_mm
+            if checked.probe_lines and self.drive.probe_input() is None:
+                refuse_probes(path, checked.probe_lines, f"the {self.config.drive.backend} "
+                              "drive has no probe input")
         except CheckCancelled:
             with self._lock:
                 self._cancelled(job)
@@ -436,9 +441,12 @@ class Machine:
                 return
             job.start_mm = start_mm
             job.tool_changes = checked.io_events
-            job.runtime = Runtime(path, config, replace(
-                self._options(job), offsets=offsets, from_line=job.from_line,
-                override_off_lines=checked.override_off_lines))
+            options = replace(self._options(job), offsets=offsets, from_line=job.from_line,
+                              override_off_lines=checked.override_off_lines)
+            # G38: a stretch per probe on the daemon's drive (runtime/probe_run.py)
+            job.runtime = ProbeRun(path, config, options, self.drive, checked.probe_lines,
+                                   job.emit) if checked.probe_lines else \
+                Runtime(path, config, options)
             job.runtime.set_feed_override(self.feed_override_pct)
             self.journal.start(job.name, job.sha256, job.lines)
             self._beat()

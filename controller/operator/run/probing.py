@@ -12,7 +12,7 @@ from controller.config import MachineConfig
 from controller.motion.types import MotionResult
 from controller.offsets import OffsetTable
 from controller.operator.check_cmd import check_program, refuse_probes
-from controller.runtime.probe_run import run_with_probes
+from controller.runtime.probe_run import ProbeRun
 from controller.runtime.processes import RuntimeOptions, build_drive, open_drive
 
 
@@ -34,7 +34,11 @@ def run_probing(args: argparse.Namespace, config: MachineConfig, offsets: Offset
         # checked again from where the drive stands, as every run on a kept-open drive is
         check_program(args.program, config, start_mm=drive.commanded_xyz_mm(), offsets=offsets,
                       summary=False)
-        return run_with_probes(args.program, config, replace(options, offsets=offsets), drive,
-                               lines, seq, on_event)
+        run = ProbeRun(args.program, config, replace(options, offsets=offsets), drive, lines,
+                       on_event)
+        seq.current = run  # the keys' requests go to the stretch now running
+        if seq.abort is not None:
+            run.request_abort(seq.abort)
+        return run.run()
     finally:
         drive.close()
