@@ -74,7 +74,7 @@ class SimCard(Drive):
         self._estop_tripped = False  # the in-process e-stop input (test hook)
         self._fault_file = options.get("drive_fault_file")
         # G38: the probe is in contact while the table's true position is inside this box
-        self._workpiece = _workpiece(options.get("probe_workpiece_mm"))
+        self._workpiece = workpiece_option(options.get("probe_workpiece_mm"), "sim: drive option")
         self.frames_clocked = 0  # every period since open, idle ones included
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -380,9 +380,10 @@ def _option(options: dict[str, Any], key: str, default: float, lo: float, hi: fl
     return number
 
 
-def _workpiece(value: Any) -> Workpiece | None:
+def workpiece_option(value: Any, who: str) -> Workpiece | None:
     """probe_workpiece_mm: `x0,y0,z0,x1,y1,z1` (text or six numbers), the simulated work's box
-    in machine mm; a DriveError naming the option otherwise."""
+    in machine mm (the sim card's and the peers' probe input); a DriveError naming the option
+    otherwise."""
     if value is None:
         return None
     parts = value.split(",") if isinstance(value, str) else value
@@ -391,6 +392,6 @@ def _workpiece(value: Any) -> Workpiece | None:
     except (TypeError, ValueError):
         v = []
     if len(v) != 6 or not all(np.isfinite(v)) or any(v[i] > v[i + 3] for i in range(3)):
-        raise DriveError(f"sim: drive option probe_workpiece_mm: {value!r} is not a box "
+        raise DriveError(f"{who} probe_workpiece_mm: {value!r} is not a box "
                          "x0,y0,z0,x1,y1,z1 (mm, each min at most its max)")
     return Workpiece((v[0], v[1], v[2]), (v[3], v[4], v[5]))

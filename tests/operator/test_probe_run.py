@@ -107,3 +107,4 @@ def test_a_probe_through_cncd(tmp_path: Path) -> None:
         assert final["event"] == "done"
         assert final["final_position_mm"]["z"] == pytest.approx(probe["trip_mm"][2], abs=0.0011)
         assert d.status()["state"] == "IDLE"
+
