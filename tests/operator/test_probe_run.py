@@ -106,5 +106,6 @@ def test_a_probe_through_cncd(tmp_path: Path) -> None:
         final = events[-1]
         assert final["event"] == "done"
         assert final["final_position_mm"]["z"] == pytest.approx(probe["trip_mm"][2], abs=0.0011)
-        assert d.status()["state"] == "IDLE"
+        status = d.status()
+        assert status["state"] == "IDLE" and status["last_probe"] == probe
 

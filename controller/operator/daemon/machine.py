@@ -69,6 +69,7 @@ class Machine:
         self.state_problems: list[str] = []  # state files kept aside at start-up, reported
         self.journal = Journal(self.state_files)
         self.feed_override_pct = 100.0  # of this and the next jobs
+        self.last_probe: dict[str, Any] | None = None  # the last G38's result (status)
         self.work_offsets = OffsetStore(config, self.state_files, log, self._lock,
                                         self._position_mm)
         self.tools = ToolStore(config, self.state_files, log, self._lock)
@@ -445,8 +446,8 @@ class Machine:
                               override_off_lines=checked.override_off_lines)
             # G38: a stretch per probe on the daemon's drive (runtime/probe_run.py)
             job.runtime = ProbeRun(path, config, options, self.drive, checked.probe_lines,
-                                   job.emit) if checked.probe_lines else \
-                Runtime(path, config, options)
+                                   lambda e: self._probed(job, e)) if checked.probe_lines \
+                else Runtime(path, config, options)
             job.runtime.set_feed_override(self.feed_override_pct)
             self.journal.start(job.name, job.sha256, job.lines)
             self._beat()
@@ -457,6 +458,11 @@ class Machine:
         if result.outcome is Outcome.DONE and not job.manual_move:
             self.work_offsets.store(checked.table, f"left by {job.name}")
         self._record(job, result)
+
+    def _probed(self, job: Job, event: dict[str, Any]) -> None:
+        """A probe's result: on the job's connection and in `status` (`last_probe`)."""
+        self.last_probe = event
+        job.emit(event)
 
     def _approach(self, job: Job, start_mm: tuple[float, float, float]) -> bool:
         """Run from line: the straight move (Z up first, then XY, then Z down, on a mill) to
@@ -571,6 +577,7 @@ class Machine:
         out["last_homing"] = self.last_homing
         out["last_job"] = self.last_job
         out["last_identify"] = self.last_identify
+        out["last_probe"] = self.last_probe  # G38: line, code, tripped, trip_mm, stop_mm
         out["state_problems"] = list(self.state_problems)
         out["scheduling"] = self.scheduling
         return out
