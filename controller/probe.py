@@ -1,5 +1,6 @@
-"""Probing (G38.2-G38.5): a probe's result, LinuxCNC's parameters #5061-#5063 and #5070, the
-simulated workpiece the sim card probes against, and the stop after a trip at Amax.
+"""Probing (G38.2-G38.5): a probe's result, LinuxCNC's parameters #5061-#5063 and #5070, and
+the simulated work the sim card and the serial peer probe against (with the exact trip point
+of a straight move, the reference the tests hold a run to).
 
 A probe move ends early, where the probe trips, so what follows depends on its result: the
 interpreter reads on past a probe only once its result is known (`ProbeResults`, keyed by the
@@ -8,7 +9,6 @@ probe's line); `check` reads on as if the probe went the whole way (the farthest
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,11 +57,6 @@ class ProbeResults:
     seen: dict[int, str] = field(default_factory=dict)  # every probe read: line -> G38.x
 
 
-def stop_distance_mm(v_mm_s: float, accel_mm_s2: float) -> float:
-    """Distance from the trip to rest, decelerating at accel_mm_s2: v^2 / (2 A)."""
-    return v_mm_s * v_mm_s / (2.0 * accel_mm_s2)
-
-
 @dataclass(frozen=True, slots=True)
 class Workpiece:
     """The sim card's simulated workpiece: a box, machine mm. The probe is in contact while
@@ -98,16 +93,3 @@ def trip_point(work: Workpiece, start: Sequence[float], end: Sequence[float],
 
 def _at(start: Sequence[float], d: Sequence[float], t: float) -> Point3:
     return (start[0] + t * d[0], start[1] + t * d[1], start[2] + t * d[2])
-
-
-def stop_point(start: Sequence[float], end: Sequence[float], trip: Sequence[float],
-               v_mm_s: float, accel_mm_s2: float) -> Point3:
-    """Where the machine rests after a trip at feed v: on past the trip by the stop at Amax,
-    never past the move's end."""
-    length = math.dist(start, end)
-    if length == 0.0:
-        return (float(trip[0]), float(trip[1]), float(trip[2]))
-    s_trip = math.dist(start, trip)
-    s = min(length, s_trip + stop_distance_mm(v_mm_s, accel_mm_s2))
-    d = [(end[i] - start[i]) / length for i in range(3)]
-    return _at(start, d, s)

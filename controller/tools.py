@@ -12,7 +12,6 @@ import math
 import os
 import re
 import tempfile
-from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -255,13 +254,3 @@ def read_tools_section(sec: Any, axis_names: tuple[str, ...],
             raise ConfigError(sec.path, sec._key("table_file"), str(exc)) from None
     sec.finish()
     return ToolsConfig(position, table_file, table)
-
-
-def tool_words(words: Iterable[str]) -> dict[str, str]:
-    """`cncctl tool set` arguments (`T3`, `Z12.5`, `D6`, `P3`) as letter -> number text."""
-    out: dict[str, str] = {}
-    for word in words:
-        if len(word) < 2 or word[0].upper() not in "TPZD":
-            raise ValueError(f"{word!r}: give T, P, Z and D words (T3 Z12.5 D6)")
-        out[word[0].upper()] = word[1:]
-    return out

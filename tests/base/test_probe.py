@@ -1,11 +1,10 @@
-"""controller/probe.py: where a straight probe move trips against a box (exact clipping), the
-stop after the trip at Amax, and LinuxCNC's parameters of a result."""
+"""controller/probe.py: where a straight probe move trips against a box (exact clipping), and
+LinuxCNC's parameters of a result."""
 
 from __future__ import annotations
 
 import math
 
-import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -14,8 +13,6 @@ from controller.probe import (
     PARAM_Z,
     ProbeResult,
     Workpiece,
-    stop_distance_mm,
-    stop_point,
     trip_point,
 )
 
@@ -48,14 +45,6 @@ def test_the_trip_is_the_first_contact_along_the_move(start: tuple, end: tuple) 
     if inside:  # and no sampled contact before it
         first = samples[inside[0]]
         assert math.dist(start, trip) <= math.dist(start, first) + 1e-9
-
-
-@given(st.floats(0.1, 100), st.floats(100, 5000))
-def test_the_stop_after_a_trip_is_v2_over_2a_never_past_the_end(v: float, a: float) -> None:
-    start, end, trip = (0.0, 0.0, 10.0), (0.0, 0.0, -10.0), (0.0, 0.0, 0.0)
-    stop = stop_point(start, end, trip, v, a)
-    assert stop[2] == pytest.approx(max(-10.0, -stop_distance_mm(v, a)))
-    assert stop_distance_mm(v, a) == pytest.approx(v * v / (2 * a))
 
 
 def test_parameters_are_the_trip_point_in_the_programs_frame() -> None:

@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 from daemon_helpers import CNCCTL, REPO, running_cncd
 
+from controller.probe import Workpiece, trip_point
+
 MILL = str(REPO / "config" / "xyz_mill.yaml")
 WORK = "probe_workpiece_mm=-20,-20,-50,20,20,0"  # its top face at Z0
 FEED_MM_S = 5.0  # F300
@@ -38,8 +40,10 @@ def test_g38_2_trips_on_the_face_stops_and_the_program_goes_on_from_there(
     (probe,) = [e for e in events if e["event"] == "probe"]
     assert probe["line"] == 3 and probe["code"] == "G38.2" and probe["tripped"]
     trip_z, stop_z = probe["trip_mm"][2], probe["stop_mm"][2]
+    face = trip_point(Workpiece((-20, -20, -50), (20, 20, 0)), (5, 5, 10), (5, 5, -10), True)
+    assert face == (5, 5, 0)
     # seen within a motion cycle (2 ms, 10 um at F300) and the servo's lag of the face
-    assert -0.05 < trip_z <= 0.0
+    assert -0.05 < trip_z - face[2] <= 0.0
     # the stop starts a few frames after the trip, not behind the card's 100 ms FIFO (0.5 mm)
     overtravel_mm = trip_z - stop_z
     assert 0.0 <= overtravel_mm < 0.1 + 2 * FEED_MM_S**2 / (2 * AMAX_MM_S2)
