@@ -156,5 +156,36 @@ class AuxBlock:
     source: Source = field(default_factory=lambda: Source("", 0, 0))
 
 
+PROBE_CODES = ("G38.2", "G38.3", "G38.4", "G38.5")
+
+
+@dataclass(frozen=True, slots=True)
+class ProbeBlock:
+    """G38.2-G38.5 (LinuxCNC): a straight move from start toward end at the feed that ends
+    where the probe trips (G38.2/3: contact made; G38.4/5: contact lost), so nothing after it
+    can be planned before its result: planning stops here and goes on from where the machine
+    stopped. G38.2 and G38.4 are an error if the move ends without tripping."""
+
+    code: str  # one of PROBE_CODES
+    start: Point3
+    end: Point3
+    feed_mm_s: float
+    source: Source
+
+    @property
+    def toward(self) -> bool:
+        """True: the probe moves toward the work (trips on contact); False: away from it."""
+        return self.code in ("G38.2", "G38.3")
+
+    @property
+    def error_on_miss(self) -> bool:
+        return self.code in ("G38.2", "G38.4")
+
+    def as_line(self) -> LineBlock:
+        """The whole move, as planned from rest to rest (the probe may end it sooner)."""
+        return LineBlock(self.start, self.end, self.feed_mm_s, False,
+                         PathControl(PathMode.EXACT_STOP), self.source)
+
+
 MotionBlock = LineBlock | ArcBlock | NurbsBlock
-NcBlock = LineBlock | ArcBlock | NurbsBlock | DwellBlock | StopBlock | AuxBlock
+NcBlock = LineBlock | ArcBlock | NurbsBlock | DwellBlock | StopBlock | AuxBlock | ProbeBlock

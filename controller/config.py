@@ -13,6 +13,7 @@ import yaml
 from controller.backends import BUILTIN_BACKENDS, backend_names
 from controller.errors import ConfigError
 from controller.servo_poles import pole_problem
+from controller.tools import ToolsConfig, read_tools_section
 from controller.yaml_strict import Section, StrictLoader
 
 DEFAULT_CONFIG_NAME = "xy_table"
@@ -152,6 +153,7 @@ class MachineConfig:
     runtime: RuntimeConfig = field(default_factory=lambda: RuntimeConfig(64, 20.0, 100.0))
     service: ServiceConfig = field(default_factory=ServiceConfig)
     allow_unhomed: bool = False  # run programs before the axes with a homing sequence are homed
+    tools: ToolsConfig = field(default_factory=ToolsConfig)  # tool table, M6 position
 
     @property
     def axis_names(self) -> tuple[str, ...]:
@@ -317,6 +319,8 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         runtime=_read_runtime(top.section("runtime", {})),
         service=_read_service(top.section("service", {})),
         allow_unhomed=top.bool("allow_unhomed", False),
+        tools=read_tools_section(top.section("tools", {}), tuple(a.name for a in axes),
+                                 tuple(a.travel_mm for a in axes)),
     )
     top.finish()
     _check_plan_sizes(cfg, path)

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from controller.errors import OffsetsError
+from controller.probe import ProbeResults
 
 Point3 = tuple[float, float, float]
 SYSTEM_NAMES = ("G54", "G55", "G56", "G57", "G58", "G59")  # system n is SYSTEM_NAMES[n - 1]
@@ -276,3 +277,7 @@ class ProgramOffsets:
     table: OffsetTable = field(default_factory=OffsetTable)
     # M49 ... M48: [first line, last line] stretches where the feed override is off
     override_off_lines: list[list[int]] = field(default_factory=list)
+    # tool changes (controller/io_events.py dicts, t_s None): the run times them as it goes
+    io_events: list[dict[str, Any]] = field(default_factory=list)
+    # probes: the results known (a run) and the parameters they set (controller/probe.py)
+    probes: ProbeResults = field(default_factory=ProbeResults)

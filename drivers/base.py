@@ -186,6 +186,11 @@ class Drive(ABC):
         drive not open reads False (nothing to stop)."""
         return self._is_open and self._estop_input()
 
+    def probe_input(self) -> bool | None:
+        """The probe input (G38): True in contact; None on a drive without one (a probe is
+        then refused before any motion)."""
+        return self._probe_input() if self._is_open else None
+
     def home(self, axes: Sequence[int], timeout_s: float = 60.0) -> None:
         """Run the homing sequence of these axes (indices in config.axes order) on the device,
         all of them together; block until done. Afterwards position_counts() reads the machine
@@ -352,6 +357,10 @@ class Drive(ABC):
     def _estop_input(self) -> bool:
         """Backend hook; the default: a drive without an e-stop input."""
         return False
+
+    def _probe_input(self) -> bool | None:
+        """Backend hook; the default: a drive without a probe input."""
+        return None
 
     def _close(self) -> None:  # noqa: B027 (optional hook: most backends have nothing to close)
         return None

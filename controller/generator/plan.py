@@ -16,6 +16,7 @@ from controller.blocks import (
     NcBlock,
     NurbsBlock,
     PathMode,
+    ProbeBlock,
     StopBlock,
     StopKind,
 )
@@ -329,10 +330,13 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
         yield from queue.flush()
         # A long move or dwell comes in chunks, each timed on from the one before (emit may
         # put an in-position hold before the first).
-        if isinstance(block, LineBlock):
-            for chunk, last in _straight_move(block, config, 0.0):
+        if isinstance(block, LineBlock | ProbeBlock):
+            # A probe (G38) is a barrier: planned to rest on its own; the interpreter goes on
+            # only once its result is known (controller/probe.py).
+            line = block.as_line() if isinstance(block, ProbeBlock) else block
+            for chunk, last in _straight_move(line, config, 0.0):
                 yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s),
-                                                  rapid=block.rapid), at_rest=last)
+                                                  rapid=line.rapid), at_rest=last)
         elif isinstance(block, DwellBlock):
             for chunk in _dwell(block, config, 0.0):
                 yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s)),

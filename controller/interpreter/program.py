@@ -134,8 +134,8 @@ class Interpreter:
                 if emitting:
                     yield from out
                 out.clear()
-            if self.state.ended:
-                break
+            if self.state.ended or self.state.probing.stop_reading:
+                break  # M2/M30, or a probe whose result decides the rest (a run)
         self.state.finish_program(lineno)
         if not emitting and self.state.mark_pending is not None:
             self.state.mark(first)  # a G6.2 block ended by the end of the file, before `first`
@@ -269,6 +269,9 @@ class Interpreter:
             raise NcError(self.path, lineno, col, word,
                           f"parameter #{number} out of range 1..{MAX_PARAMETER}")
         if number not in self.params:
+            probed = self.state.probing.results.parameters  # #5061-#5063, #5070 (G38)
+            if number in probed:
+                return probed[number]
             raise NcError(self.path, lineno, col, word, f"parameter #{number} is not set")
         return self.params[number]
 

@@ -18,6 +18,8 @@ from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
 from controller.interpreter.line_state import LineState
 from controller.interpreter.modal import Modal
 from controller.interpreter.moves import MAX_BLOCK_S, Moves
+from controller.interpreter.probing import PROBE_CODE10, Probing
+from controller.interpreter.tool_length import ToolState
 from controller.interpreter.work_offsets import AXIS_CODES, WorkOffsets
 from controller.offsets import OffsetTable, ProgramOffsets
 
@@ -31,7 +33,8 @@ _STOPS = {0: StopKind.PAUSE, 1: StopKind.OPTIONAL_PAUSE, 2: StopKind.END, 30: St
 _USES: dict[int, frozenset[str]] = {
     0: _AXES, 10: _AXES, 20: _AXES | set("IJRP") | {"K"}, 30: _AXES | set("IJRP") | {"K"},
     52: frozenset("XYZPL"), 62: frozenset("XYZRKPQ"), 40: frozenset("P"),
-    640: frozenset("PQ"), 430: frozenset("H"), 100: _AXES | set("LPR"), 920: _AXES,
+    640: frozenset("PQ"), 430: frozenset("H"), 431: frozenset("Z"),
+    100: _AXES | set("LPR"), 920: _AXES, 382: _AXES, 383: _AXES, 384: _AXES, 385: _AXES,
 }
 _ALWAYS = frozenset("FST")
 _FAST_MOTIONS = frozenset((0, 10, 20, 30))
@@ -58,13 +61,17 @@ class InterpState:
         self.offsets = WorkOffsets(offsets if offsets is not None else OffsetTable(), track,
                                    config.has_axis("z"), config.name)
         self.moves = Moves(self.modal, self.offsets, config, path, self.out)
+        self.tools = ToolState(config, self.modal, self.offsets, path, self.out)
+        if track is not None:
+            self.tools.events = track.io_events  # the caller reads them after the program
+        self.probing = Probing(self.modal, self.offsets, self.moves, path, self.out,
+                               None if track is None else track.probes)
         self.track = track
         self.spindle_rpm = 0.0
         self.spindle_on = False
         self.spindle_code = 5  # M3, M4 or M5
         self.coolant: tuple[str, ...] = ()
         self.css = False  # G96: S is a surface speed
-        self.tool = 0
         self.ended = False
         self.mark_pending: int | None = None  # run from this line once the NURBS block ends
         self.at_line: LineState | None = None  # the state where the run from line starts
@@ -84,10 +91,12 @@ class InterpState:
         mgroups = _groups(ms, M_GROUP, lambda m: f"M{m}")
         motion = groups.get("motion")
         nonmodal = groups.get("non-modal")
-        axis_code = nonmodal in AXIS_CODES
+        # G10, G92 and G43.1 take the line's axis words for themselves
+        axis_code = nonmodal in AXIS_CODES or groups.get("tool length") == 431
         if axis_code and motion is not None and motion != 800:
-            raise WordError(g_name(nonmodal), f"{g_name(nonmodal)} and {g_name(motion)} both "
-                                              f"use axis words: put them on separate lines")
+            word = g_name(nonmodal if nonmodal in AXIS_CODES else 431)
+            raise WordError(word, f"{word} and {g_name(motion)} both use axis words: put "
+                                  f"them on separate lines")
         _check_letters(groups, vals,
                        motion if motion is not None or axis_code else self.modal.motion)
         self._modes(groups, vals)
@@ -102,7 +111,10 @@ class InterpState:
         elif motion is not None or not _AXES.isdisjoint(vals):
             if nonmodal == 530:
                 self._need_straight(motion)
-            moves.move(motion, vals, lineno, machine=nonmodal == 530)
+            if (motion if motion is not None else self.modal.motion) in PROBE_CODE10:
+                self.probing.probe(motion or self.modal.motion, vals, lineno)  # type: ignore
+            else:
+                moves.move(motion, vals, lineno, machine=nonmodal == 530)
         stop = mgroups.get("stopping")
         if stop is not None:
             self.out.append(StopBlock(_STOPS[stop], self.modal.pos, self._src(lineno)))
@@ -152,7 +164,7 @@ class InterpState:
             feed_mm_s=modal.feed_mm_s, absolute=modal.absolute, inch=modal.scale != 1.0,
             motion=None if modal.motion is None else g_name(modal.motion),
             path_control=modal.path_control, spindle=f"M{self.spindle_code}",
-            spindle_rpm=self._rpm(), coolant=self.coolant, tool=self.tool)
+            spindle_rpm=self._rpm(), coolant=self.coolant, tool=self.tools.selected)
 
     def inside_nurbs(self, line: int) -> NcError:
         """Run from a line inside a multi-line NURBS block: an error naming that line."""
@@ -181,8 +193,15 @@ class InterpState:
         elif path == 640:
             self.modal.path_control = PathControl(PathMode.BLEND, self._tol(vals, "P"),
                                             self._tol(vals, "Q"))
-        # G17, G40, G43/G49 (no tool table: zero length), G94, G98/G99 and G97 change nothing
-        # in phcnc's model; they are accepted because CAM headers use them.
+        length = groups.get("tool length")
+        if length == 430:
+            self.tools.g43(vals)
+        elif length == 431:
+            self.tools.g43_1(vals)
+        elif length == 490:
+            self.tools.g49()
+        # G17, G40, G94, G98/G99 and G97 change nothing in phcnc's model; they are accepted
+        # because CAM headers use them.
 
     def _tol(self, vals: dict[str, float], letter: str) -> float | None:
         if letter not in vals:
@@ -208,11 +227,9 @@ class InterpState:
             if self.spindle_on and "spindle" not in mgroups:
                 self.out.append(AuxBlock("S", self._rpm(), None, self._src(lineno)))
         if "T" in vals:
-            if vals["T"] < 0 or vals["T"] != int(vals["T"]):
-                raise WordError("T", "tool number must be a non-negative integer")
-            self.tool = int(vals["T"])
-        if "tool change" in mgroups:
-            self.out.append(AuxBlock("M6", None, self.tool, self._src(lineno)))
+            self.tools.select(vals["T"])
+        if "tool change" in mgroups and self.tools.change(lineno, self.spindle_on):
+            self.spindle_on, self.spindle_code = False, 5  # M6 stops the spindle
         spindle = mgroups.get("spindle")
         if spindle is not None:
             self.spindle_on = spindle != 5

@@ -32,16 +32,23 @@ class WorkOffsets:
         self.has_z = has_z
         self.config_name = config_name  # named in the refusal of a Z offset without Z axis
         self.table = table
-        self.origin: Point3 | None = None  # active system + G92; None when it is zero
+        self.origin: Point3 | None = None  # active system + G92 + tool length; None: zero
+        self.tool_mm = 0.0  # the tool length offset in force (G43), on Z
         self.set(table)
 
     def set(self, table: OffsetTable) -> None:
         """Put `table` in force: its origin becomes the program frame's."""
         self.table = table
-        origin = work_origin(table)
+        x, y, z = work_origin(table)
+        origin = (x, y, z + self.tool_mm)
         self.origin = None if origin == ZERO_MM else origin
         if self.track is not None:
             self.track.table = table
+
+    def set_tool_length(self, length_mm: float) -> None:
+        """G43 / G43.1 / G49: program Z = machine Z - work origin - tool length."""
+        self.tool_mm = length_mm
+        self.set(self.table)
 
     def select_system(self, code10: int) -> None:
         """G54 .. G59 (code10 540 .. 590): the machine stays, the program frame changes."""
@@ -89,7 +96,7 @@ class WorkOffsets:
         for i, letter in enumerate(_AXES):
             if letter in vals:
                 value = vals[letter] * scale
-                origin[i] = value if kind == 2.0 else pos[i] - g92[i] - value
+                origin[i] = value if kind == 2.0 else pos[i] - g92[i] - self._tool(i) - value
         self._check_z(vals, origin[2], old[2])
         self.set(with_system(self.table, n, origin))
 
@@ -101,9 +108,12 @@ class WorkOffsets:
         g92 = list(old)
         for i, letter in enumerate(_AXES):
             if letter in vals:
-                g92[i] = pos[i] - origin[i] - vals[letter] * scale
+                g92[i] = pos[i] - origin[i] - self._tool(i) - vals[letter] * scale
         self._check_z(vals, g92[2], old[2])
         self.set(with_g92(self.table, g92))
+
+    def _tool(self, i: int) -> float:
+        return self.tool_mm if i == 2 else 0.0
 
     def _check_z(self, vals: dict[str, float], new: float, old: float) -> None:
         if "Z" in vals and not self.has_z and new != old:

@@ -7,10 +7,10 @@ import json
 import sys
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Literal, overload
 
-from controller.blocks import ArcBlock, LineBlock, NurbsBlock
+from controller.blocks import ArcBlock, LineBlock, NurbsBlock, ProbeBlock
 from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import ConfigError, DriveError, NcError, OffsetsError
 from controller.interpreter.extent import (
@@ -27,6 +27,7 @@ from controller.operator.drive_args import (
     config_with_drive_options,
     probe_drive,
 )
+from controller.tools import ToolTableError, load_tool_table
 
 _AXES = ("x", "y", "z")
 
@@ -49,7 +50,9 @@ class CheckSummary:
 
 
 _GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
-             NurbsBlock: nurbs_length_and_box}  # NURBS: from dense samples, 64 per knot span
+             NurbsBlock: nurbs_length_and_box,
+             ProbeBlock: line_length_and_box}
+# NURBS: from dense samples, 64 per knot span; G38: the whole move, the farthest it can go
 
 CHECK_BEAT_BLOCKS = 4096  # on_block is called every this many blocks
 
@@ -132,6 +135,15 @@ def check_program(path: str, config: MachineConfig,
         travel_mm={name: [tlo, thi] for _, name, tlo, thi in limits})
 
 
+def refuse_probes(path: str, seen: dict[int, str], why: str) -> None:
+    """A run that cannot probe (through cncd, a drive without a probe input, run from line):
+    an NcError naming the first probe, before any motion."""
+    if seen:
+        line = min(seen)
+        raise NcError(path, line, 1, seen[line], f"{seen[line]}: probing is checked (`cncctl "
+                      f"check`) but cannot run here: {why}; nothing moved")
+
+
 def _json_error(args: argparse.Namespace, kind: str, message: str) -> None:
     """--json: every outcome is one JSON object on stdout (a program error has file and line,
     a config or drive error only its kind and message)."""
@@ -159,6 +171,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--offsets", metavar="FILE",
                         help="work offset table (JSON, as cncd keeps it in its state "
                              "directory) in force for the check")
+    parser.add_argument("--tools", metavar="TBL", help="tool table (LinuxCNC tool.tbl) in "
+                        "force, in place of the config's tools.table_file")
     add_drive_option_argument(parser)
 
 
@@ -167,10 +181,13 @@ def run(args: argparse.Namespace) -> int:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
         offsets = load_offsets(args.offsets, missing_ok=False) \
             if args.offsets is not None else None
+        if args.tools is not None:
+            config = replace(config, tools=config.tools.with_table(
+                load_tool_table(args.tools, missing_ok=False)))
         summary = check_program(args.program, config, offsets=offsets)
         assert summary is not None  # summary=True
         probe_drive(config)
-    except (ConfigError, OffsetsError) as exc:
+    except (ConfigError, OffsetsError, ToolTableError) as exc:
         print(f"cncctl: config error: {exc}", file=sys.stderr)
         _json_error(args, "config", str(exc))
         return 2

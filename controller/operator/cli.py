@@ -28,6 +28,7 @@ COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("home", _OPS + "control_cmd", "home the axes (switches or index, run by the drive)"),
     ("jog", _OPS + "control_cmd", "jog an axis within the soft limits: X+10, or X+ continuous"),
     ("offset", _OPS + "control_cmd", "work offsets: show, set G54 --here, select G55, clear-g92"),
+    ("tool", _OPS + "tool_cmd", "the tool table (tool.tbl): list, set T3 Z12.5 D6, delete T3"),
     ("log", _OPS + "control_cmd", "the daemon's last events"),
     ("simdrive", _OPS + "simdrive_cmd", "serve a simulated CANopen drive set or serial card"),
     ("completion", _OPS + "completion_cmd", "print the shell completion script (bash or zsh)"),

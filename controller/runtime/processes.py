@@ -56,6 +56,8 @@ class RuntimeOptions:
     offsets: OffsetTable | None = None  # work offsets in force at the start (default none)
     from_line: int | None = None  # run from this line (interpreter state brought there)
     override_off_lines: list[list[int]] = field(default_factory=list)  # M49..M48 stretches
+    probes: Any = None  # G38 results known (controller/probe.ProbeResults): a probing run
+    probe_watch: Any = None  # watches the probe input (runtime/probe_run.ProbeWatch)
 
 
 class _Messages:
@@ -203,9 +205,10 @@ class Runtime:
             preload_stages()
         blocks_fn = self.options.blocks_fn
         o = self.options
-        if blocks_fn is blocks_source and (o.start_mm, o.offsets, o.from_line) != (None,) * 3:
+        if blocks_fn is blocks_source and (o.start_mm, o.offsets, o.from_line,
+                                           o.probes) != (None,) * 4:
             blocks_fn = functools.partial(blocks_source, start_mm=o.start_mm, offsets=o.offsets,
-                                          from_line=o.from_line)
+                                          from_line=o.from_line, probes=o.probes)
         nc_fifo = _CTX.Queue(maxsize=self.config.runtime.nc_fifo_blocks)
         # Generator first, so that it is waiting on the NC FIFO when the first block lands.
         self.procs["generator"] = _CTX.Process(
@@ -246,6 +249,8 @@ class Runtime:
         axis_servos(self.config)  # built (cached) before the pacer's clock starts: ~10 ms when
         # pre-compensated (model inverse and residual), which made the first cycle late
         watch = self._watch(messages)
+        if self.options.probe_watch is not None:
+            watch = self.options.probe_watch.wrap(watch, lambda: self.controller)
         if self.options.virtual_time:
             need = round((self.settings.high_water_ms + self.settings.holdback_ms) * 1e-3
                          / period_s) + 2 * self.settings.cycle_frames

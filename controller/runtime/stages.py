@@ -24,10 +24,15 @@ GenerateFn = Callable[[Iterable[Any], MachineConfig], Iterable[RefChunk]]
 
 def blocks_source(path: str, config: MachineConfig,
                   start_mm: tuple[float, float, float] | None = None,
-                  offsets: Any = None, from_line: int | None = None) -> Iterator[Any]:
-    """The interpreter stage: read_program, block by block (its process is interpreter_main)."""
+                  offsets: Any = None, from_line: int | None = None,
+                  probes: Any = None) -> Iterator[Any]:
+    """The interpreter stage: read_program, block by block (its process is interpreter_main);
+    probes: the G38 results known (controller/probe.ProbeResults), read no further than one
+    without its result."""
     from controller.interpreter.program import read_program
-    yield from read_program(path, config, start_mm, offsets, from_line)
+    from controller.offsets import ProgramOffsets
+    track = None if probes is None else ProgramOffsets(probes=probes)
+    yield from read_program(path, config, start_mm, offsets, from_line, track)
 
 
 def reference_source(blocks: Iterable[Any], config: MachineConfig,

@@ -382,6 +382,10 @@ class SerialCard(Drive):
         s = self._last  # the card reports its input in every status frame (io byte)
         return s is not None and bool(s.io & p.IO_ESTOP_INPUT)
 
+    def _probe_input(self) -> bool:
+        s = self._last  # in every status frame too (io bit PROBE_INPUT)
+        return s is not None and bool(s.io & p.IO_PROBE_INPUT)
+
     # -- measurements -----------------------------------------------------------------------
     def link_stats(self) -> dict[str, Any]:
         """Round trip = a status request written by this process -> its reply decoded by the

@@ -40,6 +40,7 @@ ST_EXECUTED = 0x80  # not latched: the last clock tick executed sample exec_seq
 # The status frame's io byte (not latched: what is true now).
 IO_DISABLED = 0x01  # amplifiers off (a DISABLE frame, until a RESET with the input closed)
 IO_ESTOP_INPUT = 0x02  # the card's e-stop input is open (tripped)
+IO_PROBE_INPUT = 0x04  # the probe input (G38) is in contact
 
 # fault_code of ST_HOME_FAILED (a drive fault during homing is ST_DRIVE_FAULT instead)
 HOME_NOT_FOUND = 1  # no switch within the search limit

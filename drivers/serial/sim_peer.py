@@ -18,6 +18,7 @@ from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.homing import HomingPlan
 from drivers.serial import protocol as p
 from drivers.sim.axes import SimAxes, plant_of
+from drivers.sim.card import workpiece_option
 from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
 from drivers.sim.switches import SWITCH_OPTIONS, SimSwitches
@@ -44,8 +45,9 @@ PEER_OPTIONS: dict[str, Any] = {
     "index_pitch_mm": 1.0,  # encoder index marks at multiples of this
     "homing_fault_after_s": None,  # drive_fault_axis faults this long into a HOME
     "estop_input_file": None,  # a path: the e-stop input is open while this file exists
+    "probe_workpiece_mm": None,  # x0,y0,z0,x1,y1,z1: the probe is in contact inside this box
 } | dict.fromkeys(PLANT_OPTIONS)  # each axis's own loop, mismatch (controller/servo/plant_option)
-LIST_OPTIONS = ("start_mm", "true_start_mm", "home_switch_mm")
+LIST_OPTIONS = ("start_mm", "true_start_mm", "home_switch_mm", "probe_workpiece_mm")
 TEXT_OPTIONS = ("estop_input_file",)
 
 
@@ -92,6 +94,7 @@ class PeerCard:
                                              if k in SWITCH_OPTIONS and v is not None},
                                     self.axes.actual_mm.copy(), "serial simdrive")
         self.homing: SimAxesHoming | None = None
+        self.workpiece = workpiece_option(self.opt["probe_workpiece_mm"], "serial simdrive: option")
         self.home_token = 0
         self.home_started_s = 0.0
         self.home_aborted = False
@@ -291,6 +294,11 @@ class PeerCard:
         path = self.opt["estop_input_file"]
         return path is not None and os.path.exists(path)
 
+    def probe_input(self) -> bool:
+        """The probe input: in contact while the table's true position is inside the work."""
+        return self.workpiece is not None and self.workpiece.contact(
+            self.axes.actual_mm + self.switches.offset_mm)
+
     def send_status(self, reply_to: int = 0) -> None:
         if self._after("silent_after_s"):
             return
@@ -305,7 +313,8 @@ class PeerCard:
             commanded_delta=tuple(int(c) for c in cur_cmd - self.prev_cmd),
             encoder_delta=tuple(int(e) for e in cur_enc - self.prev_enc),
             io=(p.IO_DISABLED if self.disabled else 0)
-            | (p.IO_ESTOP_INPUT if self.estop_input() else 0))
+            | (p.IO_ESTOP_INPUT if self.estop_input() else 0)
+            | (p.IO_PROBE_INPUT if self.probe_input() else 0))
         data = p.encode_status(status)
         if self._after("corrupt_status_after_s"):
             data = data[:-1] + bytes([data[-1] ^ 0xFF])

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.probe import Workpiece
 from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, HomingError, LostCommunicationError
@@ -43,7 +44,8 @@ class SimCard(Drive):
 
     OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm",
                          "true_start_mm", "home_switch_mm", "index_pitch_mm", "homed_at_start",
-                         "estop_input_file", "drive_fault_file"}) | PLANT_OPTIONS
+                         "estop_input_file", "drive_fault_file", "probe_workpiece_mm"}) \
+        | PLANT_OPTIONS
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
@@ -71,6 +73,8 @@ class SimCard(Drive):
         self._estop_file = options.get("estop_input_file")
         self._estop_tripped = False  # the in-process e-stop input (test hook)
         self._fault_file = options.get("drive_fault_file")
+        # G38: the probe is in contact while the table's true position is inside this box
+        self._workpiece = workpiece_option(options.get("probe_workpiece_mm"), "sim: drive option")
         self.frames_clocked = 0  # every period since open, idle ones included
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -171,6 +175,11 @@ class SimCard(Drive):
     def _estop_input(self) -> bool:
         return self._estop_tripped or (self._estop_file is not None
                                        and os.path.exists(str(self._estop_file)))
+
+    def _probe_input(self) -> bool | None:
+        if self._workpiece is None:
+            return None
+        return self._workpiece.contact(self.true_position_mm())
 
     def trip_estop_input(self, tripped: bool = True) -> None:
         """The e-stop input opens (True) or closes again (test hook)."""
@@ -369,3 +378,20 @@ def _option(options: dict[str, Any], key: str, default: float, lo: float, hi: fl
     if not lo <= number <= hi:
         raise DriveError(f"sim: drive option {key}: {value!r} is not in [{lo:g}, {hi:g}]")
     return number
+
+
+def workpiece_option(value: Any, who: str) -> Workpiece | None:
+    """probe_workpiece_mm: `x0,y0,z0,x1,y1,z1` (text or six numbers), the simulated work's box
+    in machine mm (the sim card's and the peers' probe input); a DriveError naming the option
+    otherwise."""
+    if value is None:
+        return None
+    parts = value.split(",") if isinstance(value, str) else value
+    try:
+        v = [float(p) for p in parts]
+    except (TypeError, ValueError):
+        v = []
+    if len(v) != 6 or not all(np.isfinite(v)) or any(v[i] > v[i + 3] for i in range(3)):
+        raise DriveError(f"{who} probe_workpiece_mm: {value!r} is not a box "
+                         "x0,y0,z0,x1,y1,z1 (mm, each min at most its max)")
+    return Workpiece((v[0], v[1], v[2]), (v[3], v[4], v[5]))

@@ -99,12 +99,13 @@ def test_path_control_modes(tmp_path: Path) -> None:
 def test_dwell_aux_and_stop_blocks_in_linuxcnc_order(tmp_path: Path) -> None:
     b = blocks_of(tmp_path, "T3 M6\nS1200 M3 M8 G4 P0.5 G0 X1 M0\nS900\nM5 M9\nM2\nG0 X50\n")
     kinds = [(type(x).__name__, getattr(x, "code", getattr(x, "kind", None))) for x in b]
-    assert kinds == [("AuxBlock", "M6"), ("AuxBlock", "M3"), ("AuxBlock", "M8"),
-                     ("DwellBlock", None), ("LineBlock", None), ("StopBlock", StopKind.PAUSE),
-                     ("AuxBlock", "S"), ("AuxBlock", "M5"), ("AuxBlock", "M9"),
-                     ("StopBlock", StopKind.END)]
-    assert b[0].tool == 3 and b[1].spindle_rpm == 1200 and b[6].spindle_rpm == 900
-    assert isinstance(b[3], DwellBlock) and b[3].seconds == 0.5
+    # M6 is a manual tool change: a pause for the operator (no change position configured)
+    assert kinds == [("AuxBlock", "M6"), ("StopBlock", StopKind.PAUSE), ("AuxBlock", "M3"),
+                     ("AuxBlock", "M8"), ("DwellBlock", None), ("LineBlock", None),
+                     ("StopBlock", StopKind.PAUSE), ("AuxBlock", "S"), ("AuxBlock", "M5"),
+                     ("AuxBlock", "M9"), ("StopBlock", StopKind.END)]
+    assert b[0].tool == 3 and b[2].spindle_rpm == 1200 and b[7].spindle_rpm == 900
+    assert isinstance(b[4], DwellBlock) and b[4].seconds == 0.5
     assert isinstance(b[-1], StopBlock) and b[-1].position == (1.0, 0.0, 0.0)
 
 

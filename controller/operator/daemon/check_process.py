@@ -19,7 +19,7 @@ from controller.config import MachineConfig
 from controller.errors import CncError, NcError
 from controller.interpreter.program import position_at_line
 from controller.offsets import OffsetTable, ProgramOffsets
-from controller.operator.check_cmd import check_program
+from controller.operator.check_cmd import check_program, refuse_probes
 from controller.runtime.stages import memory_ceiling
 
 CHECK_POLL_S = 0.02  # how often the job thread looks at its cancel flag while the child checks
@@ -35,6 +35,8 @@ class CheckOutcome:
     approach_mm: tuple[float, float, float] | None = None
     table: OffsetTable = field(default_factory=OffsetTable)
     override_off_lines: list[list[int]] = field(default_factory=list)
+    io_events: list[dict[str, Any]] = field(default_factory=list)  # tool changes (M6)
+    probe_lines: dict[int, str] = field(default_factory=dict)  # G38 lines: line -> code
 
 
 def check_in_child(path: str, config: MachineConfig, offsets: OffsetTable | None,
@@ -85,7 +87,12 @@ def _child(send: Any, path: str, config: MachineConfig, offsets: OffsetTable | N
         track = ProgramOffsets()
         check_program(path, config, offsets=offsets, start_mm=start_mm, from_line=from_line,
                       track=track, summary=False)
+        if from_line is not None:
+            refuse_probes(path, track.probes.seen, "run from line is not combined with "
+                                                   "probes yet")
+        outcome.probe_lines = track.probes.seen
         outcome.table, outcome.override_off_lines = track.table, track.override_off_lines
+        outcome.io_events = track.io_events
         send.send(("ok", outcome))
     except NcError as exc:
         send.send(("nc", (exc.path, exc.line, exc.col, exc.word, exc.message)))

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from controller.motion.types import MotionProgress
+from controller.runtime.probe_run import ProbeRun
 from controller.runtime.processes import Runtime
 
 Emit = Callable[[dict[str, Any]], None]
@@ -33,7 +34,7 @@ class Job:
     text: bytes
     lines: int
     emit: Emit  # events for the connection that started it (and the state subscribers)
-    runtime: Runtime | None = None
+    runtime: Runtime | ProbeRun | None = None  # ProbeRun: a program with probes (G38)
     cancel: str | None = None  # abort or e-stop asked while checking
     start_mm: tuple[float, float, float] | None = None  # where the machine stood
     progress: MotionProgress | None = None
@@ -43,6 +44,8 @@ class Job:
     manual_move: bool = False  # a jog: machine coordinates, no offsets
     approach_mm: tuple[float, float, float] | None = None  # where line from_line starts
     approaching: bool = False  # the approach is moving (its lines are not the program's)
+    tool_changes: list[dict[str, Any]] = field(default_factory=list)  # M6s the check found
+    emitted_lines: set[int] = field(default_factory=set)  # tool changes already announced
     done: threading.Event = field(default_factory=threading.Event)
 
 

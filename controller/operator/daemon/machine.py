@@ -22,6 +22,7 @@ from controller.config import MachineConfig
 from controller.errors import CncError, NcError
 from controller.motion.realtime import realtime_threads
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
+from controller.operator.check_cmd import refuse_probes
 from controller.operator.daemon import identify_run, manual
 from controller.operator.daemon.check_process import CheckCancelled, check_in_child
 from controller.operator.daemon.job import Emit, Job, State, progress_event
@@ -30,8 +31,11 @@ from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.offset_store import OffsetStore
 from controller.operator.daemon.protocol import ProtocolError
 from controller.operator.daemon.state_dir import StateDir
+from controller.operator.daemon.tool_store import ToolStore
 from controller.operator.run.from_line import approach_program
+from controller.operator.run.io_announce import tool_change_at, tool_prompt
 from controller.operator.run.view import result_summary
+from controller.runtime.probe_run import ProbeRun
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.base import CardStatus, Drive
 from drivers.errors import LostCommunicationError
@@ -43,7 +47,7 @@ ESTOP_INPUT_POLL_S = 0.02  # the drive's e-stop input is read this often (a job'
 ESTOP_INPUT = "e-stop input on the drive tripped"
 
 
-LEFTOVER_PREFIXES = ("job-", "approach-", ".journal.json.", ".offsets.json.")
+LEFTOVER_PREFIXES = ("job-", "approach-", ".journal.json.", ".offsets.json.", ".tool.tbl.")
 
 
 class Machine:
@@ -65,9 +69,11 @@ class Machine:
         self.state_problems: list[str] = []  # state files kept aside at start-up, reported
         self.journal = Journal(self.state_files)
         self.feed_override_pct = 100.0  # of this and the next jobs
+        self.last_probe: dict[str, Any] | None = None  # the last G38's result (status)
         self.work_offsets = OffsetStore(config, self.state_files, log, self._lock,
                                         self._position_mm)
-        self.state_problems += [p for p in (self.work_offsets.load(),) if p]
+        self.tools = ToolStore(config, self.state_files, log, self._lock)
+        self.state_problems += [p for p in (self.work_offsets.load(), self.tools.load()) if p]
         self.last_job = self.journal.after_restart()
         identify = self.last_job.pop(IDENTIFY_KEY, None)
         self.last_identify = identify if isinstance(identify, dict) else None
@@ -205,6 +211,14 @@ class Machine:
         with self._lock:
             self.require_idle()
             return self.work_offsets.change(action, system, values, here)
+
+    def tool(self, fields: dict[str, Any]) -> dict[str, Any]:
+        """`cncctl tool` (see ToolStore.change): a change only between jobs (e-stop or fault
+        latched is fine: nothing moves)."""
+        with self._lock:
+            if fields["action"] != "list" and self.job is not None:
+                raise ProtocolError("busy", "a job is running: change tools between jobs")
+            return self.tools.change(fields)
 
     def _time_out(self, job: Job) -> None:
         with self._lock:
@@ -408,10 +422,14 @@ class Machine:
         self.log.log(INFO, f"job {job.number}: checking {job.name!r} ({job.sha256[:12]})")
         start_mm = self._start_mm()
         offsets = None if job.manual_move else self.work_offsets.table
+        config = self.tools.job_config(self.config)  # the tool table in force for this job
         try:
-            checked = check_in_child(path, self.config, offsets, start_mm, job.from_line,
+            checked = check_in_child(path, config, offsets, start_mm, job.from_line,
                                      lambda: job.cancel is not None, self._beat)
             job.approach_mm = checked.approach_mm
+            if checked.probe_lines and self.drive.probe_input() is None:
+                refuse_probes(path, checked.probe_lines, f"the {self.config.drive.backend} "
+                              "drive has no probe input")
         except CheckCancelled:
             with self._lock:
                 self._cancelled(job)
@@ -428,9 +446,13 @@ class Machine:
             if self._cancelled(job):
                 return
             job.start_mm = start_mm
-            job.runtime = Runtime(path, self.config, replace(
-                self._options(job), offsets=offsets, from_line=job.from_line,
-                override_off_lines=checked.override_off_lines))
+            job.tool_changes = checked.io_events
+            options = replace(self._options(job), offsets=offsets, from_line=job.from_line,
+                              override_off_lines=checked.override_off_lines)
+            # G38: a stretch per probe on the daemon's drive (runtime/probe_run.py)
+            job.runtime = ProbeRun(path, config, options, self.drive, checked.probe_lines,
+                                   lambda e: self._probed(job, e)) if checked.probe_lines \
+                else Runtime(path, config, options)
             job.runtime.set_feed_override(self.feed_override_pct)
             self.journal.start(job.name, job.sha256, job.lines)
             self._beat()
@@ -441,6 +463,11 @@ class Machine:
         if result.outcome is Outcome.DONE and not job.manual_move:
             self.work_offsets.store(checked.table, f"left by {job.name}")
         self._record(job, result)
+
+    def _probed(self, job: Job, event: dict[str, Any]) -> None:
+        """A probe's result: on the job's connection and in `status` (`last_probe`)."""
+        self.last_probe = event
+        job.emit(event)
 
     def _approach(self, job: Job, start_mm: tuple[float, float, float]) -> bool:
         """Run from line: the straight move (Z up first, then XY, then Z down, on a mill) to
@@ -493,6 +520,8 @@ class Machine:
                 base.on_progress(p)
             event = progress_event(p)
             job.emit(event)
+            for io in tool_change_at(job.tool_changes, p, job.emitted_lines):
+                job.emit(io)
             self.publish("progress", event)
         return replace(base, drive=self.drive, keep_drive_open=True, on_progress=progress,
                        start_mm=job.start_mm, optional_stop=job.optional_stop)
@@ -528,12 +557,14 @@ class Machine:
     def status(self) -> dict[str, Any]:
         with self._lock:
             job, p = self.job, (self.job.progress if self.job else None)
-            state = self.state.value
+            state, out_tool = self.state.value, None
             if p is not None and p.state is MotionState.PAUSED and self.state is State.RUNNING:
                 state = "PAUSED"  # at a program pause (M0): `cncctl resume` continues
+                out_tool = tool_prompt(job.tool_changes, p.line)  # type: ignore[union-attr]
             if p is not None and p.state is MotionState.HELD and self.state is State.RUNNING:
                 state = "HELD"  # feed hold (or 0 % override): `cncctl resume` continues
             out: dict[str, Any] = {"state": state, "fault": self.fault,
+                                   "tool_change": out_tool,
                                    "program": job.name if job else None,
                                    "job": job.number if job else None}
             # On the approach of a run from line N: N, not the approach's own lines.
@@ -551,6 +582,7 @@ class Machine:
         out["last_homing"] = self.last_homing
         out["last_job"] = self.last_job
         out["last_identify"] = self.last_identify
+        out["last_probe"] = self.last_probe  # G38: line, code, tripped, trip_mm, stop_mm
         out["state_problems"] = list(self.state_problems)
         out["scheduling"] = self.scheduling
         return out

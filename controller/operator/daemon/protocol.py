@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from typing import Any
 
 MAX_LINE_BYTES = 64 * 1024  # any request line
 MAX_PROGRAM_BYTES = 64 * 1024 * 1024  # the program text that follows a run request
 COMMANDS = frozenset({"status", "run", "abort", "estop", "reset", "log", "subscribe",
-                      "resume", "hold", "feed", "home", "jog", "offset", "identify"})
+                      "resume", "hold", "feed", "home", "jog", "offset", "identify",
+                      "tool"})
 MAX_FEED_OVERRIDE_PCT = 150.0
 TOPICS = frozenset({"state", "progress", "log"})
 
@@ -217,7 +219,27 @@ def _check_identify(request: Request) -> None:
         raise ProtocolError("bad-field", "from_mm must map axis letters to numbers")
 
 
-_CHECKS = {"offset": _check_offset, "run": _check_run, "log": _check_log,
+def _check_tool(request: Request) -> None:
+    """`tool`: list, set (tool, pocket, length_mm, diameter_mm, comment) or delete (tool)."""
+    _known(request, {"action", "tool", "pocket", "length_mm", "diameter_mm", "comment"})
+    f = request.fields
+    if f.get("action") not in ("list", "set", "delete"):
+        raise ProtocolError("bad-field", "action must be list, set or delete")
+    if f["action"] != "list" and "tool" not in f:
+        raise ProtocolError("bad-field", f"{f['action']} needs tool")
+    for key in ("tool", "pocket"):
+        if isinstance(f.get(key, 1), bool) or not isinstance(f.get(key, 1), int):
+            raise ProtocolError("bad-field", f"{key} must be an integer")
+    for key in ("length_mm", "diameter_mm"):
+        value = f.get(key, 0.0)
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or not math.isfinite(value):
+            raise ProtocolError("bad-field", f"{key} must be a number")
+    if not isinstance(f.get("comment", ""), str) or len(f.get("comment", "")) > 200:
+        raise ProtocolError("bad-field", "comment must be a text of at most 200 characters")
+
+
+_CHECKS = {"tool": _check_tool, "offset": _check_offset, "run": _check_run, "log": _check_log,
            "subscribe": _check_subscribe, "feed": _check_feed, "home": _check_home,
            "jog": _check_jog, "identify": _check_identify}
 

@@ -276,9 +276,10 @@ class Server:
             self.machine.identify(request.fields, rid, self.emitter(conn))
         elif cmd == "offset":
             f = request.fields
-            table = self.machine.offset(f["action"], f.get("system"), f.get("values", {}),
-                                        f.get("here", False))
-            self._send(conn, reply_ok(rid, offsets=table))
+            self._send(conn, reply_ok(rid, offsets=self.machine.offset(
+                f["action"], f.get("system"), f.get("values", {}), f.get("here", False))))
+        elif cmd == "tool":  # list, set, delete (daemon/tool_store.py)
+            self._send(conn, reply_ok(rid, **self.machine.tool(request.fields)))
         elif cmd == "feed":
             self.machine.feed(float(request.fields["percent"]))
             self._send(conn, reply_ok(rid, feed_override_pct=self.machine.feed_override_pct))

@@ -25,10 +25,13 @@ from controller.operator.client import (
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
 from controller.operator.run.exit_codes import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
 from controller.operator.run.from_line import HomingAborted, Sequence, run_from_line
+from controller.operator.run.io_announce import ToolChanges
 from controller.operator.run.keys import KeyControl, read_keys, stdin_fd
+from controller.operator.run.probing import run_probing
 from controller.operator.run.remote import run_on_daemon
 from controller.operator.run.view import JsonView, PlainView, ProgramLines, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
+from controller.tools import ToolTableError, load_tool_table
 from drivers.errors import DriveUnavailableError
 
 
@@ -46,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --from-line: do not ask before the approach")
     parser.add_argument("--offsets", metavar="FILE",
                         help="embedded runs: work offset table (JSON) in force")
+    parser.add_argument("--tools", metavar="TBL",
+                        help="embedded runs: tool table (LinuxCNC tool.tbl) in force, in place "
+                             "of the config's tools.table_file")
     parser.add_argument("--optional-stop", action="store_true",
                         help="M1 pauses like M0 (optional stop on)")
     parser.add_argument("--virtual-time", action="store_true",
@@ -75,20 +81,29 @@ def _view(args: argparse.Namespace, path: str) -> Any:
 class _Announcer:
     """Says once per standstill (M0 pause, feed hold) how to continue; passes progress on."""
 
-    def __init__(self, inner: Any, keys: KeyControl) -> None:
+    def __init__(self, inner: Any, keys: KeyControl, tools: ToolChanges | None = None) -> None:
         self.inner, self.keys, self.last = inner, keys, MotionState.WAITING
+        self.tools = tools
 
     def progress(self, p: MotionProgress) -> None:
         self.keys.progress(p)
         if p.state is not self.last and p.state is MotionState.PAUSED:
-            print(f"cncctl: paused at line {p.line} (M0): press Enter to resume, Ctrl-C to "
-                  "stop", file=sys.stderr, flush=True)
+            change = None if self.tools is None else self.tools.prompt(p.line)
+            print(f"cncctl: {change or f'paused at line {p.line} (M0)'}: press Enter to "
+                  "resume, Ctrl-C to stop", file=sys.stderr, flush=True)
+            if self.tools is not None:
+                self.tools.at_pause(p)
         elif p.state is not self.last and p.state is MotionState.HELD:
             where = " ".join(f"{n}{v:.3f}" for n, v in zip("XYZ", p.position_mm, strict=False))
             print(f"cncctl: held at line {p.line}, {where}: press space or Enter to resume",
                   file=sys.stderr, flush=True)
         self.last = p.state
         self.inner(p)
+
+
+def _event_to(view: Any) -> Any:
+    """An I/O event dict (controller/io_events.py) out through the view's event line."""
+    return lambda e: view.event(e["event"], **{k: v for k, v in e.items() if k != "event"})
 
 
 def _daemon_socket(args: argparse.Namespace) -> str | None:
@@ -109,6 +124,7 @@ _NOT_THROUGH_DAEMON = (
     ("drive_option", "--drive-option", "the daemon's drive is set in its config"),
     ("home", "--home", "home through the daemon first: `cncctl home`"),
     ("offsets", "--offsets", "the daemon keeps its own table: `cncctl offset`"),
+    ("tools", "--tools", "the daemon keeps its own tool table: `cncctl tool`"),
 )
 
 
@@ -135,12 +151,15 @@ def run(args: argparse.Namespace) -> int:
             return EXIT_REJECTED if isinstance(exc, NoDaemon) else 3
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
+        if args.tools is not None:
+            config = replace(config, tools=config.tools.with_table(
+                load_tool_table(args.tools, missing_ok=False)))
         offsets = load_offsets(args.offsets, missing_ok=False) \
             if args.offsets is not None else None
         track = ProgramOffsets()
         check_program(args.program, config, offsets=offsets, from_line=args.from_line,
                       track=track, summary=False)
-    except (NcError, ConfigError, OffsetsError) as exc:
+    except (NcError, ConfigError, OffsetsError, ToolTableError) as exc:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
     needs_homing = any(a.homing is not None for a in config.axes) and not config.allow_unhomed
@@ -157,12 +176,15 @@ def run(args: argparse.Namespace) -> int:
     # where it stands (read from the drive opened once for the run), not from X0 Y0, which
     # faulted the second run ("reference starts at 0 but the machine is at 5") or, for a
     # G0 X0 Y0, reported done with nothing moved. The simulated card starts at 0 when opened.
-    shared_drive = args.from_line is not None or args.home or config.drive.backend != "sim"
+    probing = track.probes.seen  # G38 lines: a stretch per probe (run/probing.py)
+    shared_drive = args.from_line is not None or args.home or config.drive.backend != "sim" \
+        or bool(probing)
     if shared_drive:
         runtime = Sequence()
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
                                                   flush=True), abort_at_pause_without_keys=True)
-    options = replace(options, on_progress=_Announcer(view.progress, keys).progress)
+    tools = ToolChanges(track.io_events, _event_to(view))
+    options = replace(options, on_progress=_Announcer(view.progress, keys, tools).progress)
     if not shared_drive:
         runtime.options = options
     fd = stdin_fd()
@@ -188,6 +210,9 @@ def run(args: argparse.Namespace) -> int:
                    drive=config.drive.backend, virtual_time=args.virtual_time)
         if not shared_drive:
             result = runtime.run()
+        elif probing:
+            result = run_probing(args, config, offsets, options, runtime, probing,
+                                 _event_to(view))
         else:
             result = run_from_line(args, config, offsets, options, runtime, start_keys)
             if result is None:

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from controller.io_events import EVENT_KINDS
 from controller.operator.client import (
     DaemonClient,
     DaemonError,
@@ -113,6 +114,8 @@ def _follow(client: DaemonClient, view: Any, keys: KeyControl) -> int:
             return EXIT_REJECTED
         if kind == "start":
             view.event("start", **{k: v for k, v in event.items() if k != "event"})
+        elif kind in EVENT_KINDS:  # tool changes, probe results (controller/io_events.py)
+            view.event(kind, **{k: v for k, v in event.items() if k != "event"})
         elif kind == "progress":
             p = progress_from_event(event)
             keys.progress(p)

@@ -1,0 +1,16 @@
+"""Machine I/O events of a run (tool changes, probe results) as the dicts `run --json` prints."""
+
+from __future__ import annotations
+
+from typing import Any
+
+EVENT_KINDS = ("tool", "probe")
+
+
+def io_event(kind: str, t_s: float | None, line: int, **what: Any) -> dict[str, Any]:
+    """One event: `{"event": kind, "t_s": ..., "line": ..., **what}`. t_s is the run's time
+    (s since its start) when the machine got there; None while only the interpreter knows it."""
+    if kind not in EVENT_KINDS:
+        raise ValueError(f"unknown I/O event {kind!r} (one of {', '.join(EVENT_KINDS)})")
+    return {"event": kind, "t_s": None if t_s is None else round(float(t_s), 4),
+            "line": int(line), **what}

@@ -1,0 +1,194 @@
+"""Runs with probes (G38.2-G38.5): the program in stretches that each end at a probe.
+
+A probe ends its move where the probe trips, so nothing after it can be planned before it has
+run: the interpreter reads no further than a probe without its result (a barrier,
+controller/probe.py), the stretch runs, the motion loop watches the probe input on the probe's
+line and, once it trips, stops along the path at Amax (the abort's stop). The next stretch
+reads the program again from its first line with the results known and yields from the line
+after the probe on, from where the machine came to rest; #5061-#5063 and #5070 are set there.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+from controller.config import MachineConfig
+from controller.io_events import io_event
+from controller.motion.loop import ESTOP_KEEP_FRAMES
+from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
+from controller.probe import ProbeResult, ProbeResults
+from controller.runtime.processes import Runtime, RuntimeOptions
+from drivers.base import Drive
+
+TRIPPED_BY_PROBE = "the probe tripped"
+
+
+class ProbeWatch:
+    """Watches the probe input while the motion loop executes a probe's line (`lines`: line ->
+    G38.x). On the trip it notes the encoder position and asks the stop along the path."""
+
+    def __init__(self, lines: dict[int, str], drive: Drive, config: MachineConfig,
+                 start_mm: tuple[float, float, float]) -> None:
+        self.lines, self.drive, self.config, self.start_mm = lines, drive, config, start_mm
+        self.line: int | None = None  # the probe line reached in this stretch
+        self.tripped = False
+        self.trip_mm: tuple[float, float, float] | None = None
+        self.error: str | None = None
+
+    def wrap(self, inner: Callable[[], str | None],
+             controller: Callable[[], Any]) -> Callable[[], str | None]:
+        """The runtime's watch (dead processes) with the probe watched after it."""
+        def watch() -> str | None:
+            problem = inner()
+            if problem is None:
+                self._check(controller())
+            return problem
+        return watch
+
+    def _check(self, ctrl: Any) -> None:
+        if ctrl is None or self.tripped or self.error is not None:
+            return
+        line = ctrl.figures.line
+        code = self.lines.get(line)
+        if code is None:
+            return
+        contact = self.drive.probe_input()
+        toward = code in ("G38.2", "G38.3")
+        if contact is None:
+            self._fail(ctrl, f"line {line}: {code}: the drive has no probe input")
+        elif self.line is None and contact == toward:  # LinuxCNC refuses it at the start
+            self.line = line
+            self._fail(ctrl, f"line {line}: {code}: the probe is already "
+                             f"{'in contact' if toward else 'out of contact'}")
+        elif contact == toward:
+            self.line, self.tripped = line, True
+            self.trip_mm = self._encoder_mm(ctrl)
+            _take_back(ctrl)
+            ctrl.request_abort(f"{TRIPPED_BY_PROBE} at line {line}")
+        else:
+            self.line = line
+
+    def _fail(self, ctrl: Any, message: str) -> None:
+        self.error = message
+        ctrl.request_abort(message)
+
+    def _encoder_mm(self, ctrl: Any) -> tuple[float, float, float]:
+        """Where the encoders were when the trip was seen (machine mm, Z of the start on a
+        table without Z)."""
+        xyz = list(self.start_mm)
+        enc = ctrl.figures.last_enc
+        for i, axis in enumerate(self.config.axes):
+            xyz["xyz".index(axis.name)] = float(enc[i]) * axis.pulse_mm
+        return xyz[0], xyz[1], xyz[2]
+
+
+def _take_back(ctrl: Any) -> None:
+    """The frames the card has queued beyond a couple are taken back (where the drive can), as
+    the e-stop does: the abort's stop along the path at Amax then starts about 2 ms after the
+    trip, not behind the whole card FIFO (100 ms of the probe's feed further on)."""
+    at_rest = ctrl.sent_eos or ctrl.pausing or ctrl.pending_tail is not None
+    if ctrl.state in (MotionState.WAITING, MotionState.RUNNING) and not at_rest:
+        ctrl.stream.take_back(ctrl.drive, ctrl.drive.fifo_level(), ESTOP_KEEP_FRAMES)
+
+
+class ProbeRun:
+    """The whole program, a stretch (a Runtime) per probe, on `drive` (open, kept open):
+    operator requests go to the stretch now running (the override to every one), an abort
+    asked between two stretches stops the next at once; every probe's result goes to
+    on_event as a `probe` event. Used as a Runtime is (run, request_*, controller)."""
+
+    def __init__(self, path: str, config: MachineConfig, options: RuntimeOptions,
+                 drive: Drive, lines: dict[int, str],
+                 on_event: Callable[[dict[str, Any]], None]) -> None:
+        self.path, self.config, self.drive, self.lines = path, config, drive, lines
+        self.on_event = on_event
+        self.clock = _RunClock(options.on_progress)  # one time line over the stretches
+        self.options = replace(options, on_progress=self.clock.progress
+                               if options.on_progress else None)
+        self.current: Runtime | None = None
+        self.abort: str | None = None
+        self.override_pct = 100.0
+
+    @property
+    def controller(self) -> Any:
+        return self.current.controller if self.current is not None else None
+
+    def request_abort(self, message: str = "aborted by operator") -> None:
+        self.abort = message
+        if self.current is not None:
+            self.current.request_abort(message)
+
+    def request_hold(self) -> None:
+        if self.current is not None:
+            self.current.request_hold()
+
+    def request_resume(self) -> None:
+        if self.current is not None:
+            self.current.request_resume()
+
+    def set_feed_override(self, percent: float) -> None:
+        self.override_pct = percent
+        if self.current is not None:
+            self.current.set_feed_override(percent)
+
+    def run(self) -> MotionResult:
+        results = ProbeResults(barrier=True)
+        start = self.drive.commanded_xyz_mm()
+        from_line = None
+        last_line = _line_count(self.path)
+        while True:
+            watch = ProbeWatch(self.lines, self.drive, self.config, start)
+            runtime = Runtime(self.path, self.config, replace(
+                self.options, drive=self.drive, keep_drive_open=True,
+                start_mm=self.options.start_mm or start, from_line=from_line,
+                probes=ProbeResults(dict(results.by_line), barrier=True), probe_watch=watch))
+            runtime.set_feed_override(self.override_pct)
+            self.current = runtime
+            if self.abort is not None:
+                runtime.request_abort(self.abort)
+            result = runtime.run()
+            t_s = self.clock.stretch_done(runtime)
+            if watch.line is None or watch.error is not None \
+                    or result.outcome is Outcome.FAULT \
+                    or (result.outcome is Outcome.ABORTED and not watch.tripped):
+                return result
+            stop = self.drive.commanded_xyz_mm()
+            line, code = watch.line, self.lines[watch.line]
+            probe = ProbeResult(line, watch.tripped, watch.trip_mm or stop, stop)
+            results.by_line[line] = probe
+            self.on_event(io_event("probe", t_s, line, code=code, **{
+                k: v for k, v in probe.describe().items() if k != "line"}))
+            if not probe.tripped and code in ("G38.2", "G38.4"):
+                return replace(result, outcome=Outcome.ABORTED, message=(
+                    f"line {line}: {code}: the probe move ended without "
+                    f"{'making' if code == 'G38.2' else 'losing'} contact"))
+            if line >= last_line:
+                return replace(result, outcome=Outcome.DONE, message="")
+            from_line = line + 1
+
+
+class _RunClock:
+    """The run's time over its stretches: each runtime's clock starts at 0, so progress is
+    passed on with the time of the stretches before it added (a view that paces its reports
+    by time would hold them back otherwise), and events are timed on the same line."""
+
+    def __init__(self, inner: Callable[[MotionProgress], None] | None) -> None:
+        self.inner = inner
+        self.before_s = 0.0
+
+    def progress(self, p: MotionProgress) -> None:
+        if self.inner is not None:
+            self.inner(replace(p, elapsed_s=p.elapsed_s + self.before_s))
+
+    def stretch_done(self, runtime: Runtime) -> float:
+        """The run's time at the end of this stretch."""
+        ctrl = runtime.controller
+        self.before_s += ctrl.pacer.elapsed_s() if ctrl is not None else 0.0
+        return self.before_s
+
+
+def _line_count(path: str) -> int:
+    with open(path, "rb") as fh:
+        return sum(1 for _ in fh)

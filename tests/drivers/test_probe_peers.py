@@ -1,0 +1,47 @@
+"""G38 on the backends with a simulated peer in its own process: the serial card's probe
+input (an io bit of its status frame, docs/serial-protocol.md)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+from test_serial_card import CLI, LINK_S, REPO
+from test_serial_card import peer as serial_peer
+
+
+def test_a_probe_on_the_serial_card_through_its_peer_process(tmp_path: Path) -> None:
+    program = tmp_path / "probe.nc"
+    program.write_text("G21 G90 F300\nG38.2 X20\nG91 G0 X-2\nG90 G0 X#5061\nM2\n")
+    with serial_peer("probe_workpiece_mm=10,-50,-50,50,50,50") as (port, _):
+        done = subprocess.run([*CLI, "run", str(program), "--config", "serial", "--json",
+                               "--drive-option", f"port={port}", "--drive-option",
+                               f"link_timeout_s={LINK_S}"], capture_output=True, text=True,
+                              timeout=120, stdin=subprocess.DEVNULL, cwd=REPO)
+    events = [json.loads(line) for line in done.stdout.splitlines()]
+    assert done.returncode == 0, done.stderr
+    (probe,) = [e for e in events if e["event"] == "probe"]
+    trip_x, stop_x = probe["trip_mm"][0], probe["stop_mm"][0]
+    # the face at X10, seen within a few status periods of the link and the servo's lag
+    assert probe["tripped"] and 9.95 < trip_x <= 10.05
+    # The card cannot give back the frames it has queued (up to the high-water mark, 100 ms):
+    # the stop at Amax starts behind them, so the overtravel is at most those at F300 (5 mm/s),
+    # a couple of cycles and the stop distance.
+    assert 0.0 <= stop_x - trip_x < 5.0 * (0.100 + 0.020) + 2 * 5.0**2 / (2 * 2450.0)
+    # G91 X-2 from the stop point, then G0 X#5061: the trip point, as the program reads it
+    assert events[-1]["final_position_mm"]["x"] == pytest.approx(trip_x, abs=0.0011)
+
+
+def test_a_serial_card_without_contact_ends_a_g38_2_as_an_error(tmp_path: Path) -> None:
+    program = tmp_path / "probe.nc"
+    program.write_text("G21 G90 F600\nG38.2 X5\nM2\n")
+    with serial_peer() as (port, _):
+        done = subprocess.run([*CLI, "run", str(program), "--config", "serial",
+                               "--drive-option", f"port={port}", "--drive-option",
+                               f"link_timeout_s={LINK_S}"], capture_output=True, text=True,
+                              timeout=120, stdin=subprocess.DEVNULL, cwd=REPO)
+    assert done.returncode == 4
+    assert "line 2: G38.2: the probe move ended without making contact" in done.stderr \
+        + done.stdout

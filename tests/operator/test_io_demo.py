@@ -1,0 +1,61 @@
+"""nc_programs/io_demo.nc checks clean on the mill with its tools, and is refused without them."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+from daemon_helpers import CNCCTL, REPO
+
+DEMO = REPO / "nc_programs" / "io_demo.nc"
+MILL = str(REPO / "config" / "xyz_mill.yaml")
+
+
+def test_io_demo_checks_with_its_tools_and_names_a_missing_one(tmp_path: Path) -> None:
+    tools = tmp_path / "tool.tbl"
+    tools.write_text("T1 P1 Z5 D6 ;6 mm end mill\n")
+    missing = subprocess.run([*CNCCTL, "check", str(DEMO), "--config", MILL, "--tools",
+                              str(tools)], capture_output=True, text=True, timeout=60)
+    assert missing.returncode == 2 and ":21:" in missing.stderr
+    assert "T2 is not in the tool table" in missing.stderr
+    tools.write_text("T1 P1 Z5 D6 ;6 mm end mill\nT2 P2 Z12 D3 ;3 mm drill\n")
+    done = subprocess.run([*CNCCTL, "check", str(DEMO), "--config", MILL, "--tools",
+                           str(tools), "--json"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout)
+    assert summary["blocks"]["ProbeBlock"] == 1 and summary["blocks"]["StopBlock"] == 3
+    # the probe's whole move, with T1's length: down to Z-30 + 5 in machine coordinates
+    assert summary["extents_mm"]["z"][0] == -25.0
+
+
+def test_io_demo_runs_on_the_sim_card_with_its_tool_changes_and_probe(tmp_path: Path) -> None:
+    tools = tmp_path / "tool.tbl"
+    tools.write_text("T1 P1 Z5 D6\nT2 P2 Z12 D3\n")
+    proc = subprocess.Popen([*CNCCTL, "run", str(DEMO), "--config", MILL, "--tools", str(tools),
+                     "--drive-option", "probe_workpiece_mm=-50,-50,-50,50,50,0",
+                     "--virtual-time", "--json"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE, text=True)
+    events = []
+    try:
+        assert proc.stdout is not None and proc.stdin is not None
+        for line in proc.stdout:
+            event = json.loads(line)
+            if event["event"] != "progress":
+                events.append(event)
+            if event["event"] == "tool":  # the operator puts the tool in and confirms
+                proc.stdin.write("\n")
+                proc.stdin.flush()
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    kinds = [(e["event"], e.get("line")) for e in events]
+    assert kinds == [("start", None), ("tool", 7), ("probe", 13), ("tool", 21), ("done", 25)]
+    tool1, probe, tool2 = events[1], events[2], events[3]
+    assert (tool1["tool"], tool1["length_mm"], tool2["tool"], tool2["length_mm"]) == (1, 0, 2, 12)
+    assert tool1["t_s"] < probe["t_s"] < tool2["t_s"]  # one time line over the stretches
+    assert probe["tripped"] and -0.05 < probe["trip_mm"][2] <= 0.0  # the face at machine Z0
+    # the program's last Z: G0 Z20 with T2's length 12 in force
+    assert events[-1]["final_position_mm"] == {"x": 25.0, "y": 25.0, "z": 32.0}
