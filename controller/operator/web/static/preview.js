@@ -32,14 +32,8 @@ class PathPreview {
       if (this.trail.length > 20000) this.trail.splice(0, 10000);
     }
     this.canvas.dataset.tool = x.toFixed(3) + "," + y.toFixed(3);
-    this.canvas.dataset.cut = String(this.cutPieces());
+    this.canvas.dataset.cut = String(this.trail.length);  // tool positions drawn as cut
     this.dirty = true;
-  }
-
-  cutPieces() {
-    let n = 0;
-    for (const p of this.pieces) if (p.line < this.cutLine) n++;
-    return n;
   }
 
   transform() {
