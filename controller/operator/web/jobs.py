@@ -77,7 +77,7 @@ class Jobs:
                 if kind == "start":
                     job["state"] = "RUNNING"
                 if kind in FINAL_EVENTS:
-                    job["state"] = kind
+                    job["state"], job["result"] = kind, event
                     message = event.get("message") or None
                     job["message"] = mdi.user_message(message) if mdi_lines and message \
                         else message
@@ -90,7 +90,7 @@ class Jobs:
             await link.close()
         if entry is not None:
             entry["state"], entry["message"] = job["state"], job["message"]
-        self.notify("job", {**job, "final": True})
+        self.notify("job", {**job, "final": True})  # with the daemon's final event (result)
         self.notify("queue", {"queue": self.queue})
 
     # -- MDI ---------------------------------------------------------------------------------

@@ -68,6 +68,7 @@ function onMessage(m) {
 const fmt = (v) => (v === undefined || v === null) ? "-" : v.toFixed(3);
 
 function showStatus(s) {
+  if (status.seq === undefined) performance.mark("first-status");  // the panel's load time
   status = s;
   const st = $("state"); st.textContent = s.state; st.className = "state " + s.state;
   $("alarm").textContent = s.fault || (s.estop_input ? "e-stop input open" : "");
