@@ -17,9 +17,11 @@ PUSH_PERIOD_S = 0.04  # 25 Hz: the status poll's period while no job reports pro
 BUSY_POLL_PERIOD_S = 0.25  # during a job (its progress events carry position and line)
 PROGRESS_FRESH_S = 0.1  # progress this recent: the job reports, polling slows down
 LOG_KEPT = 200
+# what the 25 Hz push carries (the last job and homing are in the job events and the log):
+# about 1 kB a push, to each of 20 tablets
 STATUS_KEYS = ("state", "fault", "program", "job", "line", "feed_mm_s", "ferror_um",
                "feed_override_pct", "position_mm", "work_position_mm", "drives",
-               "estop_input", "homed", "offsets", "last_job", "last_homing", "outputs")
+               "estop_input", "homed", "offsets", "outputs")
 # a job's motion states that the daemon's status reports as states of their own
 _MOTION_STATES = {"paused": "PAUSED", "held": "HELD"}
 
