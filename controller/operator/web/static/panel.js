@@ -75,6 +75,7 @@ function showStatus(s) {
   $("estop").classList.toggle("latched", s.state === "ESTOP");
   const m = s.position_mm || {}, w = s.work_position_mm || {};
   for (const a of ["x", "y", "z"]) { $("dro-m" + a).textContent = fmt(m[a]); $("dro-w" + a).textContent = fmt(w[a]); }
+  $("dro-mz").parentElement.hidden = m.z === undefined;  // an X-Y table has no Z row
   $("feed").textContent = ((s.feed_mm_s || 0) * 60).toFixed(0);
   $("line").textContent = s.line ?? "-";
   $("ferror").textContent = (s.ferror_um || 0).toFixed(1);
@@ -91,7 +92,8 @@ function showStatus(s) {
 
 function addLog(e) {
   const li = document.createElement("li");
-  li.className = "p" + e.priority; li.textContent = (e.time || "") + " " + e.message;
+  const when = typeof e.time === "number" ? new Date(e.time * 1000).toLocaleTimeString() : (e.time || "");
+  li.className = "p" + e.priority; li.textContent = when + " " + e.message;
   const log = $("log"); log.prepend(li);
   while (log.children.length > 200) log.lastChild.remove();
 }
