@@ -187,3 +187,17 @@ def test_the_http_keys_are_read_strictly() -> None:
         with pytest.raises(ConfigError) as exc:
             parse_config(data, "m.yaml")
         assert exc.value.key.startswith("service.http")
+
+
+def test_the_page_ships_with_a_plain_install() -> None:
+    """Every file the server serves is package data (a non-editable install has them)."""
+    import fnmatch
+    import tomllib
+
+    from controller.operator.web.app import STATIC
+
+    patterns = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"][
+        "package-data"]["controller.operator.web"]
+    for name in STATIC:
+        assert (REPO / "controller" / "operator" / "web" / "static" / name).is_file()
+        assert any(fnmatch.fnmatch(f"static/{name}", p) for p in patterns), name

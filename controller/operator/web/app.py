@@ -52,14 +52,17 @@ class Session:
         self.wake.set()
 
     async def sender(self) -> None:
-        while not self.ws.closed and not self.dropped:
-            await self.wake.wait()
-            self.wake.clear()
-            while self.events:
-                await self.ws.send_str(self.events.popleft())
-            if self.status is not None:
-                text, self.status = self.status, None
-                await self.ws.send_str(text)
+        try:
+            while not self.ws.closed and not self.dropped:
+                await self.wake.wait()
+                self.wake.clear()
+                while self.events:
+                    await self.ws.send_str(self.events.popleft())
+                if self.status is not None:
+                    text, self.status = self.status, None
+                    await self.ws.send_str(text)
+        except (ConnectionError, RuntimeError):
+            pass  # the peer went away: the handler's loop ends and cleans up
         await self.ws.close()
 
 
