@@ -98,6 +98,7 @@ def bench_panel(tmp: Path, program: Path, clients: int, runs: int) -> dict[str, 
     with running_cncd(tmp, "--config", CONFIG, "--http", f"127.0.0.1:{port}",
                       name="web") as daemon:
         panel_pid = children_of(daemon.proc.pid)[0]
+        idle = idle_cpu(panel_pid, daemon.proc.pid)
         reset(daemon.socket_path)
         data = program.read_bytes()
         asyncio.run(_upload(base, program.name, data))
@@ -109,7 +110,16 @@ def bench_panel(tmp: Path, program: Path, clients: int, runs: int) -> dict[str, 
             row["cncd_cpu_pct"] = 100 * (cpu_s(daemon.proc.pid) - c_d) / row["wall_s"]
             rows.append(row)
         load = panel_load(base)
-    return {"rows": rows, "load_ms": load}
+    return {"rows": rows, "load_ms": load, "idle": idle}
+
+
+def idle_cpu(panel_pid: int, daemon_pid: int, seconds: float = 10.0) -> tuple[float, float]:
+    """CPU % of the panel and of cncd, idle, with no WebSocket open."""
+    time.sleep(1.0)
+    c_web, c_d, t0 = cpu_s(panel_pid), cpu_s(daemon_pid), time.monotonic()
+    time.sleep(seconds)
+    wall = time.monotonic() - t0
+    return 100 * (cpu_s(panel_pid) - c_web) / wall, 100 * (cpu_s(daemon_pid) - c_d) / wall
 
 
 async def _upload(base: str, name: str, data: bytes) -> None:
@@ -189,6 +199,8 @@ def main() -> None:
     for r in plain:
         print(f"  without the panel: {r['state']}, cncd CPU {r['cncd_cpu_pct']:.1f} %, "
               f"underruns {r['underruns']}, late cycles {r['late_cycles']}")
+    print(f"  idle, no WebSocket open: panel CPU {panel['idle'][0]:.1f} %, cncd CPU "
+          f"{panel['idle'][1]:.1f} %")
     if panel["load_ms"]:
         loads = panel["load_ms"]
         print(f"  panel load (navigation to the first status shown), headless Chromium: median "

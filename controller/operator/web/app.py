@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import asyncio
 import json
+import time
 from collections import deque
 from importlib import resources
 from typing import Any
 
 from aiohttp import WSMsgType, web
 
+from controller.operator.client import DaemonError, DaemonUnavailable
 from controller.operator.web import guard
 from controller.operator.web.library import MAX_PROGRAM_BYTES, LibraryError
 from controller.operator.web.openapi import openapi
@@ -21,6 +23,7 @@ MAX_REQUEST_BYTES = 1 << 20  # any request but an upload; any WebSocket message
 MAX_QUEUED_MESSAGES = 1000  # events owed to one WebSocket beyond which it is dropped
 AUTH_TIMEOUT_S = 10.0
 MAX_CALLS_IN_FLIGHT = 16  # per WebSocket
+STATUS_FRESH_S = 0.1  # GET /api/status polls the daemon when its status is older
 STATIC = ("index.html", "panel.js", "panel.css", "preview.js")
 HEADERS = {"X-Content-Type-Options": "nosniff", "X-Frame-Options": "DENY",
            "Referrer-Policy": "no-referrer", "Cache-Control": "no-store",
@@ -106,7 +109,17 @@ async def static_file(request: web.Request) -> web.StreamResponse:
 
 
 async def get_status(request: web.Request) -> web.Response:
-    return web.json_response(request.app[API].bridge.status)
+    bridge = request.app[API].bridge
+    if time.monotonic() - bridge.polled_s > STATUS_FRESH_S and not app_watched(request.app):
+        try:  # nobody keeps the push going: ask the daemon now
+            await bridge.poll()
+        except (DaemonError, DaemonUnavailable):
+            pass
+    return web.json_response(bridge.status)
+
+
+def app_watched(app: web.Application) -> bool:
+    return bool(app[SESSIONS])
 
 
 async def get_openapi(request: web.Request) -> web.Response:

@@ -14,6 +14,7 @@ from controller.operator.client import DaemonError, DaemonUnavailable
 from controller.operator.web.daemon_link import DaemonLink
 
 PUSH_PERIOD_S = 0.04  # 25 Hz: the status poll's period while no job reports progress
+UNWATCHED_POLL_PERIOD_S = 1.0  # no WebSocket open: nobody sees a push (GET /api/status polls)
 BUSY_POLL_PERIOD_S = 0.25  # during a job (its progress events carry position and line)
 PROGRESS_FRESH_S = 0.1  # progress this recent: the job reports, polling slows down
 LOG_KEPT = 200
@@ -48,6 +49,8 @@ class Bridge:
         self._progress_s = 0.0
         self._daemon_state = "UNKNOWN"
         self._tasks: list[asyncio.Task[None]] = []
+        self.watched: Callable[[], bool] = lambda: True  # is anyone subscribed to the push
+        self.polled_s = 0.0
 
     async def start(self) -> None:
         self.sub = await DaemonLink(self.socket_path, self._event).open()
@@ -73,6 +76,7 @@ class Bridge:
 
     async def poll(self) -> None:
         reply = await self.request("status")
+        self.polled_s = time.monotonic()
         self._daemon_state = reply["state"]
         fresh = time.monotonic() - self._progress_s < PROGRESS_FRESH_S
         for key in STATUS_KEYS:
@@ -88,7 +92,10 @@ class Bridge:
     async def _poll_loop(self) -> None:
         while True:
             fresh = time.monotonic() - self._progress_s < PROGRESS_FRESH_S
-            await asyncio.sleep(BUSY_POLL_PERIOD_S if fresh else PUSH_PERIOD_S)
+            if not self.watched():
+                await asyncio.sleep(UNWATCHED_POLL_PERIOD_S)
+            else:
+                await asyncio.sleep(BUSY_POLL_PERIOD_S if fresh else PUSH_PERIOD_S)
             try:
                 await self.poll()
             except DaemonError:

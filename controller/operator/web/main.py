@@ -66,7 +66,7 @@ def settings(args: argparse.Namespace) -> tuple[str, int, str | None]:
 async def serve(args: argparse.Namespace, host: str, port: int, token: str | None) -> int:
     from aiohttp import web
 
-    from controller.operator.web.app import distribute, make_app
+    from controller.operator.web.app import app_watched, distribute, make_app
     from controller.operator.web.bridge import Bridge
     from controller.operator.web.jobs import Jobs
     from controller.operator.web.rpc import Api
@@ -80,6 +80,7 @@ async def serve(args: argparse.Namespace, host: str, port: int, token: str | Non
     jobs = Jobs(bridge, library, MdiSession(config), notify)
     app = make_app(Api(bridge, jobs, library, config), token)
     app_holder.append(app)
+    bridge.watched = lambda: app_watched(app)
     bridge.listeners.add(notify)
     runner = web.AppRunner(app, access_log=None)
     await runner.setup()
