@@ -45,6 +45,13 @@ def _die_with_parent(parent_pid: int | None) -> None:
         raise SystemExit(1)
 
 
+def _ordinary_priority() -> None:
+    """The panel inherits nice -10 from cncd's socket thread: back to 0, below the socket
+    loop and a job's interpreter and generator, which it must never hold up."""
+    if os.getpriority(os.PRIO_PROCESS, 0) < 0:
+        os.setpriority(os.PRIO_PROCESS, 0, 0)
+
+
 def settings(args: argparse.Namespace) -> tuple[str, int, str | None]:
     """(host, port, token); SystemExit naming the problem when the panel may not start."""
     try:
@@ -104,6 +111,7 @@ async def serve(args: argparse.Namespace, host: str, port: int, token: str | Non
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     _die_with_parent(args.parent_pid)
+    _ordinary_priority()
     host, port, token = settings(args)
     try:
         return asyncio.run(serve(args, host, port, token))
