@@ -189,6 +189,7 @@ async def websocket(request: web.Request) -> web.WebSocketResponse:
         return ws
     session = Session(ws)
     app[SESSIONS].add(session)
+    api.bridge.wake.set()
     sender = asyncio.create_task(session.sender())
     session.push("status", json.dumps({"jsonrpc": "2.0", "method": "status",
                                        "params": api.bridge.status}))

@@ -51,6 +51,7 @@ class Bridge:
         self._tasks: list[asyncio.Task[None]] = []
         self.watched: Callable[[], bool] = lambda: True  # is anyone subscribed to the push
         self.polled_s = 0.0
+        self.wake = asyncio.Event()
 
     async def start(self) -> None:
         self.sub = await DaemonLink(self.socket_path, self._event).open()
@@ -92,10 +93,13 @@ class Bridge:
     async def _poll_loop(self) -> None:
         while True:
             fresh = time.monotonic() - self._progress_s < PROGRESS_FRESH_S
-            if not self.watched():
-                await asyncio.sleep(UNWATCHED_POLL_PERIOD_S)
-            else:
-                await asyncio.sleep(BUSY_POLL_PERIOD_S if fresh else PUSH_PERIOD_S)
+            period = (UNWATCHED_POLL_PERIOD_S if not self.watched() else
+                      BUSY_POLL_PERIOD_S if fresh else PUSH_PERIOD_S)
+            try:  # a WebSocket opening wakes it: its push starts at 25 Hz at once
+                await asyncio.wait_for(self.wake.wait(), period)
+            except TimeoutError:
+                pass
+            self.wake.clear()
             try:
                 await self.poll()
             except DaemonError:

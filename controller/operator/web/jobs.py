@@ -19,6 +19,7 @@ from controller.operator.web.library import Library
 FINAL_EVENTS = ("rejected", "done", "fault", "aborted")
 MAX_QUEUE = 100
 JOG_LEASE_S = 0.5  # a continuous jog not renewed this long is stopped (the page went away)
+MDI_SETTLE_S = 2.0  # an MDI line waits this long at most for the last one's modes
 JOG_TIMEOUT_S = 60.0  # the daemon's own time-out: a jog ends even if this process dies
 
 
@@ -37,6 +38,7 @@ class Jobs:
         self.jog_until_s = 0.0
         self._jog_lock = asyncio.Lock()
         self._lease_task: asyncio.Task[None] | None = None
+        self._mdi_task: asyncio.Task[None] | None = None  # following the last MDI job
 
     async def run(self, name: str, text: bytes, mdi_lines: list[str] | None = None,
                   entry: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -54,6 +56,8 @@ class Jobs:
         job = {"job": reply["job"], "name": name, "state": "CHECKING", "message": None}
         self.last_job = job
         task = asyncio.create_task(self._follow(link, events, job, mdi_lines, entry))
+        if mdi_lines is not None:
+            self._mdi_task = task
         self._followers.add(task)
         task.add_done_callback(self._followers.discard)
         return job
@@ -96,6 +100,11 @@ class Jobs:
     # -- MDI ---------------------------------------------------------------------------------
     async def mdi(self, text: object) -> dict[str, Any]:
         lines = mdi.check_text(text)
+        last = self._mdi_task
+        if last is not None and not last.done():
+            # The daemon says IDLE just before the job's final event, whose modes the next
+            # line needs; a job still running after this is refused `busy` by the daemon.
+            await asyncio.wait({last}, timeout=MDI_SETTLE_S)
         return await self.run(mdi.JOB_NAME, self.session.job_text(lines), mdi_lines=lines)
 
     # -- the queue ---------------------------------------------------------------------------
