@@ -66,6 +66,7 @@ def test_a_job_pushed_at_25_hz_held_resumed_done(tmp_path: Path) -> None:
             assert len(idle) >= 0.9 * 20 * 0.9, len(idle)  # >= 20 Hz idle too (timer-based)
             assert (await ws.call("reset"))["result"]["state"] == "IDLE"
             await ws.call("feed", percent=50)  # a longer run, to hold it midway
+            seen = len(ws.pushed)
             job = (await ws.call("run", name="naca.nc"))["result"]
             assert job["job"] >= 1
             moving = await ws.wait_for(lambda s: s.get("source") == "progress"
@@ -81,9 +82,12 @@ def test_a_job_pushed_at_25_hz_held_resumed_done(tmp_path: Path) -> None:
             assert ws.statuses()[-1]["work_position_mm"] == held["work_position_mm"]
             await ws.call("resume")
             await ws.wait_for(lambda s: s["state"] == "IDLE", timeout_s=30)
-            finals = [m["params"] for _, m in ws.pushed
-                      if m["method"] == "job" and m["params"].get("final")]
-            assert finals and finals[-1]["state"] == "done", finals
+            deadline = time.monotonic() + 10
+            while not (finals := [m["params"] for _, m in ws.pushed[seen:]
+                                  if m["method"] == "job" and m["params"].get("final")]):
+                assert time.monotonic() < deadline, "no final job event"
+                await asyncio.sleep(0.02)
+            assert finals[0]["state"] == "done", finals
             await ws.call("feed", percent=100)
 
     with web_cncd(tmp_path) as (daemon, base):
