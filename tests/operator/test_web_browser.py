@@ -63,7 +63,8 @@ def until(what: Callable[[], Any], timeout_s: float = 20.0, why: str = "") -> An
 
 
 def panel_says(driver: Any) -> str:
-    return f"state {text(driver, 'state')}, message {text(driver, 'message')!r}"
+    return (f"state {text(driver, 'state')}, message {text(driver, 'message')!r}, "
+            f"{text(driver, 'conn')}, log {text(driver, 'log')[:300]!r}")
 
 
 def text(driver: Any, element_id: str) -> str:

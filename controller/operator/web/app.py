@@ -181,7 +181,8 @@ async def preview(request: web.Request) -> web.Response:
 
 
 async def websocket(request: web.Request) -> web.WebSocketResponse:
-    ws = web.WebSocketResponse(max_msg_size=MAX_REQUEST_BYTES, heartbeat=2.0)
+    # a silent peer is dropped after about 15 s (a continuous jog does not wait: its lease)
+    ws = web.WebSocketResponse(max_msg_size=MAX_REQUEST_BYTES, heartbeat=10.0)
     await ws.prepare(request)
     app, api = request.app, request.app[API]
     if not await _authenticate(ws, app[TOKEN]):

@@ -5,12 +5,13 @@ status is pushed to every listener at 25 Hz or more."""
 from __future__ import annotations
 
 import asyncio
+import sys
 import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from controller.operator.client import DaemonError, DaemonUnavailable
+from controller.operator.client import DaemonUnavailable
 from controller.operator.web.daemon_link import DaemonLink
 
 PUSH_PERIOD_S = 0.04  # 25 Hz: the status poll's period while no job reports progress
@@ -102,10 +103,12 @@ class Bridge:
             self.wake.clear()
             try:
                 await self.poll()
-            except DaemonError:
-                continue
             except DaemonUnavailable:
-                return
+                if self.cmd is None or self.cmd.closed.is_set():
+                    return  # the daemon hung up: gone() ends the panel
+            except Exception as exc:  # noqa: BLE001  (the push must outlive any one reply)
+                print(f"<4>web panel: status poll: {type(exc).__name__}: {str(exc)[:200]}",
+                      file=sys.stderr, flush=True)
 
     def _event(self, event: dict[str, Any]) -> None:
         kind = event.get("event")

@@ -25,6 +25,8 @@ function connect() {
   ws.onmessage = (e) => onMessage(JSON.parse(e.data));
   ws.onclose = (e) => {
     $("conn").textContent = "disconnected";
+    // what the page shows is no longer live: said plainly, never left as RUNNING or IDLE
+    $("state").textContent = "OFFLINE"; $("state").className = "state OFFLINE";
     stopJogLocally();
     for (const [, p] of pending) p.reject(new Error("connection closed"));
     pending.clear();
