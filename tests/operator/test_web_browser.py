@@ -52,14 +52,15 @@ def panel(tmp_path: Path) -> Iterator[tuple[Any, Any, str]]:
             driver.quit()
 
 
-def until(what: Callable[[], Any], timeout_s: float = 20.0, why: str = "") -> Any:
+def until(what: Callable[[], Any], timeout_s: float = 20.0,
+          why: str | Callable[[], str] = "") -> Any:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         value = what()
         if value:
             return value
         time.sleep(0.02)
-    raise AssertionError(f"not within {timeout_s} s: {why}")
+    raise AssertionError(f"not within {timeout_s} s: {why() if callable(why) else why}")
 
 
 def panel_says(driver: Any) -> str:
@@ -106,16 +107,16 @@ def test_upload_run_hold_resume_done_and_estop(panel: tuple[Any, Any, str],
     until(lambda: driver.find_element(By.ID, "preview").get_attribute("data-tool") != first[1],
           why="the live tool moves on the preview")
     until(lambda: int(driver.find_element(By.ID, "preview").get_attribute("data-cut")) > 5,
-          timeout_s=5, why="the part cut so far drawn apart (the tool's trail)")
+          why=lambda: f"the part cut so far drawn apart (the tool's trail; {panel_says(driver)})")
     screenshot(driver, "panel-running.png", tmp_path)
     driver.find_element(By.ID, "hold").click()
-    until(state_is(driver, "HELD"), why=f"held ({panel_says(driver)})")
+    until(state_is(driver, "HELD"), why=lambda: f"held ({panel_says(driver)})")
     held = text(driver, "dro-wx")
     time.sleep(0.5)
     assert text(driver, "dro-wx") == held, "the DRO moved while held"
     driver.find_element(By.ID, "resume").click()
     until(state_is(driver, "IDLE"), timeout_s=60,
-          why=f"the job ends ({panel_says(driver)}, {daemon.status()['state']})")
+          why=lambda: f"the job ends ({panel_says(driver)}, {status(daemon)['state']})")
     until(lambda: "naca2415.nc: done" in text(driver, "message"), why="done is said")
     assert daemon.status()["last_job"]["state"] == "DONE"
     driver.execute_script("const o = document.getElementById('override'); o.value = 100;"
