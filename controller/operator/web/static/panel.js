@@ -78,6 +78,7 @@ function showStatus(s) {
   const m = s.position_mm || {}, w = s.work_position_mm || {};
   for (const a of ["x", "y", "z"]) { $("dro-m" + a).textContent = fmt(m[a]); $("dro-w" + a).textContent = fmt(w[a]); }
   $("dro-mz").parentElement.hidden = m.z === undefined;  // an X-Y table has no Z row
+  for (const b of document.querySelectorAll(".jog[data-axis='z']")) b.hidden = m.z === undefined;
   $("feed").textContent = ((s.feed_mm_s || 0) * 60).toFixed(0);
   $("line").textContent = s.line ?? "-";
   $("ferror").textContent = (s.ferror_um || 0).toFixed(1);
