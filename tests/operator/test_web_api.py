@@ -123,10 +123,33 @@ def test_mdi_keeps_modes_and_is_checked_first(tmp_path: Path) -> None:
             assert busy["error"]["data"]["reason"] == "busy"
             await ws.call("abort")
             await ws.wait_for(lambda s: s["state"] == "IDLE")
+            await ws.call("feed", percent=100)
+            await queue_job_by_job(ws)
 
     with web_cncd(tmp_path) as (_, base):
         run(http("POST", base + "/api/programs/naca.nc", data=NACA))
+        run(http("POST", base + "/api/programs/step.nc", data=b"G91 G1 X1 F1200\nM2\n"))
         run(scenario(base))
+
+
+async def queue_job_by_job(ws) -> None:  # noqa: ANN001
+    """Two queued jobs, each started by hand; a name not in the library is refused."""
+    assert (await ws.call("queue.add", name="nosuch.nc"))["error"]["data"]["reason"] == \
+        "not-found"
+    first = (await ws.call("queue.add", name="step.nc"))["result"]
+    second = (await ws.call("queue.add", name="step.nc"))["result"]
+    x0 = ws.statuses()[-1]["position_mm"]["x"]
+    for n, entry in enumerate((first, second), start=1):
+        started = (await ws.call("queue.start_next"))["result"]
+        assert started["entry"]["id"] == entry["id"]
+        await ws.wait_for(lambda s, n=n: s["state"] == "IDLE"
+                          and abs(s["position_mm"]["x"] - (x0 + n)) < 1e-3)
+        await asyncio.sleep(1.0)  # nothing starts the next job but the operator
+        assert ws.statuses()[-1]["position_mm"]["x"] == pytest.approx(x0 + n, abs=1e-3)
+    queue = (await ws.call("queue.list"))["result"]["queue"]
+    assert [e["state"] for e in queue] == ["done", "done"]
+    assert (await ws.call("queue.start_next"))["error"]["data"]["reason"] == "empty"
+    assert (await ws.call("queue.clear_finished"))["result"]["queue"] == []
 
 
 def test_continuous_jog_stops_when_the_connection_drops_or_the_lease_runs_out(
