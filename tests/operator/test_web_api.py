@@ -244,3 +244,16 @@ def test_the_panel_lives_and_dies_with_cncd(tmp_path: Path) -> None:
         daemon.proc.send_signal(signal.SIGTERM)
         assert daemon.proc.wait(timeout=20) == 0
         assert not running(panel[0], wait_s=2.0)
+
+
+def test_the_config_can_ask_for_the_panel(tmp_path: Path) -> None:
+    from daemon_helpers import running_cncd
+    from web_helpers import free_port
+
+    port = free_port()
+    config = tmp_path / "mill.yaml"
+    config.write_text((REPO / "config" / "xy_table.yaml").read_text()
+                      + f'\nservice:\n  http: "127.0.0.1:{port}"\n')
+    with running_cncd(tmp_path, "--config", str(config)):
+        status, body = run(http("GET", f"http://127.0.0.1:{port}/api/status"))
+        assert status == 200 and body["state"] == "ESTOP"
