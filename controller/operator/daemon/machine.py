@@ -24,7 +24,7 @@ from controller.motion.realtime import realtime_threads
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
 from controller.operator.daemon import identify_run, manual
 from controller.operator.daemon.check_process import CheckCancelled, check_in_child
-from controller.operator.daemon.job import PROGRESS_EVERY_S, Emit, Job, State, progress_event
+from controller.operator.daemon.job import Emit, Job, State, progress_event
 from controller.operator.daemon.journal import Journal
 from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.offset_store import OffsetStore
@@ -490,8 +490,7 @@ class Machine:
             job.emit(event)
             self.publish("progress", event)
         return replace(base, drive=self.drive, keep_drive_open=True, on_progress=progress,
-                       start_mm=job.start_mm, optional_stop=job.optional_stop,
-                       settings={"progress_every_s": PROGRESS_EVERY_S, **base.settings})
+                       start_mm=job.start_mm, optional_stop=job.optional_stop)
 
     def _record(self, job: Job, result: MotionResult, line: int | None = None) -> None:
         """The job's result into the journal, the log and its connection; line: the program

@@ -20,6 +20,7 @@ from controller.motion.realtime import probe_scheduling, realtime_threads, servi
 from controller.operator.client import default_socket_path, estop_socket_path
 from controller.operator.daemon.access import AccessPolicy, bind_socket, socket_gid
 from controller.operator.daemon.estop_socket import EstopSocket
+from controller.operator.daemon.job import PROGRESS_EVERY_S
 from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.notify import run_watchdog, sd_notify
@@ -27,6 +28,7 @@ from controller.operator.daemon.protocol import ProtocolError
 from controller.operator.daemon.server import Server
 from controller.operator.daemon.web_process import WebProcess, WebProcessError, check_listen
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
+from controller.runtime.processes import RuntimeOptions
 
 STOP_TIMEOUT_S = 20.0  # SIGTERM: the running job's controlled stop must end within this
 SERVER_STALL_S = 1.0  # the socket loop silent this long: unhealthy (no WATCHDOG=1)
@@ -79,6 +81,11 @@ def _lock_memory(log: EventLog) -> None:
                            "for fewer latency spikes")
 
 
+def _job_options() -> RuntimeOptions:
+    """A job's progress every PROGRESS_EVERY_S (the web panel's 25 Hz status push)."""
+    return RuntimeOptions(settings={"progress_every_s": PROGRESS_EVERY_S})
+
+
 class Daemon:
     def __init__(self, config: MachineConfig, socket_path: str, state_dir: Path,
                  log: EventLog) -> None:
@@ -92,7 +99,8 @@ class Daemon:
         with realtime_threads():  # the drive's threads (card clock, link) as the motion thread
             self.drive.open()
         self.server: Server | None = None
-        self.machine = Machine(config, self.drive, state_dir, log, self._publish)
+        self.machine = Machine(config, self.drive, state_dir, log, self._publish,
+                               runtime_options=_job_options)
         self.machine.scheduling = sched.as_dict()
         self.web: WebProcess | None = None
         self.failed = False  # the web panel asked for did not start
