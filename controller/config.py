@@ -12,6 +12,7 @@ import yaml
 
 from controller.backends import BUILTIN_BACKENDS, backend_names
 from controller.errors import ConfigError
+from controller.http_listen import ListenError, parse_listen
 from controller.servo_poles import pole_problem
 from controller.tools import ToolsConfig, read_tools_section
 from controller.yaml_strict import Section, StrictLoader
@@ -128,6 +129,8 @@ class ServiceConfig:
     allowed_users: tuple[str, ...] = ()
     max_connections: int = 64
     log_events: int = 1000  # kept in memory for `cncctl log`
+    http: str | None = None  # the web panel's HOST:PORT (controller/http_listen.py), or none
+    http_token_file: str | None = None  # the API token; required beyond the loopback
 
 
 @dataclass(frozen=True, slots=True)
@@ -290,9 +293,21 @@ def _read_service(sec: Section) -> ServiceConfig:
         allowed_users=sec.names("allowed_users"),
         max_connections=sec.int("max_connections", 64, minval=4, maxval=4096),
         log_events=sec.int("log_events", 1000, minval=10, maxval=1_000_000),
+        http=_http_listen(sec), http_token_file=sec._raw("http_token_file", None),
     )
+    if cfg.http_token_file is not None and not (isinstance(cfg.http_token_file, str)
+                                                and cfg.http_token_file.startswith("/")):
+        raise ConfigError(sec.path, sec._key("http_token_file"), "must be an absolute path")
     sec.finish()
     return cfg
+
+
+def _http_listen(sec: Section) -> str | None:
+    text = sec._raw("http", None)
+    try:
+        return None if text is None else (parse_listen(text) and text)
+    except ListenError as exc:
+        raise ConfigError(sec.path, sec._key("http"), str(exc)) from None
 
 
 def parse_config(data: Any, path: str) -> MachineConfig:

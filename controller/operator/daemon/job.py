@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import enum
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -14,6 +15,9 @@ from controller.runtime.probe_run import ProbeRun
 from controller.runtime.processes import Runtime
 
 Emit = Callable[[dict[str, Any]], None]
+# A job's progress every 40 ms (the motion loop's own default is 0.1 s): the web panel's
+# status push runs at 25 Hz from these events (docs/api.md).
+PROGRESS_EVERY_S = 0.04
 
 
 class State(enum.StrEnum):
@@ -55,4 +59,7 @@ def progress_event(p: MotionProgress) -> dict[str, Any]:
             "fifo_ms": round(p.fifo_ms, 1), "elapsed_s": round(p.elapsed_s, 3),
             "executed_s": round(p.executed_s, 3), "planned_s": p.planned_s,
             "override_pct": p.override_pct, "position_mm": list(p.position_mm),
-            "work_origin_mm": list(p.work_origin_mm)}
+            "work_origin_mm": list(p.work_origin_mm),
+            # when the motion loop reported it (CLOCK_MONOTONIC, one clock for the whole
+            # machine): a client on the same PC measures its latency from the loop
+            "t_mono": round(time.monotonic(), 6)}

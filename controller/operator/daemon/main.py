@@ -20,12 +20,15 @@ from controller.motion.realtime import probe_scheduling, realtime_threads, servi
 from controller.operator.client import default_socket_path, estop_socket_path
 from controller.operator.daemon.access import AccessPolicy, bind_socket, socket_gid
 from controller.operator.daemon.estop_socket import EstopSocket
+from controller.operator.daemon.job import PROGRESS_EVERY_S
 from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.notify import run_watchdog, sd_notify
 from controller.operator.daemon.protocol import ProtocolError
 from controller.operator.daemon.server import Server
+from controller.operator.daemon.web_process import WebProcess, WebProcessError, check_listen
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
+from controller.runtime.processes import RuntimeOptions
 
 STOP_TIMEOUT_S = 20.0  # SIGTERM: the running job's controlled stop must end within this
 SERVER_STALL_S = 1.0  # the socket loop silent this long: unhealthy (no WATCHDOG=1)
@@ -44,6 +47,12 @@ def build_parser() -> argparse.ArgumentParser:
     state_default = default_state_dir().replace("%", "%%")
     ap.add_argument("--socket", help=f"control socket (default: {socket_default})")
     ap.add_argument("--state-dir", help=f"job journal (default: {state_default})")
+    ap.add_argument("--http", metavar="HOST:PORT",
+                    help="serve the web panel and its API there (default: service.http; "
+                         "127.0.0.1 when HOST is left out)")
+    ap.add_argument("--http-token-file", help="the API token (default: "
+                                              "service.http_token_file); needed beyond the "
+                                              "loopback")
     add_drive_option_argument(ap)
     return ap
 
@@ -72,6 +81,11 @@ def _lock_memory(log: EventLog) -> None:
                            "for fewer latency spikes")
 
 
+def _job_options() -> RuntimeOptions:
+    """A job's progress every PROGRESS_EVERY_S (the web panel's 25 Hz status push)."""
+    return RuntimeOptions(settings={"progress_every_s": PROGRESS_EVERY_S})
+
+
 class Daemon:
     def __init__(self, config: MachineConfig, socket_path: str, state_dir: Path,
                  log: EventLog) -> None:
@@ -85,8 +99,31 @@ class Daemon:
         with realtime_threads():  # the drive's threads (card clock, link) as the motion thread
             self.drive.open()
         self.server: Server | None = None
-        self.machine = Machine(config, self.drive, state_dir, log, self._publish)
+        self.machine = Machine(config, self.drive, state_dir, log, self._publish,
+                               runtime_options=_job_options)
         self.machine.scheduling = sched.as_dict()
+        self.web: WebProcess | None = None
+        self.failed = False  # the web panel asked for did not start
+
+    def _start_web(self) -> None:
+        """Off the socket loop, which the panel needs to answer it; READY=1 once it serves."""
+        assert self.web is not None
+        try:
+            self.web.start()
+        except WebProcessError as exc:
+            self.log.log(ERR, f"cncd: cannot start: {exc}")
+            self.failed = True
+            self.stop.set()
+            return
+        self._ready()
+        # This thread lives as long as the panel: the kernel's parent-death signal, which
+        # stops the panel if cncd dies, follows the thread that started it.
+        self.web.wait()
+
+    def _ready(self) -> None:
+        sd_notify(f"READY=1\nSTATUS={self.machine.state.value}\nMAINPID={os.getpid()}")
+        self.log.log(NOTICE, f"ready on {self.socket_path} ({self.config.name}, drive "
+                             f"{self.config.drive.backend}); state {self.machine.state.value}")
 
     def _publish(self, topic: str, event: dict) -> None:
         if self.server is not None:
@@ -109,12 +146,15 @@ class Daemon:
         estop.start()
         threading.Thread(target=run_watchdog, args=(self._healthy, self.stop, self._unhealthy),
                          name="watchdog", daemon=True).start()
-        sd_notify(f"READY=1\nSTATUS={self.machine.state.value}\nMAINPID={os.getpid()}")
-        self.log.log(NOTICE, f"ready on {self.socket_path} ({self.config.name}, drive "
-                             f"{self.config.drive.backend}); state {self.machine.state.value}")
+        if self.web is not None:
+            threading.Thread(target=self._start_web, name="web-start", daemon=True).start()
+        else:
+            self._ready()
         try:
             self.server.serve(self._keep_going)
         finally:
+            if self.web is not None:
+                self.web.stop()
             estop.close()
             listener.close()
             try:
@@ -173,7 +213,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         state_dir.mkdir(mode=0o750, parents=True, exist_ok=True)
         _lock_memory(log)
+        http = args.http or config.service.http
+        token_file = args.http_token_file or config.service.http_token_file
+        if http:  # before the drive is opened: a panel that may not serve stops everything
+            check_listen(http, token_file)
         daemon = Daemon(config, socket_path, state_dir, log)
+        if http:
+            daemon.web = WebProcess(http, token_file, socket_path, state_dir, args.config, log)
     except (CncError, OSError, ProtocolError) as exc:
         log.log(ERR, f"cncd: cannot start: {exc}")
         return 1
@@ -190,11 +236,13 @@ def main(argv: list[str] | None = None) -> int:
             log.log(ERR, f"cncd: internal error: {type(exc).__name__}: {str(exc)[:200]}")
             reason = "internal error"
         daemon.machine.terminate(f"daemon stopping ({reason})")
+        if daemon.web is not None:
+            daemon.web.stop()
         daemon.close()
         return 1
     daemon.close()
     log.log(NOTICE, "stopped")
-    return 0
+    return 1 if daemon.failed else 0
 
 
 if __name__ == "__main__":
