@@ -12,7 +12,7 @@ import yaml
 
 from controller.backends import BUILTIN_BACKENDS, backend_names
 from controller.errors import ConfigError
-from controller.http_listen import ListenError, parse_listen
+from controller.service_config import ServiceConfig, read_service
 from controller.servo_poles import pole_problem
 from controller.tools import ToolsConfig, read_tools_section
 from controller.yaml_strict import Section, StrictLoader
@@ -118,19 +118,6 @@ class InterpolatorConfig:
 class DriveConfig:
     backend: str
     options: tuple[tuple[str, Any], ...] = ()
-
-
-@dataclass(frozen=True, slots=True)
-class ServiceConfig:
-    """Who may use cncd's control socket, and its limits (the `service` section, optional)."""
-
-    socket_group: str | None = None  # group of the socket file (default: the daemon's own)
-    allowed_groups: tuple[str, ...] = ()  # besides root, the daemon's user and socket group
-    allowed_users: tuple[str, ...] = ()
-    max_connections: int = 64
-    log_events: int = 1000  # kept in memory for `cncctl log`
-    http: str | None = None  # the web panel's HOST:PORT (controller/http_listen.py), or none
-    http_token_file: str | None = None  # the API token; required beyond the loopback
 
 
 @dataclass(frozen=True, slots=True)
@@ -283,33 +270,6 @@ def _read_runtime(sec: Section) -> RuntimeConfig:
     return cfg
 
 
-def _read_service(sec: Section) -> ServiceConfig:
-    group = sec._raw("socket_group", None)
-    if group is not None and not (isinstance(group, str) and group):
-        raise ConfigError(sec.path, sec._key("socket_group"), "must be a group name")
-    cfg = ServiceConfig(
-        socket_group=group,
-        allowed_groups=sec.names("allowed_groups"),
-        allowed_users=sec.names("allowed_users"),
-        max_connections=sec.int("max_connections", 64, minval=4, maxval=4096),
-        log_events=sec.int("log_events", 1000, minval=10, maxval=1_000_000),
-        http=_http_listen(sec), http_token_file=sec._raw("http_token_file", None),
-    )
-    if cfg.http_token_file is not None and not (isinstance(cfg.http_token_file, str)
-                                                and cfg.http_token_file.startswith("/")):
-        raise ConfigError(sec.path, sec._key("http_token_file"), "must be an absolute path")
-    sec.finish()
-    return cfg
-
-
-def _http_listen(sec: Section) -> str | None:
-    text = sec._raw("http", None)
-    try:
-        return None if text is None else (parse_listen(text) and text)
-    except ListenError as exc:
-        raise ConfigError(sec.path, sec._key("http"), str(exc)) from None
-
-
 def parse_config(data: Any, path: str) -> MachineConfig:
     """Build a MachineConfig from parsed YAML; any mistake is a ConfigError naming the key."""
     top = Section(data, path, "")
@@ -332,7 +292,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         interpolator=_read_interpolator(top.section("interpolator")),
         drive=_read_drive(top.section("drive")),
         runtime=_read_runtime(top.section("runtime", {})),
-        service=_read_service(top.section("service", {})),
+        service=read_service(top.section("service", {})),
         allow_unhomed=top.bool("allow_unhomed", False),
         tools=read_tools_section(top.section("tools", {}), tuple(a.name for a in axes),
                                  tuple(a.travel_mm for a in axes)),
