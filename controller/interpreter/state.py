@@ -18,6 +18,7 @@ from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
 from controller.interpreter.line_state import LineState
 from controller.interpreter.modal import Modal
 from controller.interpreter.moves import MAX_BLOCK_S, Moves
+from controller.interpreter.params import Parameters
 from controller.interpreter.work_offsets import AXIS_CODES, WorkOffsets
 from controller.offsets import OffsetTable, ProgramOffsets
 
@@ -59,6 +60,7 @@ class InterpState:
                                    config.has_axis("z"), config.name)
         self.moves = Moves(self.modal, self.offsets, config, path, self.out)
         self.track = track
+        self.params = Parameters()
         self.spindle_rpm = 0.0
         self.spindle_on = False
         self.spindle_code = 5  # M3, M4 or M5
