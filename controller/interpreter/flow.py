@@ -96,6 +96,7 @@ class Flow:
         self.subs: dict[str, int] = {}  # label -> line of its `sub`
         self.frames: list[_Frame] = [_Frame(None, 0, 0)]
         self.total_passes = 0
+        self._closed: set[int] = set()  # lines of if/while/do/repeat whose end was found
 
     def run(self, ow: OWord, lineno: int, raw: str) -> None:
         self.cursor.keep_from(lineno, raw)
@@ -147,6 +148,13 @@ class Flow:
             n += 1
         wanted = " or ".join(f"O{ow.label} {k.lower()}" for k in sorted(keywords))
         raise self._error(ow, lineno, f"{ow.name} without {wanted} after it")
+
+    def _closes(self, ow: OWord, lineno: int, keyword: str) -> None:
+        """An if, while, do or repeat must have its end in the file, even when it is never
+        reached (LinuxCNC refuses such a program too); found once per line."""
+        if lineno not in self._closed:
+            self._find(ow, lineno, {keyword})
+            self._closed.add(lineno)
 
     def _pass(self, ow: OWord, lineno: int, loop: _Loop) -> None:
         loop.passes += 1
@@ -212,6 +220,7 @@ class Flow:
 
     # ---- if ---------------------------------------------------------------------------------
     def _if(self, ow: OWord, lineno: int) -> None:
+        self._closes(ow, lineno, "ENDIF")
         n = lineno
         cond = self._value(ow, lineno, "a condition")
         while cond == 0.0:
@@ -236,6 +245,8 @@ class Flow:
         loops = self.frames[-1].loops
         loop = loops.get(ow.label)
         cond = self._value(ow, lineno, "a condition")
+        if loop is None or loop.kind != "DO":
+            self._closes(ow, lineno, "ENDWHILE")
         if loop is not None and loop.kind == "DO" and loop.start < lineno:  # do ... while
             if cond != 0.0:
                 self._pass(ow, lineno, loop)
@@ -256,9 +267,11 @@ class Flow:
         self.cursor.jump(self._loop(ow, lineno).start)  # the while line tests again
 
     def _do(self, ow: OWord, lineno: int) -> None:
+        self._closes(ow, lineno, "WHILE")
         self.frames[-1].loops[ow.label] = _Loop("DO", lineno)
 
     def _repeat(self, ow: OWord, lineno: int) -> None:
+        self._closes(ow, lineno, "ENDREPEAT")
         count = round(self._value(ow, lineno, "a count"))
         if count <= 0:
             end, _ = self._find(ow, lineno, {"ENDREPEAT"})

@@ -14,7 +14,9 @@ from controller.blocks import (
 )
 from controller.config import MachineConfig
 from controller.errors import NcError
+from controller.interpreter.canned import CYCLES, CannedCycles
 from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
+from controller.interpreter.homes import HOME_CODES, HomePositions
 from controller.interpreter.line_state import LineState
 from controller.interpreter.modal import Modal
 from controller.interpreter.moves import MAX_BLOCK_S, Moves
@@ -33,6 +35,8 @@ _USES: dict[int, frozenset[str]] = {
     0: _AXES, 10: _AXES, 20: _AXES | set("IJRP") | {"K"}, 30: _AXES | set("IJRP") | {"K"},
     52: frozenset("XYZPL"), 62: frozenset("XYZRKPQ"), 40: frozenset("P"),
     640: frozenset("PQ"), 430: frozenset("H"), 100: _AXES | set("LPR"), 920: _AXES,
+    280: _AXES, 300: _AXES,
+    **{code: _AXES | set("RLPQ") for code in CYCLES},
 }
 _ALWAYS = frozenset("FST")
 _FAST_MOTIONS = frozenset((0, 10, 20, 30))
@@ -61,6 +65,9 @@ class InterpState:
         self.moves = Moves(self.modal, self.offsets, config, path, self.out)
         self.track = track
         self.params = Parameters()
+        self.cycles = CannedCycles(self.modal, self.moves, path)
+        self.homes = HomePositions(self.modal, self.moves, self.params)
+        self.plane = 170  # G17
         self.spindle_rpm = 0.0
         self.spindle_on = False
         self.spindle_code = 5  # M3, M4 or M5
@@ -82,11 +89,13 @@ class InterpState:
             self.mark(self.mark_pending)
         if not ms and len(gs) <= 1 and self.fast(gs[0] if gs else -1, vals, lineno):
             return
+        if 800 in gs and len(gs) > 1:
+            gs = _drop_g80(gs)
         groups = _groups(gs, G_GROUP, g_name)
         mgroups = _groups(ms, M_GROUP, lambda m: f"M{m}")
         motion = groups.get("motion")
         nonmodal = groups.get("non-modal")
-        axis_code = nonmodal in AXIS_CODES
+        axis_code = nonmodal in AXIS_CODES or nonmodal in HOME_CODES
         if axis_code and motion is not None and motion != 800:
             raise WordError(g_name(nonmodal), f"{g_name(nonmodal)} and {g_name(motion)} both "
                                               f"use axis words: put them on separate lines")
@@ -96,11 +105,16 @@ class InterpState:
         self._feed_speed_tool(vals, ms, mgroups, lineno)
         if nonmodal == 40:
             self._dwell(vals, lineno)
+        elif nonmodal in HOME_CODES:
+            self.homes.run(nonmodal, vals, lineno)
         elif nonmodal is not None and nonmodal != 530:
             self.offsets.apply(nonmodal, vals, self.modal.pos, self.modal.scale)
         if axis_code:
             if motion is not None:
                 moves.move(motion, {}, lineno)  # G80: cancels the motion mode
+        elif (motion if motion is not None else self.modal.motion) in CYCLES:
+            if motion is not None or not _AXES.isdisjoint(vals):
+                self._cycle(motion if motion is not None else self.modal.motion, vals, lineno)
         elif motion is not None or not _AXES.isdisjoint(vals):
             if nonmodal == 530:
                 self._need_straight(motion)
@@ -135,6 +149,14 @@ class InterpState:
         self.moves.move(code if code >= 0 else None, vals, lineno)
         return True
 
+    def _cycle(self, code: int, vals: dict[str, float], lineno: int) -> None:
+        if self.plane != 170:
+            raise WordError(g_name(code), f"{g_name(code)}: canned cycles run in the XY plane "
+                                          f"(G17) only")
+        new = self.modal.motion != code
+        self.modal.motion = code
+        self.cycles.run(code, vals, lineno, new)
+
     def _src(self, lineno: int) -> Source:
         return Source(self.path, lineno, lineno)
 
@@ -165,6 +187,10 @@ class InterpState:
                        f"block that starts at line {first}; run from line {first}")
 
     def _modes(self, groups: dict[str, int], vals: dict[str, float]) -> None:
+        if "plane" in groups:
+            self.plane = groups["plane"]
+        if "canned return" in groups:
+            self.cycles.retract_to_r = groups["canned return"] == 990
         if "units" in groups:
             self.modal.scale = MM_PER_INCH if groups["units"] == 200 else 1.0
         if "distance" in groups:
@@ -263,6 +289,13 @@ class InterpState:
             raise NcError(self.path, nurbs.first_line, 1, "G5.2",
                           "G5.2 NURBS block not closed by G5.3 before the end of the program")
         self.moves.end_nurbs()
+
+
+def _drop_g80(gs: list[int]) -> list[int]:
+    """`G0 G80` (the common safety line): another motion code on the line cancels the cycle
+    anyway, so LinuxCNC accepts both; G80 is dropped and the other code is in force."""
+    others = [g for g in gs if g != 800 and G_GROUP.get(g) == "motion"]
+    return [g for g in gs if g != 800] if others else gs
 
 
 def _groups(codes: list[int], table: dict[int, str], name) -> dict[str, int]:  # noqa: ANN001
