@@ -61,6 +61,25 @@ M_GROUP: dict[int, str] = {
     48: "override", 49: "override",
 }
 
+# M codes that posts for other controllers write; refused like every unknown M code (LinuxCNC
+# refuses them too), since what they do there may move the machine or need an answer.
+M_OTHER: dict[int, str] = {
+    25: "Centroid: move Z to its home position",
+    40: "Mach3: open a probe log; Fanuc and Haas: a gear range",
+    41: "Mach3: close the probe log; Fanuc and Haas: a gear range",
+    98: "Fanuc: call a subprogram (here: O100 call)",
+    99: "Fanuc: return from a subprogram (here: O100 endsub)",
+}
+
+
+def m_refusal(number: float) -> str:
+    """Why an M code is refused: unknown here, and what it means elsewhere when it is known."""
+    name = f"M{number:g}"
+    other = M_OTHER.get(int(number)) if number == int(number) else None
+    if other is None:
+        return f"{name} is not supported"
+    return f"{name} is not supported: an M code of other controllers ({other})"
+
 
 def g_name(code10: int) -> str:
     """G61.1 for 611, G1 for 10."""

@@ -21,6 +21,7 @@ from controller.interpreter.codes import (
     WordError,
     g_code10,
     g_name,
+    m_refusal,
 )
 from controller.interpreter.flow import Flow, LineCursor
 from controller.interpreter.lexer import CLEAN_RE, MAX_LINE_CHARS, WORD_RE, Line, lex_line
@@ -250,8 +251,7 @@ class Interpreter:
             return code
         number = float(text)
         if number != int(number) or int(number) not in M_GROUP:
-            raise NcError(self.path, lineno, line.col(i), "M" + text,
-                          f"M{number:g} is not supported")
+            raise NcError(self.path, lineno, line.col(i), "M" + text, m_refusal(number))
         _M_CACHE[text] = int(number)
         return int(number)
 
