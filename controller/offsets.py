@@ -276,3 +276,5 @@ class ProgramOffsets:
     table: OffsetTable = field(default_factory=OffsetTable)
     # M49 ... M48: [first line, last line] stretches where the feed override is off
     override_off_lines: list[list[int]] = field(default_factory=list)
+    # "LINE: what was accepted that LinuxCNC refuses, and the rule followed" (at most a few)
+    warnings: list[str] = field(default_factory=list)

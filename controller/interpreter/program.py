@@ -101,6 +101,7 @@ class Interpreter:
         self.state = InterpState(path, config, start_mm, offsets, track)
         self.params = self.state.params
         self.percent_seen = False
+        self.ended_by_percent = False
         self.words_seen = False
 
     def run(self, handle: TextIO, from_line: int | None = None) -> Iterator[NcBlock]:
@@ -129,7 +130,7 @@ class Interpreter:
                 if line is None:
                     continue
                 if line == "%":
-                    if self._percent():
+                    if self._percent(lineno):
                         break
                     continue
                 if isinstance(line, OWord):
@@ -147,6 +148,9 @@ class Interpreter:
                 break
         if not self.state.ended:
             flow.finish(lineno)
+            if not self.ended_by_percent and self.words_seen:
+                self.state.warn(lineno, "the program ends without M2, M30 or a closing %: read "
+                                        "to the end of the file (LinuxCNC refuses it)")
         self.state.finish_program(lineno)
         if not emitting and self.state.mark_pending is not None:
             self.state.mark(first)  # a G6.2 block ended by the end of the file, before `first`
@@ -187,9 +191,14 @@ class Interpreter:
                 return
         self._execute(Line(words, text), lineno)
 
-    def _percent(self) -> bool:
-        """`%` before any code opens the program; any later `%` ends it."""
+    def _percent(self, lineno: int) -> bool:
+        """`%` before any code opens the program; any later `%` ends it (LinuxCNC: only a
+        program opened by `%` may end with one; we end there too, with a warning)."""
         if self.percent_seen or self.words_seen:
+            if not self.percent_seen:
+                self.state.warn(lineno, "a % line that no % on the first line opened: the "
+                                        "program ends here (LinuxCNC refuses it)")
+            self.ended_by_percent = True
             return True
         self.percent_seen = True
         return False

@@ -29,6 +29,7 @@ MM_PER_INCH = 25.4
 # take 1e13 s of samples. grbl raises such feeds to the same minimum; refusing says so.
 MIN_FEED_MM_MIN = 1.0
 _AXES = frozenset("XYZ")
+MAX_WARNINGS = 10
 _STOPS = {0: StopKind.PAUSE, 1: StopKind.OPTIONAL_PAUSE, 2: StopKind.END, 30: StopKind.END_REWIND}
 # Letters each G code may use (besides F S T, allowed everywhere).
 _USES: dict[int, frozenset[str]] = {
@@ -156,6 +157,15 @@ class InterpState:
         new = self.modal.motion != code
         self.modal.motion = code
         self.cycles.run(code, vals, lineno, new)
+
+    def warn(self, lineno: int, message: str) -> None:
+        """Note something accepted that LinuxCNC refuses (the first MAX_WARNINGS, no repeats)."""
+        if self.track is None:
+            return
+        warnings = self.track.warnings
+        text = f"line {lineno}: {message}"
+        if len(warnings) < MAX_WARNINGS and text not in warnings:
+            warnings.append(text)
 
     def _src(self, lineno: int) -> Source:
         return Source(self.path, lineno, lineno)
