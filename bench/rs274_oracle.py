@@ -1,4 +1,4 @@
-"""LinuxCNC's rs274 as the oracle: the moves of each program, its canonical calls against our blocks.
+"""LinuxCNC's rs274 as the oracle: its canonical moves of each program against our blocks.
 
 Usage: python bench/rs274_oracle.py [--config xyz_mill] [--rs274 PATH] [--results FILE] DIR|FILE...
 

@@ -31,6 +31,9 @@ class CannedCycles:
         self.r: float | None = None
         self.q: float | None = None
         self.p: float | None = None
+        # LinuxCNC 2.9's initial level: the Z (program units) where the first cycle line since
+        # the last other motion started; G98 retracts there. None until a cycle line runs.
+        self.initial_z: float | None = None
 
     def run(self, code: int, vals: dict[str, float], lineno: int, new: bool) -> None:
         """One cycle line; `new`: the cycle was not in force before this line (then Z and R,
@@ -46,7 +49,10 @@ class CannedCycles:
         if p is not None and p < 0.0:
             raise WordError("P", f"{name} dwell P must not be negative")
         moves, modal = self.moves, self.modal
-        x0, y0, old_z = (moves.program(i, modal.pos[i]) for i in range(3))
+        x0, y0, z0 = (moves.program(i, modal.pos[i]) for i in range(3))
+        if self.initial_z is None:
+            self.initial_z = z0
+        old_z = self.initial_z
         if modal.absolute:
             dx = dy = 0.0
             r_z, bottom = r, z
@@ -64,28 +70,34 @@ class CannedCycles:
         saved = modal.path_control
         modal.path_control = PathControl(PathMode.EXACT_PATH)  # LinuxCNC: G61.1 in cycles
         try:
-            self._cycles(code, lineno, (x, y), (dx, dy), (old_z, r_z, bottom), q, p, repeats)
+            self._cycles(code, lineno, (x, y), (dx, dy), (old_z, z0, r_z, bottom), q, p,
+                         repeats)
         finally:
             modal.path_control = saved
 
     def _cycles(self, code: int, lineno: int, xy: tuple[float, float],
-                step: tuple[float, float], heights: tuple[float, float, float],
+                step: tuple[float, float], heights: tuple[float, float, float, float],
                 q: float | None, p: float | None, repeats: int) -> None:
+        """LinuxCNC 2.9's CYCLE_MACRO: up to R first if the initial level is below it; the first
+        hole is reached at the current height, the others at the clear height."""
         x, y = xy
-        old_z, r_z, bottom = heights
-        if old_z < r_z:  # first up to R where the tool stands
+        old_z, z_now, r_z, bottom = heights
+        if old_z < r_z:  # first straight up to R where the tool stands
             here = self.modal.pos
             self._go(self.moves.program(0, here[0]), self.moves.program(1, here[1]), r_z, True,
                      lineno)
-            old_z = r_z
+            old_z = z_now = r_z
         clear = r_z if self.retract_to_r else old_z
-        for _ in range(repeats):
+        for n in range(repeats):
             x, y = x + step[0], y + step[1]
-            self._go(x, y, old_z, True, lineno)
-            if old_z != r_z:
+            if n == 0 and z_now > r_z:
+                self._go(x, y, z_now, True, lineno)
                 self._go(x, y, r_z, True, lineno)
+            else:
+                self._go(x, y, clear, True, lineno)
+                if clear > r_z:
+                    self._go(x, y, r_z, True, lineno)
             self._body(code, lineno, x, y, r_z, clear, bottom, q, p)
-            old_z = clear
 
     def _body(self, code: int, lineno: int, x: float, y: float, r_z: float, clear: float,
               bottom: float, q: float | None, p: float | None) -> None:
@@ -95,7 +107,9 @@ class CannedCycles:
         self._go(x, y, bottom, False, lineno)
         if p is not None:
             self._dwell(p, lineno)
-        self._go(x, y, clear, code in (810, 820), lineno)  # G85/G89 feed back out
+        if code == 850:  # G85 feeds out to R, then goes on at traverse
+            self._go(x, y, r_z, False, lineno)
+        self._go(x, y, clear, code in (810, 820, 850), lineno)  # G89 feeds out
 
     def _pecks(self, code: int, lineno: int, x: float, y: float, r_z: float, clear: float,
                bottom: float, q: float) -> None:
@@ -105,12 +119,16 @@ class CannedCycles:
         depth = r_z - q
         while depth > bottom:
             self._go(x, y, depth, False, lineno)
-            if code == 830:  # G83: out to clear the chips, back down to just above the bottom
-                self._go(x, y, clear, True, lineno)
+            if code == 830:  # G83: out to R to clear the chips, back down to above the bottom
+                self._go(x, y, r_z, True, lineno)
             self._go(x, y, depth + backoff, True, lineno)
             depth -= q
         self._go(x, y, bottom, False, lineno)
         self._go(x, y, clear, True, lineno)
+
+    def reset_level(self) -> None:
+        """A motion other than a cycle ran: the next cycle line sets a new initial level."""
+        self.initial_z = None
 
     def _go(self, x: float, y: float, z: float, rapid: bool, lineno: int) -> None:
         moves = self.moves

@@ -112,11 +112,13 @@ class InterpState:
             self.offsets.apply(nonmodal, vals, self.modal.pos, self.modal.scale)
         if axis_code:
             if motion is not None:
+                self.cycles.reset_level()
                 moves.move(motion, {}, lineno)  # G80: cancels the motion mode
         elif (motion if motion is not None else self.modal.motion) in CYCLES:
             if motion is not None or not _AXES.isdisjoint(vals):
                 self._cycle(motion if motion is not None else self.modal.motion, vals, lineno)
         elif motion is not None or not _AXES.isdisjoint(vals):
+            self.cycles.reset_level()
             if nonmodal == 530:
                 self._need_straight(motion)
             moves.move(motion, vals, lineno, machine=nonmodal == 530)
@@ -147,6 +149,7 @@ class InterpState:
             if vals["F"] < 0 or 0 < vals["F"] * modal.scale < MIN_FEED_MM_MIN:
                 return False  # the general path reports it
             modal.feed_mm_s = vals["F"] * modal.scale / 60.0
+        self.cycles.initial_z = None  # any other motion ends a cycle's initial level
         self.moves.move(code if code >= 0 else None, vals, lineno)
         return True
 

@@ -1,4 +1,4 @@
-"""O-words as LinuxCNC runs them: subroutines, if/elseif/else, while, do, repeat, break, continue."""
+"""O-words as LinuxCNC runs them: sub, call, return, if, elseif, else, while, do, repeat, break."""
 
 from __future__ import annotations
 
