@@ -206,7 +206,9 @@ class Flow:
         frame = self.frames[-1]
         if frame.label is None:
             raise self._error(ow, lineno, f"{ow.name} outside a subroutine call")
-        if frame.label != ow.label:
+        if frame.label != ow.label and ow.keyword == "ENDSUB":
+            # a return may carry another label (LinuxCNC's retval.ngc: `o1010 return` inside
+            # `o1010 if`, in o1000); an endsub closes its own subroutine only
             raise self._error(ow, lineno, f"{ow.name} inside subroutine O{frame.label}")
         rest = ow.text[ow.arg_pos:].strip()
         if rest and not rest.startswith(("(", ";")):
