@@ -232,7 +232,7 @@ def _apply(op: str, a: float, b: float, pos: int) -> float:
         raise ExprError(pos, f"division by zero ({a:g} {op} 0)")
     if op == "/":
         return a / b
-    if op == "MOD":  # LinuxCNC: the result takes the sign of nothing, it is made >= 0
+    if op == "MOD":  # LinuxCNC makes the remainder non-negative ([-7 MOD 3] is 2)
         r = math.fmod(a, b)
         return r + abs(b) if r < 0.0 else r
     if op == "**":

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 from controller.errors import NcError
 from controller.interpreter.expr import ExprError, Reader
-from controller.interpreter.owords import OWord, peek_oword, read_oword
+from controller.interpreter.owords import ASCII_UPPER, OWord, peek_oword, read_oword
 from controller.interpreter.params import ParamError, Parameters
 
 MAX_LOOP_PASSES = 100_000  # one loop's passes; CAM loops (pecks, passes, holes) stay far below
@@ -229,7 +229,8 @@ class Flow:
             n, keyword = self._find(ow, n, _BRANCHES)
             if keyword != "ELSEIF":
                 break
-            branch = read_oword(self.cursor.line(n).upper(), self.path, n)  # type: ignore[union-attr]
+            raw = self.cursor.line(n) or ""
+            branch = read_oword(raw.translate(ASCII_UPPER), self.path, n)
             cond = self._value(branch, n, "a condition")
         self.cursor.jump(n + 1)
 

@@ -15,7 +15,7 @@ KEYWORDS = frozenset((
 _HEAD_RE = re.compile(r"\s*(?:N\s*\d+\s*)?O\s*(\d+|<[^>]*>)\s*([A-Z]*)", re.ASCII)
 NO_KEYWORD = ("an O-word needs a keyword (O100 sub, O100 if [...]); a program number line "
               "(O1000) is not RS274/NGC, and LinuxCNC refuses it too")
-_ASCII_UPPER = str.maketrans("abcdefghijklmnopqrstuvwxyz", "ABCDEFGHIJKLMNOPQRSTUVWXYZ")
+ASCII_UPPER = str.maketrans("abcdefghijklmnopqrstuvwxyz", "ABCDEFGHIJKLMNOPQRSTUVWXYZ")
 
 
 @dataclass(slots=True)
@@ -42,7 +42,7 @@ def _label(raw: str) -> str:
 
 def peek_oword(raw: str) -> tuple[str, str] | None:
     """(label, keyword) of a raw program line if it is an O-word line, else None."""
-    m = _HEAD_RE.match(raw.translate(_ASCII_UPPER))
+    m = _HEAD_RE.match(raw.translate(ASCII_UPPER))
     if m is None:
         return None
     return _label(m.group(1)), m.group(2)
