@@ -163,7 +163,10 @@ def _lex_word(reader: Reader, pos: int, path: str, lineno: int, words: list[tupl
 def _lex_assign(reader: Reader, pos: int, path: str, lineno: int,
                 assigns: list[tuple[int | str, float, int]]) -> int:
     """`#N = value`, `#<name> = value` or `#[expr] = value`; stored after the line."""
-    key, end = reader.key(pos)
+    try:
+        key, end = reader.key(pos)
+    except ExprError as exc:
+        raise ExprError(exc.pos, f"parameter setting: {exc.message}") from None
     eq = reader.skip(end)
     if reader.text[eq : eq + 1] != "=":
         raise NcError(path, lineno, pos + 1, "#",
