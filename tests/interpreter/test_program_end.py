@@ -41,3 +41,21 @@ def test_missing_m2_is_a_warning_and_m2_is_not(tmp_path: Path) -> None:
 def test_percent_line_text_after_the_sign_is_not_read(tmp_path: Path) -> None:
     blocks, warnings = read(tmp_path, "% program 12\nG0 X1\n%(end)\n")
     assert [b.end[0] for b in blocks] == [1.0] and warnings == []
+
+
+def test_cncctl_check_reports_the_warnings(tmp_path: Path) -> None:
+    """From outside: `cncctl check` prints them, and --json carries them."""
+    import json
+    import subprocess
+    import sys
+
+    path = tmp_path / "p.ngc"
+    path.write_text("G21 F100\no1 repeat [2]\nG1 X1\nG1 X2\no1 endrepeat\n")
+    cli = [sys.executable, "-m", "controller.operator.cli", "check", str(path)]
+    text = subprocess.run(cli, capture_output=True, text=True, timeout=120, check=True).stdout
+    assert "warning: line 5: the program ends without M2, M30 or a closing %" in text
+    out = subprocess.run([*cli, "--json"], capture_output=True, text=True, timeout=120,
+                         check=True).stdout
+    summary = json.loads(out)
+    assert summary["ok"] and summary["blocks"]["LineBlock"] == 4
+    assert len(summary["warnings"]) == 1 and "LinuxCNC refuses it" in summary["warnings"][0]
