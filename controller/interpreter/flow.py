@@ -34,20 +34,22 @@ class LineCursor:
         self.read = 0  # lines read from the file so far
         self.next_line = 1  # the number of the line the next iteration returns
 
-    def __iter__(self) -> LineCursor:
-        return self
-
-    def __next__(self) -> str:
-        n = self.next_line
-        if n <= self.read:
-            raw = self.kept[n - self.first_kept]  # type: ignore[index]
-        else:
-            raw = next(self._raw)
-            self.read += 1
-            if self.kept is not None:
-                self.kept.append(raw)
-        self.next_line = n + 1
-        return raw
+    def __iter__(self) -> Iterator[str]:
+        """The lines in the order they run (a generator: cheaper per line than __next__)."""
+        raw_lines = self._raw
+        while True:
+            n = self.next_line
+            if n <= self.read:
+                raw = self.kept[n - self.first_kept]  # type: ignore[index]
+            else:
+                raw = next(raw_lines, None)
+                if raw is None:
+                    return
+                self.read = n
+                if self.kept is not None:
+                    self.kept.append(raw)
+            self.next_line = n + 1
+            yield raw
 
     def keep_from(self, lineno: int, raw: str) -> None:
         """Keep line `lineno` (the one just read) and every later line."""
