@@ -281,3 +281,5 @@ class ProgramOffsets:
     io_events: list[dict[str, Any]] = field(default_factory=list)
     # probes: the results known (a run) and the parameters they set (controller/probe.py)
     probes: ProbeResults = field(default_factory=ProbeResults)
+    # "LINE: what was accepted that LinuxCNC refuses, and the rule followed" (at most a few)
+    warnings: list[str] = field(default_factory=list)

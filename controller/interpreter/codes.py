@@ -6,7 +6,9 @@ from __future__ import annotations
 G_GROUP: dict[int, str] = {
     0: "motion", 10: "motion", 20: "motion", 30: "motion", 52: "motion", 53: "motion",
     62: "motion", 800: "motion", 382: "motion", 383: "motion", 384: "motion", 385: "motion",
+    730: "motion", 810: "motion", 820: "motion", 830: "motion", 850: "motion", 890: "motion",
     40: "non-modal", 100: "non-modal", 530: "non-modal",
+    280: "non-modal", 281: "non-modal", 300: "non-modal", 301: "non-modal",
     920: "non-modal", 921: "non-modal", 922: "non-modal",
     170: "plane",
     900: "distance", 910: "distance",
@@ -22,7 +24,7 @@ G_GROUP: dict[int, str] = {
     980: "canned return", 990: "canned return",
 }
 
-_CANNED = "canned cycles are not supported"
+_CANNED = "this canned cycle is not supported (G73 G81 G82 G83 G85 G89 are)"
 _G59_X = "coordinate systems G59.1-G59.3 are not supported (G54-G59 only)"
 G_UNSUPPORTED: dict[int, str] = {
     50: "cubic splines (G5) are not supported; use G5.2 NURBS",
@@ -32,8 +34,6 @@ G_UNSUPPORTED: dict[int, str] = {
     171: "only the XY plane (G17) is supported",
     180: "only the XY plane (G17) is supported", 181: "only the XY plane (G17) is supported",
     190: "only the XY plane (G17) is supported", 191: "only the XY plane (G17) is supported",
-    280: "home positions (G28) are not supported", 281: "home positions are not supported",
-    300: "home positions (G30) are not supported", 301: "home positions are not supported",
     330: "spindle-synchronized motion is not supported",
     331: "rigid tapping is not supported",
     410: "cutter radius compensation is not supported",
@@ -43,8 +43,8 @@ G_UNSUPPORTED: dict[int, str] = {
     432: "additional tool length offsets are not supported",
     520: "G52 local offsets are not supported",
     591: _G59_X, 592: _G59_X, 593: _G59_X,
-    730: _CANNED, 740: _CANNED, 760: _CANNED, 810: _CANNED, 820: _CANNED, 830: _CANNED,
-    840: _CANNED, 850: _CANNED, 860: _CANNED, 870: _CANNED, 880: _CANNED, 890: _CANNED,
+    740: "left-hand tapping (G74) is not supported", 760: "threading (G76) is not supported",
+    840: _CANNED, 860: _CANNED, 870: _CANNED, 880: _CANNED,
     923: "restoring G92 offsets from parameters (G92.3) is not supported; program G92 again",
     930: "inverse-time feed (G93) is not supported; use G94",
     950: "feed per revolution (G95) is not supported; use G94",
@@ -57,6 +57,25 @@ M_GROUP: dict[int, str] = {
     7: "coolant", 8: "coolant", 9: "coolant",
     48: "override", 49: "override",
 }
+
+# M codes that posts for other controllers write; refused like every unknown M code (LinuxCNC
+# refuses them too), since what they do there may move the machine or need an answer.
+M_OTHER: dict[int, str] = {
+    25: "Centroid: move Z to its home position",
+    40: "Mach3: open a probe log; Fanuc and Haas: a gear range",
+    41: "Mach3: close the probe log; Fanuc and Haas: a gear range",
+    98: "Fanuc: call a subprogram (here: O100 call)",
+    99: "Fanuc: return from a subprogram (here: O100 endsub)",
+}
+
+
+def m_refusal(number: float) -> str:
+    """Why an M code is refused: unknown here, and what it means elsewhere when it is known."""
+    name = f"M{number:g}"
+    other = M_OTHER.get(int(number)) if number == int(number) else None
+    if other is None:
+        return f"{name} is not supported"
+    return f"{name} is not supported: an M code of other controllers ({other})"
 
 
 def g_name(code10: int) -> str:

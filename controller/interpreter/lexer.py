@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import math
 import re
 
 from controller.errors import NcError
+from controller.interpreter.expr import ExprError, Reader
+from controller.interpreter.owords import OWord, read_oword
+from controller.interpreter.params import MAX_PARAMETER, Parameters
 
 MAX_LINE_CHARS = 4096  # LinuxCNC allows 256; CAM output never needs more than this
 _NUMBER = r"[-+]?(?:\d{1,20}(?:\.\d{0,20})?|\.\d{1,20})"  # no exponents (RS274), bounded size
@@ -16,8 +20,6 @@ WORD_RE = re.compile(r"([A-Z])\s*([-+.\d]+)", re.ASCII)
 # Every pattern is ASCII-only: Python's \d also matches other scripts' digits (X١٢ and X１２
 # would read as X12), and str.upper() turns some non-ASCII letters into ASCII ones (long s).
 _NUMBER_RE = re.compile(_NUMBER, re.ASCII)
-_PARAM_REF_RE = re.compile(r"#\s*(\d{1,5})", re.ASCII)
-_ASSIGN_RE = re.compile(r"#\s*(\d{1,5})\s*=\s*", re.ASCII)
 _SPACE_RE = re.compile(r"\s*", re.ASCII)
 _ASCII_UPPER = str.maketrans("abcdefghijklmnopqrstuvwxyz", "ABCDEFGHIJKLMNOPQRSTUVWXYZ")
 
@@ -30,19 +32,19 @@ def ascii_upper(raw: str) -> str:
 class Line:
     """The words of one program line; columns (1-based) are computed only when an error needs them.
 
-    `words` holds (letter, number text) pairs; a number text may be `#N` (a parameter reference,
-    then `has_params` is set). `assigns` holds `#N=value` settings, applied after the line.
-    """
+    `words` holds (letter, number text) pairs, every value already evaluated (parameters and
+    expressions are read when the line is lexed, against the store as it stands before the
+    line). `assigns` holds the line's parameter settings (key, value, column), which LinuxCNC
+    applies after the whole line has been read."""
 
-    __slots__ = ("words", "text", "cols", "assigns", "has_params")
+    __slots__ = ("words", "text", "cols", "assigns")
 
     def __init__(self, words: list[tuple[str, str]], text: str, cols: list[int] | None = None,
-                 assigns: list[tuple[int, str, int]] | None = None) -> None:
+                 assigns: list[tuple[int | str, float, int]] | None = None) -> None:
         self.words = words
         self.text = text
         self.cols = cols
         self.assigns = assigns
-        self.has_params = cols is not None and any(t[0] == "#" for _, t in words)
 
     def col(self, index: int) -> int:
         """1-based column of word `index` (0 when the line has no such word)."""
@@ -55,45 +57,61 @@ class Line:
         return letter + number
 
 
-def lex_line(raw: str, path: str, lineno: int) -> Line | str | None:
-    """Lex one line (without its newline). Returns a Line, None for a skipped line, "%" for a
-    percent delimiter line. Raises NcError for anything that is not RS274 words and comments."""
+def lex_line(raw: str, path: str, lineno: int,
+             params: Parameters | None = None) -> Line | OWord | str | None:
+    """Lex one line (without its newline). Returns a Line, an OWord for an O-word line, None
+    for a skipped line, "%" for a percent line. Values are read against `params` (an empty
+    store if None). Raises NcError for anything that is not RS274/NGC words and comments."""
     if len(raw) > MAX_LINE_CHARS:
         raise NcError(path, lineno, MAX_LINE_CHARS + 1, "",
                       f"line longer than {MAX_LINE_CHARS} characters")
     text = ascii_upper(raw)
-    if CLEAN_RE.fullmatch(text) is not None:  # the fast path: plain words, nothing else
+    if CLEAN_RE.fullmatch(text) is not None and "O" not in text:  # plain words, nothing else
         return Line(WORD_RE.findall(text), text)
-    return _lex_slow(text, path, lineno)
+    return _lex_slow(text, path, lineno, params if params is not None else Parameters())
 
 
-def _lex_slow(text: str, path: str, lineno: int) -> Line | str | None:
-    """Full scanner: comments, block delete, %, parameters, and precise error columns."""
+def _lex_slow(text: str, path: str, lineno: int,
+              params: Parameters) -> Line | OWord | str | None:
+    """Full scanner: comments, block delete, %, O-words, parameters, expressions, columns."""
     stripped = text.strip()
-    if stripped == "%":
-        return "%"
+    if stripped.startswith("%"):
+        return "%"  # LinuxCNC reads nothing else on a percent line
     if stripped.startswith("/"):
         return None  # block delete: the switch is always on in phcnc
+    if stripped.startswith("O") or (stripped.startswith("N") and _oword_after_n(stripped)):
+        return read_oword(text, path, lineno)
+    reader = Reader(text, params)
     words: list[tuple[str, str]] = []
     cols: list[int] = []
-    assigns: list[tuple[int, str, int]] = []
+    assigns: list[tuple[int | str, float, int]] = []
     pos, end = 0, len(text)
-    while pos < end:
-        pos = _SPACE_RE.match(text, pos).end()  # type: ignore[union-attr]
-        if pos >= end:
-            break
-        ch = text[pos]
-        if ch == ";":
-            break
-        if ch == "(":
-            pos = _skip_comment(text, pos, path, lineno)
-        elif ch == "#":
-            pos = _lex_assign(text, pos, path, lineno, assigns)
-        elif "A" <= ch <= "Z":
-            pos = _lex_word(text, pos, path, lineno, words, cols)
-        else:
-            raise NcError(path, lineno, pos + 1, ch, f"unexpected character {_show(ch)}")
+    try:
+        while pos < end:
+            pos = _SPACE_RE.match(text, pos).end()  # type: ignore[union-attr]
+            if pos >= end:
+                break
+            ch = text[pos]
+            if ch == ";":
+                break
+            if ch == "(":
+                pos = _skip_comment(text, pos, path, lineno)
+            elif ch == "#":
+                pos = _lex_assign(reader, pos, path, lineno, assigns)
+            elif "A" <= ch <= "Z":
+                pos = _lex_word(reader, pos, path, lineno, words, cols)
+            else:
+                raise NcError(path, lineno, pos + 1, ch, f"unexpected character {_show(ch)}")
+    except ExprError as exc:
+        raise NcError(path, lineno, exc.pos + 1, text[exc.pos : exc.pos + 1].strip(),
+                      exc.message) from None
     return Line(words, text, cols, assigns or None)
+
+
+def _oword_after_n(stripped: str) -> bool:
+    """`N10 O100 sub`: an O-word after a line number."""
+    m = re.match(r"N\s*\d+\s*O", stripped, re.ASCII)
+    return m is not None
 
 
 def _show(ch: str) -> str:
@@ -110,42 +128,54 @@ def _skip_comment(text: str, pos: int, path: str, lineno: int) -> int:
     return close + 1
 
 
-def _lex_value(text: str, pos: int) -> re.Match[str] | None:
-    """A number or a `#N` parameter reference at pos (after optional spaces)."""
-    pos = _SPACE_RE.match(text, pos).end()  # type: ignore[union-attr]
-    return _NUMBER_RE.match(text, pos) or _PARAM_REF_RE.match(text, pos)
-
-
-def _lex_word(text: str, pos: int, path: str, lineno: int, words: list[tuple[str, str]],
+def _lex_word(reader: Reader, pos: int, path: str, lineno: int, words: list[tuple[str, str]],
               cols: list[int]) -> int:
+    text = reader.text
     letter = text[pos]
     if letter == "O":
-        raise NcError(path, lineno, pos + 1, "O", "O-words (subroutines, loops) are not supported")
-    m = _lex_value(text, pos + 1)
-    if m is None:
-        bad = text[pos + 1 : pos + 2].strip() or "end of line"
-        if bad == "[":
-            raise NcError(path, lineno, pos + 1, letter,
-                          "expressions in [ ] are not supported")
-        raise NcError(path, lineno, pos + 1, letter, f"{letter} word without a number")
-    value = m.group(0)
-    if value.startswith("#"):
-        value = "#" + m.group(1)
-    elif m.end() < len(text) and text[m.end()] in "0123456789":
-        raise NcError(path, lineno, pos + 1, letter, "number too long (more than 20 digits)")
-    words.append((letter, value))
+        raise NcError(path, lineno, pos + 1, "O",
+                      "an O-word must stand first on its line (O100 sub, O100 if [...])")
+    start = reader.skip(pos + 1)
+    m = _NUMBER_RE.match(text, start)
+    if m is not None:
+        if m.end() < len(text) and text[m.end()] in "0123456789":
+            raise NcError(path, lineno, pos + 1, letter, "number too long (more than 20 digits)")
+        value_text, end = m.group(0), m.end()
+    else:
+        if start >= len(text) or not (text[start] in "[#+-" or "A" <= text[start] <= "Z"):
+            raise NcError(path, lineno, pos + 1, letter, f"{letter} word without a number")
+        try:
+            value, end = reader.value(start)
+        except ExprError as exc:
+            if exc.pos == start and text[start].isalpha():
+                raise NcError(path, lineno, pos + 1, letter,
+                              f"{letter} word without a number") from None
+            raise NcError(path, lineno, pos + 1, letter + text[start : exc.pos + 1].strip(),
+                          f"{letter} word: {exc.message}") from None
+        if not math.isfinite(value):
+            raise NcError(path, lineno, pos + 1, letter, f"{letter} word: the value is not finite")
+        value_text = repr(value)
+    words.append((letter, value_text))
     cols.append(pos + 1)
-    return m.end()
+    return end
 
 
-def _lex_assign(text: str, pos: int, path: str, lineno: int,
-                assigns: list[tuple[int, str, int]]) -> int:
-    m = _ASSIGN_RE.match(text, pos)
-    value = _lex_value(text, m.end()) if m else None
-    if m is None or value is None:
+def _lex_assign(reader: Reader, pos: int, path: str, lineno: int,
+                assigns: list[tuple[int | str, float, int]]) -> int:
+    """`#N = value`, `#<name> = value` or `#[expr] = value`; stored after the line."""
+    try:
+        key, end = reader.key(pos)
+    except ExprError as exc:
+        raise ExprError(exc.pos, f"parameter setting: {exc.message}") from None
+    eq = reader.skip(end)
+    if reader.text[eq : eq + 1] != "=":
         raise NcError(path, lineno, pos + 1, "#",
-                      "only '#N=number' parameter settings and '#N' references are supported")
-    number = value.group(0)
-    number = "#" + value.group(1) if number.startswith("#") else number
-    assigns.append((int(m.group(1)), number, pos + 1))
-    return value.end()
+                      "a parameter setting needs '=': #1 = 2, #<depth> = [#1 * 2]")
+    if isinstance(key, int) and not 1 <= key <= MAX_PARAMETER:
+        raise NcError(path, lineno, pos + 1, f"#{key}",
+                      f"parameter #{key} out of range 1..{MAX_PARAMETER}")
+    value, end = reader.value(eq + 1)
+    if not math.isfinite(value):
+        raise NcError(path, lineno, pos + 1, "#", "the value set is not finite")
+    assigns.append((key, value, pos + 1))
+    return end

@@ -90,6 +90,28 @@ class Moves:
                                  f"(config '{self.config.name}')")
         return x, y, z
 
+    def line_to(self, end: tuple[float, float, float], rapid: bool, lineno: int,
+                code: int) -> None:
+        """A straight move to `end` (machine mm) made by `code` (a canned cycle, G28, G30)."""
+        if end[2] != self.modal.pos[2] and not self.has_z:
+            raise WordError(g_name(code), f"{g_name(code)} moves Z on a machine without a Z "
+                                          f"axis (config '{self.config.name}')")
+        if not rapid:
+            self._need_feed(code)
+        self._line(end, rapid, lineno)
+
+    def end_point(self, vals: dict[str, float]) -> tuple[float, float, float]:
+        """The machine point the line's X Y Z name (G90/G91, work offsets, units)."""
+        return self._end_point(vals)
+
+    def machine(self, axis: int, value: float) -> float:
+        """An absolute program coordinate (program units) in machine mm."""
+        return self._machine(axis, value)
+
+    def program(self, axis: int, mm: float) -> float:
+        """A machine coordinate (mm) in the program's frame and units."""
+        return self._program(axis, mm)
+
     def _line(self, end: tuple[float, float, float], rapid: bool, lineno: int) -> None:
         modal = self.modal
         if end == modal.pos:

@@ -21,16 +21,19 @@ from controller.interpreter.codes import (
     WordError,
     g_code10,
     g_name,
+    m_refusal,
 )
+from controller.interpreter.flow import Flow, LineCursor
 from controller.interpreter.lexer import CLEAN_RE, MAX_LINE_CHARS, WORD_RE, Line, lex_line
 from controller.interpreter.line_state import LineState
+from controller.interpreter.owords import NO_KEYWORD, OWord
+from controller.interpreter.params import ParamError
 from controller.interpreter.state import InterpState
 from controller.offsets import OffsetTable, ProgramOffsets
 
 _G_CACHE: dict[str, int] = {}  # G number text -> code10, for supported/known codes only
 _G_BY_VALUE: dict[float, int] = {}  # the same by value (G01 and G1 alike)
 _M_CACHE: dict[str, int] = {}
-MAX_PARAMETER = 5399  # LinuxCNC's numbered parameters
 _VALUE_LETTERS = frozenset("XYZIJKRPQLFSTH")
 _CHUNK_CHARS = 1 << 16
 
@@ -96,8 +99,9 @@ class Interpreter:
                  track: ProgramOffsets | None = None) -> None:
         self.path = path
         self.state = InterpState(path, config, start_mm, offsets, track)
-        self.params: dict[int, float] = {}
+        self.params = self.state.params
         self.percent_seen = False
+        self.ended_by_percent = False
         self.words_seen = False
 
     def run(self, handle: TextIO, from_line: int | None = None) -> Iterator[NcBlock]:
@@ -109,8 +113,10 @@ class Interpreter:
             raise NcError(self.path, first, 0, "",
                           f"cannot run from line {first}: lines are numbered from 1")
         emitting = from_line is None
-        for raw in _raw_lines(handle, self.path):
-            lineno += 1
+        cursor = LineCursor(_raw_lines(handle, self.path))
+        flow = Flow(self.path, cursor, self.params)
+        for raw in cursor:
+            lineno = cursor.next_line - 1
             if not emitting and lineno >= first:
                 emitting = self._start_here(first)
             text = raw.upper()
@@ -120,12 +126,16 @@ class Interpreter:
                 if words:
                     self._execute_plain(words, text, lineno)
             else:
-                line = lex_line(raw, self.path, lineno)
+                line = lex_line(raw, self.path, lineno, self.params)
                 if line is None:
                     continue
                 if line == "%":
-                    if self._percent():
+                    if self._percent(lineno):
                         break
+                    continue
+                if isinstance(line, OWord):
+                    self.words_seen = True
+                    flow.run(line, lineno, raw)
                     continue
                 self._execute(line, lineno)  # type: ignore[arg-type]
             if not emitting:
@@ -136,6 +146,11 @@ class Interpreter:
                 out.clear()
             if self.state.ended or self.state.probing.stop_reading:
                 break  # M2/M30, or a probe whose result decides the rest (a run)
+        if not self.state.ended and not self.state.probing.stop_reading:
+            flow.finish(lineno)
+            if not self.ended_by_percent and self.words_seen:
+                self.state.warn(lineno, "the program ends without M2, M30 or a closing %: read "
+                                        "to the end of the file (LinuxCNC refuses it)")
         self.state.finish_program(lineno)
         if not emitting and self.state.mark_pending is not None:
             self.state.mark(first)  # a G6.2 block ended by the end of the file, before `first`
@@ -176,17 +191,20 @@ class Interpreter:
                 return
         self._execute(Line(words, text), lineno)
 
-    def _percent(self) -> bool:
-        """`%` before any code opens the program; any later `%` ends it."""
+    def _percent(self, lineno: int) -> bool:
+        """`%` before any code opens the program; any later `%` ends it (LinuxCNC: only a
+        program opened by `%` may end with one; we end there too, with a warning)."""
         if self.percent_seen or self.words_seen:
+            if not self.percent_seen:
+                self.state.warn(lineno, "a % line that no % on the first line opened: the "
+                                        "program ends here (LinuxCNC refuses it)")
+            self.ended_by_percent = True
             return True
         self.percent_seen = True
         return False
 
     def _execute(self, line: Line, lineno: int) -> None:
         words = line.words
-        if line.has_params:
-            words = self._resolve(line, lineno)
         if words:
             self.words_seen = True
             gs, ms, vals = self._classify(line, words, lineno)
@@ -242,8 +260,7 @@ class Interpreter:
             return code
         number = float(text)
         if number != int(number) or int(number) not in M_GROUP:
-            raise NcError(self.path, lineno, line.col(i), "M" + text,
-                          f"M{number:g} is not supported")
+            raise NcError(self.path, lineno, line.col(i), "M" + text, m_refusal(number))
         _M_CACHE[text] = int(number)
         return int(number)
 
@@ -255,37 +272,17 @@ class Interpreter:
         first = line.word_text(0) if line.words else ""
         return NcError(self.path, lineno, line.col(0), first, message)
 
-    def _resolve(self, line: Line, lineno: int) -> list[tuple[str, str]]:
-        """Replace `#N` values by the parameter values (as set before this line)."""
-        out = []
-        for i, (letter, text) in enumerate(line.words):
-            if text.startswith("#"):
-                text = repr(self._param(int(text[1:]), lineno, line.col(i), letter + text))
-            out.append((letter, text))
-        return out
-
-    def _param(self, number: int, lineno: int, col: int, word: str) -> float:
-        if not 1 <= number <= MAX_PARAMETER:
-            raise NcError(self.path, lineno, col, word,
-                          f"parameter #{number} out of range 1..{MAX_PARAMETER}")
-        if number not in self.params:
-            probed = self.state.probing.results.parameters  # #5061-#5063, #5070 (G38)
-            if number in probed:
-                return probed[number]
-            raise NcError(self.path, lineno, col, word, f"parameter #{number} is not set")
-        return self.params[number]
-
     def _assign(self, line: Line, lineno: int) -> None:
-        # LinuxCNC applies all settings of a line after reading it: evaluate first, then store.
-        values = []
-        for number, text, col in line.assigns or ():
-            if not 1 <= number <= MAX_PARAMETER:
-                raise NcError(self.path, lineno, col, f"#{number}",
-                              f"parameter #{number} out of range 1..{MAX_PARAMETER}")
-            value = (self._param(int(text[1:]), lineno, col, text) if text.startswith("#")
-                     else float(text))
-            values.append((number, value))
-        self.params.update(values)
+        # LinuxCNC applies all settings of a line after reading it (the lexer evaluated them).
+        params = self.params
+        for key, value, col in line.assigns or ():
+            try:
+                if isinstance(key, str):
+                    params.set_named(key, value)
+                else:
+                    params.set(key, value)
+            except ParamError as exc:
+                raise NcError(self.path, lineno, col, f"#{key}", str(exc)) from None
 
 
 def _raw_lines(handle: TextIO, path: str) -> Iterator[str]:
@@ -314,7 +311,7 @@ def _unknown_letter(letter: str) -> str:
     if letter in "ABCUVW":
         return f"axis {letter} is not supported (X Y Z only)"
     if letter == "O":
-        return "O-words (subroutines, loops) are not supported"
+        return NO_KEYWORD
     if letter == "E":  # most often X1e3: G-code numbers have no exponent
         return "E words are not supported (nor exponents: write 1e3 as 1000)"
     return f"{letter} words are not supported"

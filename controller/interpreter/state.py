@@ -14,10 +14,13 @@ from controller.blocks import (
 )
 from controller.config import MachineConfig
 from controller.errors import NcError
+from controller.interpreter.canned import CYCLES, CannedCycles
 from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
+from controller.interpreter.homes import HOME_CODES, HomePositions
 from controller.interpreter.line_state import LineState
 from controller.interpreter.modal import Modal
 from controller.interpreter.moves import MAX_BLOCK_S, Moves
+from controller.interpreter.params import Parameters
 from controller.interpreter.probing import PROBE_CODE10, Probing
 from controller.interpreter.tool_length import ToolState
 from controller.interpreter.work_offsets import AXIS_CODES, WorkOffsets
@@ -28,6 +31,7 @@ MM_PER_INCH = 25.4
 # take 1e13 s of samples. grbl raises such feeds to the same minimum; refusing says so.
 MIN_FEED_MM_MIN = 1.0
 _AXES = frozenset("XYZ")
+MAX_WARNINGS = 10
 _STOPS = {0: StopKind.PAUSE, 1: StopKind.OPTIONAL_PAUSE, 2: StopKind.END, 30: StopKind.END_REWIND}
 # Letters each G code may use (besides F S T, allowed everywhere).
 _USES: dict[int, frozenset[str]] = {
@@ -35,6 +39,8 @@ _USES: dict[int, frozenset[str]] = {
     52: frozenset("XYZPL"), 62: frozenset("XYZRKPQ"), 40: frozenset("P"),
     640: frozenset("PQ"), 430: frozenset("H"), 431: frozenset("Z"),
     100: _AXES | set("LPR"), 920: _AXES, 382: _AXES, 383: _AXES, 384: _AXES, 385: _AXES,
+    280: _AXES, 300: _AXES,
+    **{code: _AXES | set("RLPQ") for code in CYCLES},
 }
 _ALWAYS = frozenset("FST")
 _FAST_MOTIONS = frozenset((0, 10, 20, 30))
@@ -67,6 +73,10 @@ class InterpState:
         self.probing = Probing(self.modal, self.offsets, self.moves, path, self.out,
                                None if track is None else track.probes)
         self.track = track
+        self.params = Parameters()
+        self.cycles = CannedCycles(self.modal, self.moves, path)
+        self.homes = HomePositions(self.modal, self.moves, self.params)
+        self.plane = 170  # G17
         self.spindle_rpm = 0.0
         self.spindle_on = False
         self.spindle_code = 5  # M3, M4 or M5
@@ -87,14 +97,18 @@ class InterpState:
             self.mark(self.mark_pending)
         if not ms and len(gs) <= 1 and self.fast(gs[0] if gs else -1, vals, lineno):
             return
+        if 800 in gs and len(gs) > 1:
+            gs = _drop_g80(gs)
         groups = _groups(gs, G_GROUP, g_name)
         mgroups = _groups(ms, M_GROUP, lambda m: f"M{m}")
         motion = groups.get("motion")
         nonmodal = groups.get("non-modal")
-        # G10, G92 and G43.1 take the line's axis words for themselves
-        axis_code = nonmodal in AXIS_CODES or groups.get("tool length") == 431
+        # G10, G92, G28/G30 and G43.1 take the line's axis words for themselves
+        axis_code = (nonmodal in AXIS_CODES or nonmodal in HOME_CODES
+                     or groups.get("tool length") == 431)
         if axis_code and motion is not None and motion != 800:
-            word = g_name(nonmodal if nonmodal in AXIS_CODES else 431)
+            word = g_name(nonmodal if nonmodal in AXIS_CODES or nonmodal in HOME_CODES
+                          else 431)
             raise WordError(word, f"{word} and {g_name(motion)} both use axis words: put "
                                   f"them on separate lines")
         _check_letters(groups, vals,
@@ -103,16 +117,25 @@ class InterpState:
         self._feed_speed_tool(vals, ms, mgroups, lineno)
         if nonmodal == 40:
             self._dwell(vals, lineno)
+        elif nonmodal in HOME_CODES:
+            self.homes.run(nonmodal, vals, lineno)
         elif nonmodal is not None and nonmodal != 530:
             self.offsets.apply(nonmodal, vals, self.modal.pos, self.modal.scale)
         if axis_code:
             if motion is not None:
+                self.cycles.reset_level()
                 moves.move(motion, {}, lineno)  # G80: cancels the motion mode
+        elif (motion if motion is not None else self.modal.motion) in CYCLES:
+            if motion is not None or not _AXES.isdisjoint(vals):
+                self._cycle(motion if motion is not None else self.modal.motion, vals, lineno)
         elif motion is not None or not _AXES.isdisjoint(vals):
+            self.cycles.reset_level()
             if nonmodal == 530:
                 self._need_straight(motion)
             if (motion if motion is not None else self.modal.motion) in PROBE_CODE10:
                 self.probing.probe(motion or self.modal.motion, vals, lineno)  # type: ignore
+                for number, value in self.probing.results.parameters.items():
+                    self.params.set(number, value)  # #5061-#5063, #5070 for what follows
             else:
                 moves.move(motion, vals, lineno, machine=nonmodal == 530)
         stop = mgroups.get("stopping")
@@ -142,8 +165,26 @@ class InterpState:
             if vals["F"] < 0 or 0 < vals["F"] * modal.scale < MIN_FEED_MM_MIN:
                 return False  # the general path reports it
             modal.feed_mm_s = vals["F"] * modal.scale / 60.0
+        self.cycles.initial_z = None  # any other motion ends a cycle's initial level
         self.moves.move(code if code >= 0 else None, vals, lineno)
         return True
+
+    def _cycle(self, code: int, vals: dict[str, float], lineno: int) -> None:
+        if self.plane != 170:
+            raise WordError(g_name(code), f"{g_name(code)}: canned cycles run in the XY plane "
+                                          f"(G17) only")
+        new = self.modal.motion != code
+        self.modal.motion = code
+        self.cycles.run(code, vals, lineno, new)
+
+    def warn(self, lineno: int, message: str) -> None:
+        """Note something accepted that LinuxCNC refuses (the first MAX_WARNINGS, no repeats)."""
+        if self.track is None:
+            return
+        warnings = self.track.warnings
+        text = f"line {lineno}: {message}"
+        if len(warnings) < MAX_WARNINGS and text not in warnings:
+            warnings.append(text)
 
     def _src(self, lineno: int) -> Source:
         return Source(self.path, lineno, lineno)
@@ -175,6 +216,10 @@ class InterpState:
                        f"block that starts at line {first}; run from line {first}")
 
     def _modes(self, groups: dict[str, int], vals: dict[str, float]) -> None:
+        if "plane" in groups:
+            self.plane = groups["plane"]
+        if "canned return" in groups:
+            self.cycles.retract_to_r = groups["canned return"] == 990
         if "units" in groups:
             self.modal.scale = MM_PER_INCH if groups["units"] == 200 else 1.0
         if "distance" in groups:
@@ -278,6 +323,13 @@ class InterpState:
             raise NcError(self.path, nurbs.first_line, 1, "G5.2",
                           "G5.2 NURBS block not closed by G5.3 before the end of the program")
         self.moves.end_nurbs()
+
+
+def _drop_g80(gs: list[int]) -> list[int]:
+    """`G0 G80` (the common safety line): another motion code on the line cancels the cycle
+    anyway, so LinuxCNC accepts both; G80 is dropped and the other code is in force."""
+    others = [g for g in gs if g != 800 and G_GROUP.get(g) == "motion"]
+    return [g for g in gs if g != 800] if others else gs
 
 
 def _groups(codes: list[int], table: dict[int, str], name) -> dict[str, int]:  # noqa: ANN001

@@ -47,6 +47,7 @@ class CheckSummary:
     nurbs_control_points: int = 0
     extents_mm: dict[str, list[float]] = field(default_factory=dict)
     travel_mm: dict[str, list[float]] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)  # accepted where LinuxCNC refuses
 
 
 _GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
@@ -132,7 +133,8 @@ def check_program(path: str, config: MachineConfig,
         path_length_mm=feed_mm + rapid_mm, feed_length_mm=feed_mm, rapid_length_mm=rapid_mm,
         nominal_time_s=time_s, nurbs_blocks=kinds[NurbsBlock], nurbs_control_points=nurbs_points,
         extents_mm={name: [lo[i], hi[i]] for i, name, _, _ in limits},
-        travel_mm={name: [tlo, thi] for _, name, tlo, thi in limits})
+        travel_mm={name: [tlo, thi] for _, name, tlo, thi in limits},
+        warnings=list(track.warnings))
 
 
 def refuse_probes(path: str, seen: dict[int, str], why: str) -> None:
@@ -161,6 +163,7 @@ def format_summary(s: CheckSummary) -> str:
     for name, (lo, hi) in s.extents_mm.items():
         tlo, thi = s.travel_mm[name]
         lines.append(f"{name.upper()}: {lo:.4f} .. {hi:.4f} mm (travel {tlo:g} .. {thi:g})")
+    lines += [f"warning: {w}" for w in s.warnings]
     return "\n".join(lines)
 
 

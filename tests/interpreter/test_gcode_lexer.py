@@ -6,6 +6,7 @@ import pytest
 
 from controller.errors import NcError
 from controller.interpreter.lexer import MAX_LINE_CHARS, Line, lex_line
+from controller.interpreter.params import Parameters
 
 
 def lex(text: str) -> Line:
@@ -44,9 +45,13 @@ def test_block_delete_and_percent() -> None:
 
 def test_parameter_reference_and_assignment() -> None:
     line = lex("#10 = 290 ; feed")
-    assert line.assigns == [(10, "290", 1)] and line.words == []
-    ref = lex("F#10")
-    assert ref.words == [("F", "#10")] and ref.has_params
+    assert line.assigns == [(10, 290.0, 1)] and line.words == []
+    params = Parameters()
+    params.set(10, 290.0)
+    ref = lex_line("F#10", "p.nc", 1, params)
+    assert ref.words == [("F", "290.0")]
+    named = lex_line("#<Depth> = [#10 / 2]", "p.nc", 1, params)
+    assert named.assigns == [("depth", 145.0, 1)]
 
 
 @pytest.mark.parametrize(("text", "col", "fragment"), [
@@ -54,11 +59,11 @@ def test_parameter_reference_and_assignment() -> None:
     ("G0 X", 4, "X word without a number"),
     ("G0 X1 (open", 7, "comment not closed"),
     ("G0 (a (b) c)", 7, "nested comment"),
-    ("G0 X[1]", 4, "expressions in [ ]"),
+    ("G0 X[1", 4, "expression not closed"),
     ("G0 X" + "9" * 25, 4, "number too long"),
     ("G0 X1 / Y1", 7, "unexpected character '/'"),
-    ("O100 sub", 1, "O-words"),
-    ("#1=[2]", 1, "only '#N=number'"),
+    ("G0 O100", 4, "an O-word must stand first"),
+    ("#1 2", 1, "needs '='"),
     ("G0\x00", 3, "U+0000"),
 ])
 def test_lexical_errors_name_the_column(text: str, col: int, fragment: str) -> None:

@@ -1,0 +1,80 @@
+"""The parameter store: numbered (#1-#5399), named local (#<name>) and global (#<_name>)."""
+
+from __future__ import annotations
+
+MAX_PARAMETER = 5399  # LinuxCNC's numbered parameters
+LOCAL_NUMBERED = 30  # #1-#30 are a subroutine's arguments, saved and restored around a call
+G28_HOME = 5161  # #5161-#5166: the G28 position (X Y Z A B C, machine coordinates, program units)
+G30_HOME = 5181  # #5181-#5186: the G30 position
+
+
+class ParamError(Exception):
+    """A parameter that cannot be read or written; the caller adds file, line and word."""
+
+
+class Parameters:
+    """Numbered and named parameters with subroutine scopes.
+
+    Reading a numbered parameter that was never set is an error (LinuxCNC reads 0: a typo in
+    a parameter number would then move the machine to 0). A subroutine call starts a scope:
+    #1-#30 are its arguments (the ones not passed read 0) and named parameters without a
+    leading underscore are its own; both are restored when it returns. `#<_name>` is global.
+    Other parts of the interpreter (G28/G30, probing, tool length) read and write the
+    numbered store through `get`/`set`."""
+
+    def __init__(self) -> None:
+        self.numbered: dict[int, float] = {}
+        self.globals: dict[str, float] = {}
+        self.locals: dict[str, float] = {}
+        self._saved: list[tuple[dict[int, float], dict[str, float]]] = []
+
+    @property
+    def depth(self) -> int:
+        """How many subroutine calls are open."""
+        return len(self._saved)
+
+    def get(self, number: int) -> float:
+        _check_number(number)
+        try:
+            return self.numbered[number]
+        except KeyError:
+            raise ParamError(f"parameter #{number} is not set") from None
+
+    def set(self, number: int, value: float) -> None:
+        _check_number(number)
+        self.numbered[number] = value
+
+    def get_named(self, name: str) -> float:
+        store = self.globals if name.startswith("_") else self.locals
+        try:
+            return store[name]
+        except KeyError:
+            raise ParamError(f"named parameter #<{name}> is not set") from None
+
+    def set_named(self, name: str, value: float) -> None:
+        (self.globals if name.startswith("_") else self.locals)[name] = value
+
+    def exists(self, name: str) -> bool:
+        return name in (self.globals if name.startswith("_") else self.locals)
+
+    def call(self, args: list[float]) -> None:
+        """Open a subroutine scope with its arguments as #1, #2, ..."""
+        if len(args) > LOCAL_NUMBERED:
+            raise ParamError(f"a call passes at most {LOCAL_NUMBERED} arguments")
+        saved = {n: v for n, v in self.numbered.items() if n <= LOCAL_NUMBERED}
+        self._saved.append((saved, self.locals))
+        for n in range(1, LOCAL_NUMBERED + 1):
+            self.numbered[n] = args[n - 1] if n <= len(args) else 0.0
+        self.locals = {}
+
+    def ret(self) -> None:
+        """Close the innermost subroutine scope: its caller's #1-#30 and locals come back."""
+        saved, self.locals = self._saved.pop()
+        for n in range(1, LOCAL_NUMBERED + 1):
+            self.numbered.pop(n, None)
+        self.numbered.update(saved)
+
+
+def _check_number(number: int) -> None:
+    if not 1 <= number <= MAX_PARAMETER:
+        raise ParamError(f"parameter #{number} out of range 1..{MAX_PARAMETER}")
