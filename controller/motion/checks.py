@@ -50,7 +50,15 @@ class FerrorTrip:
 
 
 class FerrorCheck:
-    """ferror = commanded - encoder per axis and frame; limit max(MIN_FERROR, FERROR |v|/Vmax)."""
+    """ferror = commanded - encoder - lead per axis and frame; limit max(MIN_FERROR, FERROR
+    |v|/Vmax).
+
+    With servo pre-compensation a frame leads the path by the loop's lag on purpose; that lead
+    (the frame sent less the path's reference for it, RefHistory) is not an error. LinuxCNC's
+    following error with feed-forward is likewise the trajectory's minus the feedback. Without
+    pre-compensation the lead is the rounding to pulses. The card's own commanded position and
+    encoder come from one instant, so a card that numbers its rows a frame or two off shifts
+    only the slowly varying lead."""
 
     def __init__(self, config: MachineConfig, start_counts: np.ndarray) -> None:
         self.names = config.axis_names
@@ -67,13 +75,17 @@ class FerrorCheck:
         """Vectorised AxisConfig.ferror_limit_mm over rows of per-axis velocities."""
         return np.maximum(self.min_ferror_mm, self.ferror_mm * np.abs(v_mm_s) / self.vmax_mm_s)
 
-    def check(self, fb: Feedback) -> FerrorTrip | None:
+    def check(self, fb: Feedback, hist: RefHistory | None = None) -> FerrorTrip | None:
+        """Rows of feedback; hist (the frames sent and their wanted rows) takes the lead out."""
         if not len(fb):
             return None
         cmd = fb.commanded_counts
         v = np.diff(np.vstack([self.last_cmd, cmd]), axis=0) * self.pulse_mm / self.period_s
         self.last_cmd = cmd[-1].copy()
         ferr = (cmd - fb.encoder_counts) * self.pulse_mm
+        if hist is not None and hist.count:
+            idx = fb.seq % hist.capacity
+            ferr = ferr - (hist.cmd_counts[idx] * self.pulse_mm - hist.pos_mm[idx])
         self.last_mm = ferr[-1].copy()
         self.max_abs_mm = max(self.max_abs_mm, float(np.abs(ferr).max()))
         over = np.abs(ferr) > self.limits_mm(v)

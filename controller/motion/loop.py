@@ -169,7 +169,7 @@ class MotionController:
         self.checks.in_position.frames(fb.seq, fb.encoder_counts, self.stream.pulses.counts)
 
     def _supervise(self, fb: Feedback) -> None:
-        trip = self.checks.ferr.check(fb)
+        trip = self.checks.ferr.check(fb, self.stream.hist)
         if trip is not None:
             line = int(self.stream.hist.line[trip.seq % self.stream.hist.capacity])
             self._begin_stop(Outcome.FAULT, f"{trip.axis.upper()} axis following error "
