@@ -12,6 +12,7 @@ import numpy as np
 from controller.blocks import (
     ArcBlock,
     DwellBlock,
+    HelixBlock,
     LineBlock,
     NcBlock,
     NurbsBlock,
@@ -23,6 +24,7 @@ from controller.config import MachineConfig
 from controller.errors import PlanningError
 from controller.generator.baselines import FORMULA_FEEDS, plan_formula_run
 from controller.generator.feed.planner import plan_feed
+from controller.generator.helix_move import helix_move
 from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
 from controller.generator.ph.construct import BlockCurve, block_curve
 from controller.generator.repeats import Repeats
@@ -327,10 +329,13 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
         yield from queue.flush()
         # A long move or dwell comes in chunks, each timed on from the one before (emit may
         # put an in-position hold before the first).
-        if isinstance(block, LineBlock):
-            for chunk, last in _straight_move(block, config, 0.0):
+        moves = _straight_move(block, config, 0.0) if isinstance(block, LineBlock) else \
+            helix_move(block, config, 0.0) if isinstance(block, HelixBlock) else None
+        if moves is not None:  # a line that moves Z, a rapid, a helix, a G18/G19 arc
+            for chunk, last in moves:
+                rapid = isinstance(block, LineBlock) and block.rapid
                 yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s),
-                                                  rapid=block.rapid), at_rest=last)
+                                                  rapid=rapid), at_rest=last)
         elif isinstance(block, DwellBlock):
             for chunk in _dwell(block, config, 0.0):
                 yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s)),

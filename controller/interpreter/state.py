@@ -169,6 +169,8 @@ class InterpState:
             self.modal.absolute = groups["distance"] == 900
         if "arc distance" in groups:
             self.modal.arc_absolute = groups["arc distance"] == 901
+        if "plane" in groups:
+            self.modal.plane = groups["plane"]
         if "spindle mode" in groups:
             self.css = groups["spindle mode"] == 960
         if "coordinate system" in groups:
@@ -181,7 +183,7 @@ class InterpState:
         elif path == 640:
             self.modal.path_control = PathControl(PathMode.BLEND, self._tol(vals, "P"),
                                             self._tol(vals, "Q"))
-        # G17, G40, G43/G49 (no tool table: zero length), G94, G98/G99 and G97 change nothing
+        # G40, G43/G49 (no tool table: zero length), G94, G98/G99 and G97 change nothing
         # in phcnc's model; they are accepted because CAM headers use them.
 
     def _tol(self, vals: dict[str, float], letter: str) -> float | None:

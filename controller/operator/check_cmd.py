@@ -10,12 +10,13 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Literal, overload
 
-from controller.blocks import ArcBlock, LineBlock, NurbsBlock
+from controller.blocks import ArcBlock, HelixBlock, LineBlock, NurbsBlock
 from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import ConfigError, DriveError, NcError, OffsetsError
 from controller.interpreter.extent import (
     TravelLimits,
     arc_length_and_box,
+    helix_length_and_box,
     line_length_and_box,
     nurbs_hull_box,
     nurbs_length_and_box,
@@ -49,6 +50,7 @@ class CheckSummary:
 
 
 _GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
+             HelixBlock: helix_length_and_box,
              NurbsBlock: nurbs_length_and_box}  # NURBS: from dense samples, 64 per knot span
 
 CHECK_BEAT_BLOCKS = 4096  # on_block is called every this many blocks
