@@ -54,7 +54,7 @@ def feed_cap_mm_s(block: HelixBlock, curve: HelixCurve, config: MachineConfig) -
     d = curve.evaluate(np.linspace(0.0, 1.0, 65), 1)[1]
     share = np.abs(d).max(axis=0) / curve.length_mm  # per axis: |dx_i / ds| at most
     for axis, frac in zip(config.axes, share, strict=True):
-        if frac > 0:
+        if frac > 1e-9:  # an axis the arc barely moves cannot limit it
             cap = min(cap, axis.max_velocity_mm_s / frac)
     kappa = curve.curvature_per_mm
     if kappa > 0:

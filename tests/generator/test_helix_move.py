@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from helix_helpers import modelled_tool, nearest_mm
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from nc_helpers import XYZ_MILL
@@ -20,10 +21,6 @@ from controller.errors import PlanningError
 from controller.generator.helix_move import plan_helix
 from controller.generator.plan import generate_reference
 from controller.geometry.helix import HelixCurve
-from controller.numeric import segment_distance
-from controller.servo.model import discretise, tracking_error_mm
-from controller.servo.precompensation import Precompensator
-from controller.servo.prediction import SETTLE_S
 
 
 def helix(plane: str, r: float, a0: float, sweep: float, rise: float,
@@ -42,33 +39,10 @@ def reference(block: HelixBlock, config: MachineConfig) -> np.ndarray:
     return np.vstack([c.pos_mm for c in chunks])
 
 
-def modelled_tool(ref: np.ndarray, start: np.ndarray, config: MachineConfig) -> np.ndarray:
-    """The tool as the motion loop drives it: frames through the Precompensator (settling
-    included), each axis's plant from rest at the start."""
-    T = config.sample_period_s  # noqa: N806
-    settle = np.repeat(ref[-1:], int(round(SETTLE_S / T)), axis=0)
-    if config.interpolator.servo_precompensation:
-        comp = Precompensator([a.servo for a in config.axes], T, start)
-        sent = comp.to_rest(ref)
-        sent = np.vstack([sent, np.repeat(ref[-1:], max(0, len(ref) + len(settle)
-                                                         - len(sent)), axis=0)])
-    else:
-        sent = np.vstack([ref, settle])
-    v = np.diff(np.vstack([start, sent]), axis=0) / T
-    err = np.column_stack([tracking_error_mm(discretise(a.servo, T), v[:, i])
-                           for i, a in enumerate(config.axes)])
-    return sent - err
-
-
 def true_error_mm(block: HelixBlock, tool: np.ndarray) -> np.ndarray:
     curve = HelixCurve.from_block(block)
     n = max(2000, int(abs(block.sweep_rad) / 0.002))  # chords within r * 5e-7
-    pts = curve.points(np.linspace(0.0, 1.0, n))
-    out = np.empty(len(tool))
-    for i0 in range(0, len(tool), 256):
-        q = tool[i0:i0 + 256, None, :]
-        out[i0:i0 + 256] = segment_distance(q, pts[None, :-1], pts[None, 1:]).min(axis=1)
-    return out
+    return nearest_mm(tool, curve.points(np.linspace(0.0, 1.0, n)))
 
 
 def check_plan(block: HelixBlock, config: MachineConfig) -> tuple[float, float]:
