@@ -12,6 +12,10 @@ from numpy.typing import ArrayLike
 from controller.blocks import PLANE_AXES, HelixBlock
 
 NEWTON_STEPS = 6  # foot-point iterations: from a nearby start each one squares the error
+# The foot point is searched this far each side of the guess (radians of turn) in this many
+# steps: a tool lags its reference by far less (at 100 mm/s a lag of 1 mm is 10 ms).
+SEARCH_RAD = 1.0
+SEARCH_STEPS = 8
 
 
 @dataclass(frozen=True)
@@ -67,10 +71,11 @@ class HelixCurve:
         return self.evaluate(u, 0)[0]
 
     def distance_mm(self, points: np.ndarray, u_guess: np.ndarray) -> np.ndarray:
-        """Each point's distance from the curve, by Newton on (C(u) - p) . C'(u) = 0 from a
-        parameter near its foot point (the sample it was planned from), clamped to [0, 1]."""
-        u = np.clip(np.asarray(u_guess, float), 0.0, 1.0)
+        """Each point's distance from the curve near a parameter it is known to be near (the
+        sample it was planned from): the nearest of the parameters within SEARCH_RAD of the
+        guess, refined by Newton on (C(u) - p) . C'(u) = 0, clamped to [0, 1]."""
         p = np.asarray(points, float)
+        u = self._nearest_start(p, np.clip(np.asarray(u_guess, float), 0.0, 1.0))
         for _ in range(NEWTON_STEPS):
             d = self.evaluate(u, 2)
             gap = d[0] - p
@@ -80,6 +85,16 @@ class HelixCurve:
                 step = np.where(df > 0, f / df, 0.0)
             u = np.clip(u - step, 0.0, 1.0)
         return np.linalg.norm(self.points(u) - p, axis=1)
+
+    def _nearest_start(self, p: np.ndarray, u0: np.ndarray) -> np.ndarray:
+        """Of SEARCH_STEPS parameters each side of u0 within SEARCH_RAD of turn, the nearest
+        to each point: Newton from there converges to its foot point, not to another one."""
+        span = min(1.0, SEARCH_RAD / abs(self.sweep)) if self.sweep else 1.0
+        k = np.arange(-SEARCH_STEPS, SEARCH_STEPS + 1) / SEARCH_STEPS
+        cand = np.clip(u0[:, None] + span * k[None, :], 0.0, 1.0)  # (n, 2 steps + 1)
+        pts = self.points(cand.ravel()).reshape(*cand.shape, 3)
+        best = np.argmin(np.sum((pts - p[:, None, :]) ** 2, axis=2), axis=1)
+        return cand[np.arange(len(u0)), best]
 
     def box(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """The axis-aligned box (min xyz, max xyz): the circle's extremes where the sweep

@@ -71,12 +71,14 @@ def test_box_is_the_tight_box(curve: HelixCurve) -> None:
 def test_distance_of_points_near_the_curve(curve: HelixCurve, offsets: list, size_mm: float
                                            ) -> None:
     """Points within size_mm of the curve, started from a parameter that is off by as much
-    as a tool lagging its reference is: the distance is that of the dense polyline near it
+    as a tool lagging its reference is (40 times its distance, at most 0.9 rad of turn): the
+    distance is that of the dense polyline near it
     (a quarter turn each side; another turn of the helix may pass closer, and is not its
     path there)."""
     u = np.array([o[0] for o in offsets])
     p = curve.points(u) + size_mm * np.array([o[1:] for o in offsets])
-    lag = np.clip(u - 40 * size_mm / max(curve.length_mm, 1e-9), 0, 1)
+    lag = np.clip(u - min(40 * size_mm / max(curve.length_mm, 1e-9),  # a lag of 40 sizes,
+                          0.9 / abs(curve.sweep)), 0, 1)  # within the search's turn
     got = curve.distance_mm(p, lag)
     grid = np.linspace(0.0, 1.0, 100_001)
     pts = curve.points(grid)
