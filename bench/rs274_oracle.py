@@ -5,7 +5,7 @@ Usage: python bench/rs274_oracle.py [--config xyz_mill] [--rs274 PATH] [--result
 For every G-code file (.nc .ngc .gcode .tap .cnc under each DIR) it runs `rs274 -g` (from
 Debian's linuxcnc-uspace; a tool table with tools 1-999 so that a T word is never refused for
 want of one) and our `cncctl check` path (read_program and the travel check), then compares the
-STRAIGHT_TRAVERSE, STRAIGHT_FEED and ARC_FEED calls with our LineBlock and ArcBlock: end
+STRAIGHT_TRAVERSE, STRAIGHT_FEED and ARC_FEED calls with our LineBlock, ArcBlock and HelixBlock: end
 points, arc centres and turns, and feeds, each to 1 um (plus the rounding of rs274's four
 printed decimals: 0.05 um in mm, 1.27 um in inch programs). rs274 prints in the program's units
 (USE_LENGTH_UNITS); they are converted to mm. Zero-length traverses that rs274 prints (G28
@@ -31,7 +31,7 @@ import tempfile
 from collections import Counter
 from dataclasses import dataclass, field
 
-from controller.blocks import ArcBlock, LineBlock, NurbsBlock
+from controller.blocks import ArcBlock, HelixBlock, LineBlock, NurbsBlock
 from controller.config import MachineConfig, load_config
 from controller.errors import CncError
 from controller.interpreter.program import read_program
@@ -45,6 +45,8 @@ _MM_PER_UNIT = {"CANON_UNITS_MM": 1.0, "CANON_UNITS_INCHES": 25.4, "CANON_UNITS_
 # ARC_FEED's first and second axes in each plane (rs274's canon): indices into (x, y, z).
 _PLANE_AXES = {"CANON_PLANE_XY": (0, 1, 2), "CANON_PLANE_YZ": (1, 2, 0),
                "CANON_PLANE_XZ": (2, 0, 1)}
+# Our HelixBlock's planes (controller/blocks.PLANE_AXES: the same axis order as rs274's).
+_CANON_PLANE = {"G17": "CANON_PLANE_XY", "G18": "CANON_PLANE_XZ", "G19": "CANON_PLANE_YZ"}
 
 
 @dataclass(slots=True)
@@ -168,10 +170,13 @@ def run_ours(program: str, config: MachineConfig) -> Oracle:
         elif isinstance(block, LineBlock):
             ours.moves.append(Move("G0" if block.rapid else "G1", tuple(block.end),
                                    block.feed_mm_s))
-        elif isinstance(block, ArcBlock):
+        elif isinstance(block, ArcBlock | HelixBlock):
             turns = block.turns + 1
+            plane = _CANON_PLANE[block.plane] if isinstance(block, HelixBlock) else \
+                "CANON_PLANE_XY"
             ours.moves.append(Move("ARC", tuple(block.end), block.feed_mm_s,
-                                   tuple(block.center), -turns if block.clockwise else turns))
+                                   tuple(block.center), -turns if block.clockwise else turns,
+                                   plane))
     ours.moves = collapse(ours.moves)
     return ours
 
@@ -217,7 +222,9 @@ def _differs(a: Move, b: Move) -> str | None:
         return f"{a.kind} end: rs274 {_show(a.end_mm)}, we {_show(b.end_mm)}"
     if a.kind != "G0" and abs(a.feed_mm_s - b.feed_mm_s) > 0.5e-4 * a.unit_mm / 60 + 1e-9:
         return f"{a.kind} feed: rs274 {a.feed_mm_s * 60:.4f} mm/min, we {b.feed_mm_s * 60:.4f}"
-    if a.kind == "ARC" and a.plane == "CANON_PLANE_XY":
+    if a.kind == "ARC" and a.plane != b.plane:
+        return f"arc plane: rs274 {a.plane}, we {b.plane}"
+    if a.kind == "ARC":
         if max(abs(p - q) for p, q in zip(a.centre_mm, b.centre_mm, strict=True)) > tol:
             return f"arc centre: rs274 {_show(a.centre_mm)}, we {_show(b.centre_mm)}"
         if a.rotation != b.rotation:

@@ -87,6 +87,66 @@ class ArcBlock:
         return abs(self.sweep_rad) * self.radius_mm
 
 
+# The machine axes (x 0, y 1, z 2) of each arc plane: its first and second axis, then its
+# normal, as LinuxCNC orders them (G18's plane is Z then X, so that its normal is +Y).
+PLANE_AXES: dict[str, tuple[int, int, int]] = {"G17": (0, 1, 2), "G18": (2, 0, 1),
+                                                "G19": (1, 2, 0)}
+
+
+@dataclass(frozen=True, slots=True)
+class HelixBlock:
+    """G2/G3 that moves a third axis: a G17 arc with a Z end (a helix), or any G18 (ZX) or G19
+    (YZ) arc, with or without motion along the plane's normal (absolute mm).
+
+    `center` is the axis point in the plane's two coordinates (first, second axis of
+    PLANE_AXES); the sweep is counter-clockwise positive seen from the normal's + side."""
+
+    plane: str  # "G17", "G18" or "G19"
+    start: Point3
+    end: Point3
+    center: tuple[float, float]
+    clockwise: bool
+    turns: int  # extra full turns (G2 P>1)
+    feed_mm_s: float
+    path: PathControl
+    source: Source
+
+    def in_plane(self, point: Point3) -> tuple[float, float, float]:
+        """A machine point as (first, second, normal) coordinates of the plane."""
+        a, b, n = PLANE_AXES[self.plane]
+        return point[a], point[b], point[n]
+
+    @property
+    def radius_mm(self) -> float:
+        s1, s2, _ = self.in_plane(self.start)
+        return float(np.hypot(s1 - self.center[0], s2 - self.center[1]))
+
+    @property
+    def sweep_rad(self) -> float:
+        """Signed swept angle in the plane: positive counter-clockwise."""
+        (s1, s2, _), (e1, e2, _) = self.in_plane(self.start), self.in_plane(self.end)
+        c1, c2 = self.center
+        return _signed_sweep(float(np.arctan2(s2 - c2, s1 - c1)),
+                             float(np.arctan2(e2 - c2, e1 - c1)), self.clockwise, self.turns)
+
+    @property
+    def axial_mm(self) -> float:
+        """Displacement along the plane's normal (the helix's rise)."""
+        return self.in_plane(self.end)[2] - self.in_plane(self.start)[2]
+
+    @property
+    def length_mm(self) -> float:
+        """Exact: the helix unrolled is a straight line of legs r * sweep and the rise."""
+        return float(np.hypot(self.radius_mm * self.sweep_rad, self.axial_mm))
+
+
+def _signed_sweep(a0: float, a1: float, clockwise: bool, turns: int) -> float:
+    """From angle a0 to a1 the given way round, a full circle when they meet, plus turns."""
+    sweep = ((a0 - a1) if clockwise else (a1 - a0)) % (2 * np.pi)
+    sweep = (2 * np.pi if sweep <= 1e-12 else sweep) + 2 * np.pi * turns
+    return -float(sweep) if clockwise else float(sweep)
+
+
 def polygon_length_mm(points: np.ndarray) -> float:
     """Length of the polyline through points (n, 2)."""
     return float(np.sum(np.hypot(*np.diff(points, axis=0).T)))
@@ -188,4 +248,5 @@ class ProbeBlock:
 
 
 MotionBlock = LineBlock | ArcBlock | NurbsBlock
-NcBlock = LineBlock | ArcBlock | NurbsBlock | DwellBlock | StopBlock | AuxBlock | ProbeBlock
+NcBlock = (LineBlock | ArcBlock | HelixBlock | NurbsBlock | DwellBlock | StopBlock | AuxBlock
+           | ProbeBlock)

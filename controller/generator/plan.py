@@ -12,6 +12,7 @@ import numpy as np
 from controller.blocks import (
     ArcBlock,
     DwellBlock,
+    HelixBlock,
     LineBlock,
     NcBlock,
     NurbsBlock,
@@ -25,6 +26,7 @@ from controller.errors import PlanningError
 from controller.generator.baselines import FORMULA_FEEDS, plan_formula_run
 from controller.generator.feed.planner import plan_feed
 from controller.generator.feed.shape import TransitionShape
+from controller.generator.helix_move import helix_move
 from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
 from controller.generator.ph.construct import BlockCurve, block_curve
 from controller.generator.repeats import Repeats
@@ -330,13 +332,17 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
         yield from queue.flush()
         # A long move or dwell comes in chunks, each timed on from the one before (emit may
         # put an in-position hold before the first).
-        if isinstance(block, LineBlock | ProbeBlock):
+        if isinstance(block, ProbeBlock):
             # A probe (G38) is a barrier: planned to rest on its own; the interpreter goes on
             # only once its result is known (controller/probe.py).
-            line = block.as_line() if isinstance(block, ProbeBlock) else block
-            for chunk, last in _straight_move(line, config, 0.0):
+            block = block.as_line()
+        moves = _straight_move(block, config, 0.0) if isinstance(block, LineBlock) else \
+            helix_move(block, config, 0.0) if isinstance(block, HelixBlock) else None
+        if moves is not None:  # a line that moves Z, a rapid, a probe, a helix, a G18/G19 arc
+            for chunk, last in moves:
+                rapid = isinstance(block, LineBlock) and block.rapid
                 yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s),
-                                                  rapid=line.rapid), at_rest=last)
+                                                  rapid=rapid), at_rest=last)
         elif isinstance(block, DwellBlock):
             for chunk in _dwell(block, config, 0.0):
                 yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s)),

@@ -1,4 +1,6 @@
-"""Arc centres for G2/G3 in the XY plane: I J (incremental or absolute) or R, LinuxCNC's checks."""
+"""Arc centres for G2/G3 in the plane in force: centre offsets (incremental or absolute) or R,
+with LinuxCNC's checks (interp_arc.cc). The coordinates are the plane's two axes, in machine mm:
+(X, Y) in G17, (Z, X) in G18, (Y, Z) in G19."""
 
 from __future__ import annotations
 
@@ -25,19 +27,23 @@ def _tol_mm(inch: bool, tol_mm: float, tol_inch: float) -> float:
 
 
 def center_ijk(sx: float, sy: float, ex: float, ey: float, cx: float, cy: float,
-               inch: bool) -> tuple[float, float]:
-    """Check an I J arc whose centre (cx, cy) is already absolute mm; return the centre.
+               inch: bool, word: str = "I") -> tuple[float, float]:
+    """Check a centre-format arc whose centre (cx, cy) is already absolute mm; return it.
 
-    LinuxCNC's rule: start and end radius may differ by the absolute tolerance and by 0.1 %."""
+    LinuxCNC's rule (interp_arc.cc, arc_data_ijk): the end radius is refused only when it
+    differs from the start radius by over 100 times the tolerance, or by over the tolerance
+    and over 0.1 % of the larger radius. The tolerance is CENTER_ARC_RADIUS_TOLERANCE (2 *
+    0.01 * sqrt(2) mm, 2 * 0.001 * sqrt(2) in; an INI setting there, fixed here): an arc whose
+    end points and centre were rounded to 0.01 mm (0.001 in) is accepted."""
     r1 = math.hypot(sx - cx, sy - cy)
     r2 = math.hypot(ex - cx, ey - cy)
     if min(r1, r2) < _tol_mm(inch, RADIUS_TOLERANCE_MM, RADIUS_TOLERANCE_INCH):
-        raise WordError("I", f"zero-radius arc: start radius {r1:.4f} mm, end radius {r2:.4f} mm")
+        raise WordError(word, f"zero-radius arc: start radius {r1:.4f} mm, end radius {r2:.4f} mm")
     abs_err = abs(r1 - r2)
     rel_err = abs_err / max(r1, r2)
     abs_tol = _tol_mm(inch, CENTER_ARC_RADIUS_TOLERANCE_MM, CENTER_ARC_RADIUS_TOLERANCE_INCH)
-    if abs_err > abs_tol or rel_err > SPIRAL_RELATIVE_TOLERANCE:
-        raise WordError("I", f"radius to end of arc differs from radius to start: "
+    if abs_err > 100.0 * abs_tol or (abs_err > abs_tol and rel_err > SPIRAL_RELATIVE_TOLERANCE):
+        raise WordError(word, f"radius to end of arc differs from radius to start: "
                              f"r1={r1:.4f} mm r2={r2:.4f} mm abs_err={abs_err:.4g} mm "
                              f"rel_err={rel_err * 100:.4f}%")
     return cx, cy

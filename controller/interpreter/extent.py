@@ -7,9 +7,10 @@ import math
 
 import numpy as np
 
-from controller.blocks import ArcBlock, LineBlock, NcBlock, NurbsBlock
+from controller.blocks import ArcBlock, HelixBlock, LineBlock, NcBlock, NurbsBlock
 from controller.config import MachineConfig
 from controller.errors import NcError
+from controller.geometry.helix import HelixCurve
 from controller.interpreter.arcs import arc_box
 from controller.offsets import ZERO_MM, OffsetTable, work_origin
 
@@ -96,6 +97,12 @@ def arc_length_and_box(block: ArcBlock) -> tuple[float, Box]:
         return abs(sweep) * r, ((cx - r_max, cy - r_max, z), (cx + r_max, cy + r_max, z))
     x0, y0, x1, y1 = arc_box(sx, sy, ex, ey, cx, cy, sweep)
     return abs(sweep) * r, ((x0, y0, z), (x1, y1, z))
+
+
+def helix_length_and_box(block: HelixBlock) -> tuple[float, Box]:
+    """Exact length and box of a helix or of a G18/G19 arc."""
+    curve = HelixCurve.from_block(block)
+    return curve.length_mm, curve.box()
 
 
 def travel_error(path: str, block: NcBlock, axis: str, reached_mm: float, lo_mm: float,

@@ -19,5 +19,6 @@ class Modal:
     absolute: bool = True  # G90
     arc_absolute: bool = False  # G91.1 is LinuxCNC's default
     feed_mm_s: float = 0.0
+    plane: int = 170  # code10 of G17 (XY), G18 (ZX) or G19 (YZ): the plane of G2/G3
     motion: int | None = None  # code10 of the modal motion; None after G80 / NURBS
     path_control: PathControl = field(default_factory=PathControl)

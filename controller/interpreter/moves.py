@@ -1,13 +1,13 @@
-"""Motion of one line: G0/G1 lines, G2/G3 arcs, and the G5.2/G6.2 NURBS blocks."""
+"""Motion of one line: G0/G1 lines, G2/G3 arcs (plane_arcs), and the G5.2/G6.2 NURBS blocks."""
 
 from __future__ import annotations
 
-from controller.blocks import ArcBlock, LineBlock, NcBlock, Source
+from controller.blocks import LineBlock, NcBlock, Source
 from controller.config import MachineConfig
-from controller.interpreter.arcs import center_ijk, center_r
 from controller.interpreter.codes import WordError, g_name
 from controller.interpreter.modal import Modal
 from controller.interpreter.nurbs_blocks import NurbsCollector, check_order, split_at_corners
+from controller.interpreter.plane_arcs import arc_block
 from controller.interpreter.work_offsets import WorkOffsets
 
 # G6.2's first control point must be the current position within this: a drive reports whole
@@ -126,26 +126,9 @@ class Moves:
     def _arc(self, clockwise: bool, end: tuple[float, float, float], vals: dict[str, float],
              lineno: int) -> None:
         modal = self.modal
-        sx, sy, sz = modal.pos
-        ex, ey, ez = end
-        if ez != sz:
-            raise WordError("Z", "helical arcs (Z motion in G2/G3) are not supported")
-        if "K" in vals:
-            raise WordError("K", "K word in an XY-plane (G17) arc")
-        turns = self._turns(vals)
-        inch = modal.scale != 1.0
-        has_ij = "I" in vals or "J" in vals
-        if "R" in vals:
-            if has_ij:
-                raise WordError("R", "arc with both R and I J: use one of them")
-            cx, cy = center_r(sx, sy, ex, ey, vals["R"] * modal.scale, clockwise, inch)
-        elif has_ij:
-            cx, cy = center_ijk(sx, sy, ex, ey, *self._center(vals), inch)
-        else:
-            raise WordError(g_name(20 if clockwise else 30), "arc needs I J (centre) or R")
-        block = ArcBlock(modal.pos, end, (cx, cy), clockwise, turns, modal.feed_mm_s,
-                         modal.path_control, Source(self.path, lineno, lineno))
-        _within_a_day(block.length_mm, self._capped(modal.feed_mm_s), "P" if turns else "F")
+        block = arc_block(modal, self.offsets.origin, self.has_z, self.config.name, clockwise,
+                          end, vals, Source(self.path, lineno, lineno))
+        _within_a_day(block.length_mm, self._capped(modal.feed_mm_s), "P" if block.turns else "F")
         self.out.append(block)
         modal.pos = end
 
@@ -154,23 +137,6 @@ class Moves:
 
     def _capped(self, feed_mm_s: float) -> float:
         return min(feed_mm_s, self.config.interpolator.max_feed_mm_s)
-
-    def _turns(self, vals: dict[str, float]) -> int:
-        p = vals.get("P", 1.0)
-        if p < 1 or p != int(p):
-            raise WordError("P", "arc P (number of turns) must be a positive integer")
-        return int(p) - 1
-
-    def _center(self, vals: dict[str, float]) -> tuple[float, float]:
-        modal = self.modal
-        s = modal.scale
-        if modal.arc_absolute:
-            for letter in "IJ":
-                if letter not in vals:
-                    raise WordError(letter if letter == "I" else "J",
-                                    f"{letter} word missing in absolute-centre arc (G90.1)")
-            return self._machine(0, vals["I"]), self._machine(1, vals["J"])
-        return modal.pos[0] + vals.get("I", 0.0) * s, modal.pos[1] + vals.get("J", 0.0) * s
 
     def _machine(self, axis: int, value: float) -> float:
         """An absolute program coordinate (program units) in machine mm."""

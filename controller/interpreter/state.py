@@ -76,7 +76,6 @@ class InterpState:
         self.params = Parameters()
         self.cycles = CannedCycles(self.modal, self.moves, path)
         self.homes = HomePositions(self.modal, self.moves, self.params)
-        self.plane = 170  # G17
         self.spindle_rpm = 0.0
         self.spindle_on = False
         self.spindle_code = 5  # M3, M4 or M5
@@ -170,7 +169,7 @@ class InterpState:
         return True
 
     def _cycle(self, code: int, vals: dict[str, float], lineno: int) -> None:
-        if self.plane != 170:
+        if self.modal.plane != 170:
             raise WordError(g_name(code), f"{g_name(code)}: canned cycles run in the XY plane "
                                           f"(G17) only")
         new = self.modal.motion != code
@@ -216,16 +215,20 @@ class InterpState:
                        f"block that starts at line {first}; run from line {first}")
 
     def _modes(self, groups: dict[str, int], vals: dict[str, float]) -> None:
-        if "plane" in groups:
-            self.plane = groups["plane"]
         if "canned return" in groups:
             self.cycles.retract_to_r = groups["canned return"] == 990
         if "units" in groups:
-            self.modal.scale = MM_PER_INCH if groups["units"] == 200 else 1.0
+            scale = MM_PER_INCH if groups["units"] == 200 else 1.0
+            # The F number stays and now means units per minute of the new units, as LinuxCNC
+            # reads an F set before G20 (its feed is kept in the program's current units).
+            self.modal.feed_mm_s *= scale / self.modal.scale
+            self.modal.scale = scale
         if "distance" in groups:
             self.modal.absolute = groups["distance"] == 900
         if "arc distance" in groups:
             self.modal.arc_absolute = groups["arc distance"] == 901
+        if "plane" in groups:
+            self.modal.plane = groups["plane"]
         if "spindle mode" in groups:
             self.css = groups["spindle mode"] == 960
         if "coordinate system" in groups:
@@ -245,8 +248,8 @@ class InterpState:
             self.tools.g43_1(vals)
         elif length == 490:
             self.tools.g49()
-        # G17, G40, G94, G98/G99 and G97 change nothing in phcnc's model; they are accepted
-        # because CAM headers use them.
+        # G40, G94, G98/G99 and G97 change nothing in phcnc's model; they are accepted because
+        # CAM headers use them.
 
     def _tol(self, vals: dict[str, float], letter: str) -> float | None:
         if letter not in vals:

@@ -144,8 +144,8 @@ class ContourStats:
         lo = max(0, hist.count - hist.capacity)
         win = np.clip(seq[:, None] + np.arange(-NEAR_FRAMES, NEAR_FRAMES + 1),
                       lo, hist.count - 1) % hist.capacity
-        poly = hist.pos_mm[win][:, :, :2]
-        act = (counts * self.pulse_mm)[:, None, :2]
+        poly = hist.pos_mm[win]  # every axis: a helix or a G18/G19 arc is a 3-D path
+        act = (counts * self.pulse_mm)[:, None, :]
         eps = segment_distance(act, poly[:, :-1], poly[:, 1:]).min(axis=1)
         if eps.size:
             self.max_abs_mm = max(self.max_abs_mm, float(eps.max()))

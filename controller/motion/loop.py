@@ -87,8 +87,7 @@ class MotionController:
             model=ModelWatch(self.config, start_cmd),
             in_position=InPosition(self.pulse_mm, self.settings.in_position_mm, self.period_s))
         start_mm = start_cmd * self.pulse_mm
-        precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
-                                   for a in self.config.axes], self.period_s, start_mm)
+        precomp = (Precompensator([a.servo for a in self.config.axes], self.period_s, start_mm)
                    if self.config.interpolator.servo_precompensation else None)
         self.stream = SendState(
             held=np.zeros((0, self.n + 2)), prev_mm=start_mm, last_mm=start_mm,

@@ -10,12 +10,13 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Literal, overload
 
-from controller.blocks import ArcBlock, LineBlock, NurbsBlock, ProbeBlock
+from controller.blocks import ArcBlock, HelixBlock, LineBlock, NurbsBlock, ProbeBlock
 from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import ConfigError, DriveError, NcError, OffsetsError
 from controller.interpreter.extent import (
     TravelLimits,
     arc_length_and_box,
+    helix_length_and_box,
     line_length_and_box,
     nurbs_hull_box,
     nurbs_length_and_box,
@@ -51,6 +52,7 @@ class CheckSummary:
 
 
 _GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
+             HelixBlock: helix_length_and_box,
              NurbsBlock: nurbs_length_and_box,
              ProbeBlock: line_length_and_box}
 # NURBS: from dense samples, 64 per knot span; G38: the whole move, the farthest it can go

@@ -100,8 +100,7 @@ class TrajectoryWriter:
         cmd_cols = [f"{a}_cmd" for a in names]
         self.ROW = ",".join(["%.9g"] * (6 + len(cmd_cols))) + "\r\n"
         start = np.zeros(len(names))  # simulate starts at rest at X0 Y0 (Z0)
-        self.precomp = (Precompensator([a.servo if a.name in ("x", "y") else None
-                                        for a in config.axes], self.T, start)
+        self.precomp = (Precompensator([a.servo for a in config.axes], self.T, start)
                         if config.interpolator.servo_precompensation else None)
         try:
             self.fh: TextIO = open(self.part, "w", encoding="utf-8", newline="")  # noqa: SIM115

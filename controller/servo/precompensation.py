@@ -123,7 +123,7 @@ class Precompensator:
     """The motion loop's streaming form: wanted positions in, frames to send out, per axis.
 
     Positions are mm, one row per sample and one column per axis; only the axes with a servo
-    model are compensated (a Z column passes through)."""
+    model are compensated (an axis given None passes through)."""
 
     def __init__(self, servos: list[ServoParams | None], sample_period_s: float,
                  start_mm: np.ndarray) -> None:

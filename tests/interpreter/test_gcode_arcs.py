@@ -35,21 +35,39 @@ def test_r_form_centre(sx: float, sy: float, ex: float, ey: float, factor: float
     assert (arc.sweep_rad < 0) == clockwise
 
 
+TOL_MM = 2 * 0.01 * math.sqrt(2)  # LinuxCNC's CENTER_ARC_RADIUS_TOLERANCE_MM
+
+
 @PROPS
 @given(coord, coord, st.floats(0.5, 50), st.floats(-7, 7), st.floats(-7, 7),
-       st.floats(-0.05, 0.05))
+       st.one_of(st.floats(-0.05, 0.05), st.floats(-4.0, 4.0)))
 def test_ijk_radius_check_follows_linuxcnc(cx: float, cy: float, r: float, a0: float,
                                            a1: float, dr: float) -> None:
+    if r + dr < 0.01:
+        return
     sx, sy = cx + r * math.cos(a0), cy + r * math.sin(a0)
     ex, ey = cx + (r + dr) * math.cos(a1), cy + (r + dr) * math.sin(a1)
     r2 = math.hypot(ex - cx, ey - cy)
     err = abs(r2 - r)
-    ok = err <= 2 * 0.01 * math.sqrt(2) and err / max(r, r2) <= 0.001
-    if ok:
+    # interp_arc.cc: refused when over 100 x the tolerance, or over it and over 0.1 %
+    refused = err > 100 * TOL_MM or (err > TOL_MM and err / max(r, r2) > 0.001)
+    if not refused:
         assert center_ijk(sx, sy, ex, ey, cx, cy, inch=False) == (cx, cy)
     else:
         with pytest.raises(WordError, match="differs"):
             center_ijk(sx, sy, ex, ey, cx, cy, inch=False)
+
+
+def test_a_micrometre_off_on_a_small_radius_is_accepted_as_linuxcnc_does() -> None:
+    # 1.1 um on a 0.5 mm radius is 0.22 %: over the relative tolerance, under the absolute one
+    assert center_ijk(0.5, 0.0, -0.5011, 0.0, 0.0, 0.0, inch=False) == (0.0, 0.0)
+
+
+def test_over_a_hundred_tolerances_is_refused_whatever_the_radius() -> None:
+    # 3 mm on 5000 mm is 0.06 %: under the relative tolerance, over 100 x the absolute one
+    with pytest.raises(WordError, match="differs"):
+        center_ijk(5000.0, 0.0, -5003.0, 0.0, 0.0, 0.0, inch=False)
+    assert center_ijk(5000.0, 0.0, -5002.0, 0.0, 0.0, 0.0, inch=False) == (0.0, 0.0)
 
 
 @PROPS

@@ -34,6 +34,12 @@ SAME = sorted((DATA / "oracle").glob("*.ngc")) + [
 @pytest.mark.parametrize("path", SAME, ids=[str(p.relative_to(DATA)) for p in SAME])
 def test_same_moves_as_linuxcnc(path: Path, tmp_path: Path) -> None:
     row = ORACLE.compare(str(path), XYZ_MILL, RS274, str(tmp_path))
+    if row["status"] == "ours-only" and "no percent sign or program end" in row["rs274"]:
+        # A post for another controller ends without M2 (we warn, rs274 refuses): the moves
+        # are compared on the program with its M2.
+        ended = tmp_path / path.name
+        ended.write_text(path.read_text() + "\nM2\n")
+        row = ORACLE.compare(str(ended), XYZ_MILL, RS274, str(tmp_path))
     assert row["status"] == "same", row
 
 

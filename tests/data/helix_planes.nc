@@ -1,0 +1,18 @@
+(helical arcs and arcs in the three planes on a 3-axis mill)
+G21 G90 G17 G94
+G0 X0 Y0 Z5
+G1 Z0 F300
+G1 X10 F1200
+G3 X10 Y0 Z-1 I-10 J0 F900
+G3 X10 Y0 Z-2 I-10 J0
+G2 X0 Y10 Z-2.5 R10
+G1 X0 Y10 Z-2.5
+G18
+G2 X10 Z-2.5 I5 K0
+G3 X0 Z-2.5 R5
+G19
+G2 Y20 Z-2.5 J5 K0
+G3 Y10 Z-2.5 J-5
+G17
+G0 Z5
+M2
