@@ -12,6 +12,7 @@ import yaml
 
 from controller.backends import BUILTIN_BACKENDS, backend_names
 from controller.errors import ConfigError
+from controller.opcua_config import OpcuaConfig, read_opcua
 from controller.servo_poles import pole_problem
 from controller.yaml_strict import Section, StrictLoader
 
@@ -122,6 +123,7 @@ class ServiceConfig:
     allowed_users: tuple[str, ...] = ()
     max_connections: int = 64
     log_events: int = 1000  # kept in memory for `cncctl log`
+    opcua: OpcuaConfig | None = None  # the OPC UA server beside cncd (controller/opcua_config)
 
 
 @dataclass(frozen=True, slots=True)
@@ -272,7 +274,7 @@ def _read_runtime(sec: Section) -> RuntimeConfig:
     return cfg
 
 
-def _read_service(sec: Section) -> ServiceConfig:
+def _read_service(sec: Section, name: str) -> ServiceConfig:
     group = sec._raw("socket_group", None)
     if group is not None and not (isinstance(group, str) and group):
         raise ConfigError(sec.path, sec._key("socket_group"), "must be a group name")
@@ -282,6 +284,7 @@ def _read_service(sec: Section) -> ServiceConfig:
         allowed_users=sec.names("allowed_users"),
         max_connections=sec.int("max_connections", 64, minval=4, maxval=4096),
         log_events=sec.int("log_events", 1000, minval=10, maxval=1_000_000),
+        opcua=read_opcua(sec, name),
     )
     sec.finish()
     return cfg
@@ -309,7 +312,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         interpolator=_read_interpolator(top.section("interpolator")),
         drive=_read_drive(top.section("drive")),
         runtime=_read_runtime(top.section("runtime", {})),
-        service=_read_service(top.section("service", {})),
+        service=_read_service(top.section("service", {}), name),
         allow_unhomed=top.bool("allow_unhomed", False),
     )
     top.finish()

@@ -23,6 +23,7 @@ from controller.operator.daemon.estop_socket import EstopSocket
 from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.notify import run_watchdog, sd_notify
+from controller.operator.daemon.opcua_child import OpcuaChild, require_opcua
 from controller.operator.daemon.protocol import ProtocolError
 from controller.operator.daemon.server import Server
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
@@ -107,6 +108,8 @@ class Daemon:
         estop = EstopSocket(estop_socket_path(self.socket_path), gid, policy, self.log,
                             self._estop)
         estop.start()
+        opcua = OpcuaChild(self.config, self.socket_path, self.log)
+        opcua.start()  # a client of the socket: it connects once the loop below serves
         threading.Thread(target=run_watchdog, args=(self._healthy, self.stop, self._unhealthy),
                          name="watchdog", daemon=True).start()
         sd_notify(f"READY=1\nSTATUS={self.machine.state.value}\nMAINPID={os.getpid()}")
@@ -115,6 +118,7 @@ class Daemon:
         try:
             self.server.serve(self._keep_going)
         finally:
+            opcua.stop()
             estop.close()
             listener.close()
             try:
@@ -164,6 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _arguments(argv)
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
+        require_opcua(config)
     except CncError as exc:
         print(f"<3>cncd: {exc}", file=sys.stderr)
         return 2
