@@ -43,6 +43,9 @@ class View:
         assert self.model.messages is not None
         self.events = await self.model.server.get_event_generator(
             etype, emitting_node=self.model.messages)
+        # asyncua reads the imported property's data type as Null and would send Identifier
+        # as an empty variant: it is a String (OPC 40501-1, NotificationEventType).
+        self.events.event.data_types["Identifier"] = ua.VariantType.String
 
     async def update(self, seen: values.Seen) -> None:
         now_s = time.time()
@@ -88,6 +91,5 @@ class View:
         event.Message = ua.LocalizedText(text[:1000])
         event.SourceName = self.config.machine_name
         event.SourceNode = self.model.machine.nodeid
-        await self.events.trigger(time_attr=dt.datetime.now(dt.UTC),
-                                  message=ua.LocalizedText(text[:1000]))
+        await self.events.trigger(time_attr=dt.datetime.now(dt.UTC), message=text[:1000])
         self.messages_sent += 1
