@@ -23,7 +23,7 @@ from controller.operator.daemon.estop_socket import EstopSocket
 from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.notify import run_watchdog, sd_notify
-from controller.operator.daemon.opcua_child import OpcuaChild, require_opcua
+from controller.operator.daemon.opcua_child import OpcuaChild, require_opcua, runtime_options
 from controller.operator.daemon.protocol import ProtocolError
 from controller.operator.daemon.server import Server
 from controller.operator.drive_args import add_drive_option_argument, config_with_drive_options
@@ -86,7 +86,8 @@ class Daemon:
         with realtime_threads():  # the drive's threads (card clock, link) as the motion thread
             self.drive.open()
         self.server: Server | None = None
-        self.machine = Machine(config, self.drive, state_dir, log, self._publish)
+        self.machine = Machine(config, self.drive, state_dir, log, self._publish,
+                               runtime_options(config))
         self.machine.scheduling = sched.as_dict()
 
     def _publish(self, topic: str, event: dict) -> None:

@@ -17,7 +17,11 @@ from typing import Any
 from controller.config import MachineConfig
 from controller.errors import CncError
 from controller.operator.daemon.log import ERR, NOTICE, EventLog
+from controller.runtime.processes import RuntimeOptions
 
+# A job reports its progress this often with OPC UA on (0.1 s otherwise): a value's age at a
+# subscriber is this period plus the delivery, and the companion model asks for 100 ms.
+PROGRESS_EVERY_S = 0.05
 STOP_WAIT_S = 5.0  # SIGTERM, then SIGKILL after this
 RESTART_AFTER_S = (1.0, 2.0, 5.0, 10.0, 30.0)  # after its 1st, 2nd, ... unexpected exit
 
@@ -41,6 +45,13 @@ def require_opcua(config: MachineConfig,
         from controller.operator.opcua.users import read_users
 
         read_users(cfg.users_file)
+
+
+def runtime_options(config: MachineConfig) -> Callable[[], RuntimeOptions] | None:
+    """The daemon's job options: progress every PROGRESS_EVERY_S when OPC UA is on."""
+    if config.service.opcua is None:
+        return None
+    return lambda: RuntimeOptions(settings={"progress_every_s": PROGRESS_EVERY_S})
 
 
 class OpcuaChild:
