@@ -142,10 +142,12 @@ async def measure(args: argparse.Namespace, daemon: Any, endpoint: str,
     for client, _ in clients:
         await client.disconnect()
     lat_ms = 1e3 * np.array(latencies)
+    stats = {"p50": round(float(np.percentile(lat_ms, 50)), 1),
+             "p99": round(float(np.percentile(lat_ms, 99)), 1),
+             "max": round(float(lat_ms.max()), 1)} if lat_ms.size else {}
     return {"clients": args.clients, "publish_ms": args.publish_ms,
-            "latency_ms": {"p50": round(float(np.percentile(lat_ms, 50)), 1),
-                           "p99": round(float(np.percentile(lat_ms, 99)), 1),
-                           "max": round(float(lat_ms.max()), 1), "samples": int(lat_ms.size)},
+            "latency_ms": {**stats, "samples": int(lat_ms.size),
+                           "reports": sum(len(v) for v in progress.times.values())},
             "server_cpu_pct": {"rest_one_client": round(rest_pct, 2),
                                f"job_{args.clients}_clients": round(job_pct, 2)},
             "job_no_client": {k: baseline.get(k) for k in KEYS},

@@ -17,6 +17,7 @@ from controller.operator.opcua.model import NOTIFICATION_EVENT_TYPE, Model, Stat
 STATE_MACHINES = {"Program": "Program", "ItemState": "ItemState",
                   "MachineryMode": "OperationMode"}
 TEXTS = {"Manufacturer", "Model"}  # LocalizedText variables
+CLOCK_STEP = {"PowerOnDuration": 1000.0, "RunTime": 1.0}  # ms, s: written when this far on
 
 
 class View:
@@ -52,6 +53,13 @@ class View:
         out = values.monitoring_values(seen, self.axes)
         out.update(values.program_values(seen, now_s))
         out["PowerOnDuration"] = (now_s - self.started_s) * 1000.0  # Duration: ms
+        # Clocks: to the second. Written at every report they were most of the notifications
+        # (and of the server's CPU) with nothing new to say.
+        for key in ("PowerOnDuration", "RunTime") if seen.program_job() else (
+                "PowerOnDuration",):
+            if key in out and self.written.get(key) is not None and \
+                    abs(out[key] - self.written[key]) < CLOCK_STEP[key]:
+                del out[key]
         await self.write(out)
 
     async def write(self, new: dict[str, Any]) -> None:
