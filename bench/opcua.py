@@ -4,8 +4,9 @@ and late cycles with N clients subscribed.
 
 A fresh cncd (the sim card, real time) with `service.opcua` on a free port. This process is
 both a plain control-socket subscriber (the `progress` topic: the motion loop's report, on the
-socket within a millisecond) and N asyncua clients, each subscribed to the channel's X and Y
-positions, its state and the program's line at the publishing interval asked. A job of circles
+socket within a millisecond) and one asyncua client; N-1 more clients subscribe from a second
+process. Each is subscribed to the channel's X and Y positions, its state and the program's
+line at the publishing interval asked. A job of circles
 runs (X changes at every report); for each X value the OPC UA clients receive, the latency is
 its arrival time less the arrival of the progress event that carried it. The server's CPU is
 its process's utime + stime over the interval, in % of one core.
@@ -20,6 +21,7 @@ import asyncio
 import json
 import os
 import socket
+import subprocess
 import sys
 import tempfile
 import threading
@@ -131,7 +133,14 @@ async def measure(args: argparse.Namespace, daemon: Any, endpoint: str,
     rest_pct = 100 * (cpu_s(server) - c0) / (time.monotonic() - t0)
     await one[0][0].disconnect()
     baseline, _ = await job(daemon, program, server)  # the server up, no client
-    clients = [await subscribe(endpoint, args.publish_ms) for _ in range(args.clients)]
+    # One client measures here; the others subscribe from a process of their own, so their
+    # notifications load the server and not the measuring client's event loop.
+    others = subprocess.Popen([sys.executable, __file__, "--sit", endpoint, "--clients",
+                               str(args.clients - 1), "--publish-ms", str(args.publish_ms)],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              stderr=subprocess.DEVNULL)
+    assert others.stdout is not None and others.stdout.readline().strip() == b"subscribed"
+    clients = [await subscribe(endpoint, args.publish_ms)]
     progress = ProgressTimes(daemon.socket_path)
     progress.start()
     await asyncio.sleep(1.0)
@@ -141,6 +150,8 @@ async def measure(args: argparse.Namespace, daemon: Any, endpoint: str,
                  if (lat := progress.latency_s(t, x)) is not None]
     for client, _ in clients:
         await client.disconnect()
+    others.kill()  # by its pid
+    others.wait()
     lat_ms = 1e3 * np.array(latencies)
     stats = {"p50": round(float(np.percentile(lat_ms, 50)), 1),
              "p99": round(float(np.percentile(lat_ms, 99)), 1),
@@ -171,13 +182,27 @@ async def job(daemon: Any, program: Path, server: int) -> tuple[dict[str, Any], 
     return final, pct
 
 
+async def sit(endpoint: str, count: int, publish_ms: float) -> None:
+    """--sit: count subscribed clients until standard input closes (the measuring process
+    kills it by pid)."""
+    clients = [await subscribe(endpoint, publish_ms) for _ in range(count)]
+    print("subscribed", flush=True)
+    await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)
+    for client, _ in clients:
+        await client.disconnect()
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--clients", type=int, default=10)
     ap.add_argument("--publish-ms", type=float, default=50.0)
     ap.add_argument("--rest-s", type=float, default=10.0)
     ap.add_argument("--turns", type=int, default=12)
+    ap.add_argument("--sit", metavar="ENDPOINT", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.sit:
+        asyncio.run(sit(args.sit, args.clients, args.publish_ms))
+        return 0
     with tempfile.TemporaryDirectory() as name:
         tmp = Path(name)
         port = free_port()
@@ -191,8 +216,7 @@ def main() -> int:
                 except OSError:
                     assert time.monotonic() < deadline, "no OPC UA server"
                     time.sleep(0.2)
-            subprocess_ok = daemon.cncctl("reset").returncode == 0
-            assert subprocess_ok, "reset refused"
+            assert daemon.cncctl("reset").returncode == 0, "reset refused"
             endpoint = f"opc.tcp://127.0.0.1:{port}/phcnc"
             figures = asyncio.run(measure(args, daemon, endpoint, circles(tmp, args.turns)))
         finally:
