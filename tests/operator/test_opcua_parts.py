@@ -177,3 +177,14 @@ class _Lines:
 
     def readline(self) -> str:
         return self.text
+
+
+def test_a_server_behind_applies_only_the_newest_progress() -> None:
+    from controller.operator.opcua.bridge import coalesced
+
+    messages = [{"event": "progress", "line": 1}, {"event": "state", "state": "HELD"},
+                {"event": "progress", "line": 2}, {"id": 3, "ok": True},
+                {"event": "progress", "line": 3}]
+    assert coalesced(messages) == [{"event": "state", "state": "HELD"}, {"id": 3, "ok": True},
+                                   {"event": "progress", "line": 3}]
+    assert coalesced([]) == []

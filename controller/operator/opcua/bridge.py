@@ -56,11 +56,16 @@ class Bridge:
             await self._send("subscribe", topics=["state", "progress"])
             await self._send("status")
             self.connected.set()
+            pending = b""
             while not stop.is_set():
-                line = await _readline_or_stop(reader, stop)
-                if not line:
+                chunk = await _read_or_stop(reader, stop)
+                if not chunk:
                     return
-                await self._message(json.loads(line))
+                *lines, pending = (pending + chunk).split(b"\n")
+                if len(pending) > LINE_LIMIT:
+                    raise ValueError("a line longer than the limit")
+                for message in coalesced([json.loads(line) for line in lines if line]):
+                    await self._message(message)
         finally:
             poll.cancel()
             writer.close()
@@ -118,8 +123,17 @@ class Bridge:
             await self.view.message(*warning)
 
 
-async def _readline_or_stop(reader: asyncio.StreamReader, stop: asyncio.Event) -> bytes:
-    read = asyncio.ensure_future(reader.readline())
+def coalesced(messages: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """What arrived at once, in order, but of the progress events only the last: a server
+    that fell behind (a loaded PC, many clients) catches up at once instead of replaying
+    every report late, and the values it writes are the newest."""
+    last = max((i for i, m in enumerate(messages) if m.get("event") == "progress"),
+               default=-1)
+    return [m for i, m in enumerate(messages) if m.get("event") != "progress" or i == last]
+
+
+async def _read_or_stop(reader: asyncio.StreamReader, stop: asyncio.Event) -> bytes:
+    read = asyncio.ensure_future(reader.read(1 << 16))
     stopped = asyncio.ensure_future(stop.wait())
     done, _ = await asyncio.wait({read, stopped}, return_when=asyncio.FIRST_COMPLETED)
     stopped.cancel()
