@@ -363,3 +363,19 @@ def test_methods_only_for_a_known_user_and_through_the_socket(shop: list[Machine
     assert seen["result"]["event"] == "aborted"
     assert "aborted by operator" in json.dumps(seen["result"])
     assert "OPC UA user 'op': abort -> IDLE" in m.daemon.log_text()
+
+
+def test_a_server_that_dies_is_started_again(shop: list[Machine]) -> None:
+    m = shop[2]
+    first = _opcua_pid(m.daemon)
+    os.kill(first, signal.SIGKILL)
+    deadline = time.monotonic() + 20.0
+    while True:
+        kids = [pid for pid in children_of(m.daemon.proc.pid) if pid != first and
+                b"opcua.main" in Path(f"/proc/{pid}/cmdline").read_bytes()]
+        if kids:
+            break
+        assert time.monotonic() < deadline, "no second OPC UA server"
+        time.sleep(0.1)
+    assert f"(pid {first}) exited with -9; starting it again in 1 s" in m.daemon.log_text()
+    assert m.daemon.status()["state"] == "IDLE"  # the machine did not notice

@@ -69,13 +69,19 @@ class OpcuaChild:
         threading.Thread(target=self._watch, name="opcua-child", daemon=True).start()
 
     def _spawn(self) -> None:
+        """Start the server; a failure to start it is logged, never cncd's end."""
         with self._lock:
             if self._stopping.is_set():
                 return
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", "controller.operator.opcua.main", "--config",
-                 self.config.path, "--socket", self.socket_path],
-                stdin=subprocess.DEVNULL, close_fds=True, start_new_session=True)
+            try:
+                self.proc = subprocess.Popen(
+                    [sys.executable, "-m", "controller.operator.opcua.main", "--config",
+                     self.config.path, "--socket", self.socket_path],
+                    stdin=subprocess.DEVNULL, close_fds=True, start_new_session=True)
+            except OSError as exc:
+                self.proc = None
+                self.log.log(ERR, f"OPC UA server cannot start: {exc}")
+                return
             self.starts += 1
         assert self.config.service.opcua is not None
         self.log.log(NOTICE, f"OPC UA server started (pid {self.proc.pid}) on "
@@ -85,14 +91,15 @@ class OpcuaChild:
         failures = 0
         while not self._stopping.is_set():
             proc = self.proc
-            assert proc is not None
-            code = proc.wait()
+            what = "did not start"
+            if proc is not None:
+                code = proc.wait()
+                what = f"(pid {proc.pid}) exited with {code}"
             if self._stopping.is_set():
                 return
             pause_s = RESTART_AFTER_S[min(failures, len(RESTART_AFTER_S) - 1)]
             failures += 1
-            self.log.log(ERR, f"OPC UA server (pid {proc.pid}) exited with {code}; starting it "
-                              f"again in {pause_s:g} s")
+            self.log.log(ERR, f"OPC UA server {what}; starting it again in {pause_s:g} s")
             if self._stopping.wait(pause_s):
                 return
             self._spawn()
