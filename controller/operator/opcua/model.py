@@ -53,6 +53,8 @@ class Model:
     ns: dict[str, int]
     variables: dict[str, Node] = field(default_factory=dict)
     machines: dict[str, StateMachine] = field(default_factory=dict)
+    twins: dict[str, StateMachine] = field(default_factory=dict)  # the building blocks' copies
+    also: dict[str, Node] = field(default_factory=dict)  # a variable's copy, written with it
     channel: Node | None = None
     messages: Node | None = None
 
@@ -141,10 +143,17 @@ async def _monitoring(model: Model, axes: tuple[str, ...]) -> None:
     model.variables["OperationMode"] = await mt.get_child(f"{model.ns['MT']}:OperationMode")
     model.variables["PowerOnDuration"] = await mt.get_child(qualified(
         ("{DI}:OperationCounters", "{DI}:PowerOnDuration"), model.ns))
-    model.machines["ItemState"] = await state_machine(
-        model, await mt.get_child(f"{model.ns['MA']}:MachineryItemState"))
-    model.machines["OperationMode"] = await state_machine(
-        model, await mt.get_child(f"{model.ns['MA']}:MachineryOperationMode"))
+    # Machinery's building blocks hold a second copy (asyncua instantiates both): a Machinery
+    # client reads them there, a Machine Tools one under Monitoring; both are written.
+    blocks = await child(model, "{MA}:MachineryBuildingBlocks")
+    for key, name in (("ItemState", "MachineryItemState"),
+                      ("OperationMode", "MachineryOperationMode")):
+        model.machines[key] = await state_machine(
+            model, await mt.get_child(f"{model.ns['MA']}:{name}"))
+        model.twins[key] = await state_machine(
+            model, await blocks.get_child(f"{model.ns['MA']}:{name}"))
+    model.also["PowerOnDuration"] = await blocks.get_child(qualified(
+        ("{DI}:OperationCounters", "{DI}:PowerOnDuration"), model.ns))
     monitoring = await child(model, "{MT}:Monitoring")
     channel_type = model.server.get_node(ua.NodeId(CHANNEL_MONITORING_TYPE, model.ns["MT"]))
     channel = (await instantiate(monitoring, channel_type,

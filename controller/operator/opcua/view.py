@@ -76,20 +76,19 @@ class View:
             value = ua.LocalizedText(value)
         elif vtype is ua.VariantType.DateTime:
             value = None if value is None else dt.datetime.fromtimestamp(value, dt.UTC)
-        await node.write_value(ua.DataValue(ua.Variant(value, vtype),
-                                            SourceTimestamp=dt.datetime.now(dt.UTC)))
+        data = ua.DataValue(ua.Variant(value, vtype), SourceTimestamp=dt.datetime.now(dt.UTC))
+        await node.write_value(data)
+        if key in self.model.also:
+            await self.model.also[key].write_value(data)
 
     async def _state(self, key: str, name: str) -> None:
         if self.written.get(key) == name:
             return
         self.written[key] = name
-        machine: StateMachine = self.model.machines[STATE_MACHINES[key]]
-        state_id, number = machine.states[name]
-        await machine.current.write_value(ua.Variant(ua.LocalizedText(name),
-                                                     ua.VariantType.LocalizedText))
-        await machine.current_id.write_value(ua.Variant(state_id, ua.VariantType.NodeId))
-        if machine.current_number is not None:
-            await machine.current_number.write_value(ua.Variant(number, ua.VariantType.UInt32))
+        which = STATE_MACHINES[key]
+        for machine in (self.model.machines[which], self.model.twins.get(which)):
+            if machine is not None:
+                await _enter(machine, name)
 
     async def message(self, identifier: str, severity: int, text: str) -> None:
         """A Notification message (NotificationEventType) from Notification/Messages."""
@@ -101,3 +100,13 @@ class View:
         event.SourceNode = self.model.machine.nodeid
         await self.events.trigger(time_attr=dt.datetime.now(dt.UTC), message=text[:1000])
         self.messages_sent += 1
+
+
+async def _enter(machine: StateMachine, name: str) -> None:
+    """A state machine's CurrentState, its Id and Number, set to the state called name."""
+    state_id, number = machine.states[name]
+    await machine.current.write_value(ua.Variant(ua.LocalizedText(name),
+                                                 ua.VariantType.LocalizedText))
+    await machine.current_id.write_value(ua.Variant(state_id, ua.VariantType.NodeId))
+    if machine.current_number is not None:
+        await machine.current_number.write_value(ua.Variant(number, ua.VariantType.UInt32))
