@@ -219,6 +219,8 @@ def test_one_client_reads_three_machines(shop: list[Machine]) -> None:
                 serial = await (await ident.get_child(f"{ns['DI']}:SerialNumber")).read_value()
                 revision = await (await ident.get_child(f"{ns['DI']}:SoftwareRevision")
                                   ).read_value()
+                # Found by its type, as a dashboard finds machines: MachineToolType.
+                assert await machine.read_type_definition() == ua.NodeId(13, ns["MT"])
                 nodes, _, _ = await _nodes(client)
                 found.append(((await machine.read_browse_name()).Name, maker.Text, serial,
                               revision, await nodes["ChannelState"].read_value()))
