@@ -23,6 +23,8 @@ class OpcuaConfig:
     methods: bool = False  # Hold, Resume, Abort for authenticated users; read-only without
     users_file: str | None = None  # user:pbkdf2 lines, readable by cncd's user only
     min_publish_ms: float = DEFAULT_PUBLISH_MS  # the fastest publishing interval granted
+    certificate: str | None = None  # the server's certificate (DER or PEM) and key (PEM): a
+    private_key: str | None = None  # Basic256Sha256 endpoint, and passwords sent encrypted
 
     @property
     def host_port(self) -> tuple[str, int]:
@@ -48,12 +50,20 @@ def read_opcua(sec: Section, machine_name: str) -> OpcuaConfig | None:
         users_file=s.str("users_file", "") or None,
         min_publish_ms=s.float("min_publish_ms", DEFAULT_PUBLISH_MS, minval=10.0,
                                maxval=10000.0),
+        certificate=s.str("certificate", "") or None,
+        private_key=s.str("private_key", "") or None,
     )
+    if (cfg.certificate is None) != (cfg.private_key is None):
+        raise ConfigError(s.path, s._key("certificate" if cfg.certificate is None
+                                         else "private_key"),
+                          "is required with the other (certificate and private_key)")
     if cfg.methods and cfg.users_file is None:
         raise ConfigError(s.path, s._key("users_file"), "is required with methods: true (the "
                           "users who may call Hold, Resume and Abort)")
-    if cfg.users_file is not None and not cfg.users_file.startswith("/"):
-        raise ConfigError(s.path, s._key("users_file"), "must be an absolute path")
+    for key in ("users_file", "certificate", "private_key"):
+        value = getattr(cfg, key)
+        if value is not None and not value.startswith("/"):
+            raise ConfigError(s.path, s._key(key), "must be an absolute path")
     s.finish()
     return cfg
 

@@ -58,11 +58,23 @@ def _config(tmp_path: Path, name: str, port: int, methods: bool) -> tuple[Path, 
         users = tmp_path / f"{name}-users"
         users.write_text(f"op:{hash_password(PASSWORD, rounds=1000)}\n")
         users.chmod(0o600)
-        opcua.update(methods=True, users_file=str(users))
+        key, cert = tmp_path / f"{name}-key.pem", tmp_path / f"{name}-cert.der"
+        asyncio.run(_certificate(key, cert, name))
+        opcua.update(methods=True, users_file=str(users), certificate=str(cert),
+                     private_key=str(key))
     data["service"] = {"opcua": opcua}
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump(data))
     return path, opcua["endpoint"]
+
+
+async def _certificate(key: Path, cert: Path, name: str) -> None:
+    """A self-signed server certificate: passwords then travel encrypted with it."""
+    from asyncua.crypto.cert_gen import setup_self_signed_certificate
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    await setup_self_signed_certificate(key, cert, f"urn:phcnc:{name}", "127.0.0.1",
+                                        [ExtendedKeyUsageOID.SERVER_AUTH], {"commonName": name})
 
 
 def _wait_listening(endpoint: str, deadline_s: float) -> None:
@@ -306,8 +318,8 @@ def test_an_estop_raises_a_message_and_nothing_is_writable(shop: list[Machine]) 
     assert m.daemon.status()["feed_override_pct"] == 100.0
 
 
-def test_methods_only_for_a_known_user_and_through_the_socket(shop: list[Machine],
-                                                               tmp_path: Path) -> None:
+def test_methods_only_for_a_known_user_and_through_the_socket(
+        shop: list[Machine], tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     m = shop[1]
     read_only = shop[0]
 
@@ -345,7 +357,9 @@ def test_methods_only_for_a_known_user_and_through_the_socket(shop: list[Machine
         seen["wrong"] = await call(m.endpoint, "Hold", "op", "wrong password")
         seen["read-only, user"] = await call(read_only.endpoint, "Hold", "op", PASSWORD)
         seen["read-only, anonymous"] = await call(read_only.endpoint, "Hold")
+        caplog.clear()
         seen["hold"] = await call(m.endpoint, "Hold", "op", PASSWORD)
+        seen["plain"] = [r.message for r in caplog.records if "plain-text" in r.message]
         await _until(lambda: rec.values("ChannelState")[-1:] == [1], 10.0, "held")
         seen["resume"] = await call(m.endpoint, "Resume", "op", PASSWORD)
         seen["abort"] = await call(m.endpoint, "Abort", "op", PASSWORD)
@@ -360,6 +374,7 @@ def test_methods_only_for_a_known_user_and_through_the_socket(shop: list[Machine
     assert seen["read-only, user"].value == ua.StatusCodes.BadIdentityTokenRejected
     assert seen["read-only, anonymous"].value == ua.StatusCodes.BadNoMatch  # no Hold there
     assert seen["hold"] in ("HOLDING", "HELD")
+    assert seen["plain"] == []  # the password went encrypted with the server's certificate
     assert seen["resume"] == "RUNNING"
     assert seen["abort"] == "IDLE"
     assert seen["result"]["event"] == "aborted"

@@ -68,8 +68,14 @@ async def make_server(cfg: OpcuaConfig, axes: tuple[str, ...], socket_path: str,
     server.set_endpoint(cfg.endpoint)
     server.set_server_name(f"phcnc {machine}")
     await server.set_application_uri(f"urn:phcnc:{cfg.machine_name}")
-    server.set_security_policy([ua.SecurityPolicyType.NoSecurity],
-                               permission_ruleset=ReadOnlyRules())
+    policies = [ua.SecurityPolicyType.NoSecurity]  # anonymous dashboards read in the clear
+    if cfg.certificate is not None and cfg.private_key is not None:
+        # Also an encrypted endpoint; and on the open one a user's password is encrypted with
+        # this certificate rather than sent as it is.
+        await server.load_certificate(cfg.certificate)
+        await server.load_private_key(cfg.private_key)
+        policies.append(ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt)
+    server.set_security_policy(policies, permission_ruleset=ReadOnlyRules())
     if cfg.methods:
         server.set_identity_tokens([ua.AnonymousIdentityToken, ua.UserNameIdentityToken])
     else:
