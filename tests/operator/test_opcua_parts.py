@@ -50,6 +50,9 @@ def test_off_by_default_and_the_section_read_strictly() -> None:
     ({"endpoint": "opc.tcp://h:4840", "min_publish_ms": 1.0}, "service.opcua.min_publish_ms"),
     ({"endpoint": "opc.tcp://h:4840", "serial_number": "a\nb"},
      "service.opcua.serial_number"),
+    ({"endpoint": "opc.tcp://h:4840", "certificate": "/c.der"}, "service.opcua.private_key"),
+    ({"endpoint": "opc.tcp://h:4840", "certificate": "c.der", "private_key": "/k.pem"},
+     "service.opcua.certificate"),
 ])
 def test_a_bad_key_is_an_error_naming_it(opcua: dict[str, Any], key: str) -> None:
     with pytest.raises(ConfigError) as err:
