@@ -66,6 +66,10 @@ def test_cncd_refuses_the_section_without_the_library() -> None:
         require_opcua(config, find_spec=lambda name: None)
     require_opcua(config)  # installed here
     require_opcua(_config(None), find_spec=lambda name: None)  # not asked for: no library
+    missing = _config({"endpoint": "opc.tcp://127.0.0.1:4840", "certificate": "/nonexistent",
+                       "private_key": "/nonexistent.pem"})
+    with pytest.raises(OpcuaUnavailable, match="service.opcua.certificate: cannot read"):
+        require_opcua(missing)
 
 
 def test_a_users_file_others_can_read_is_refused(tmp_path: Path) -> None:

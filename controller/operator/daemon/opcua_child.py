@@ -41,6 +41,10 @@ def require_opcua(config: MachineConfig,
         raise OpcuaUnavailable(f"{config.path}: service.opcua is set but the OPC UA library is "
                                "not installed: pip install 'phcnc[opcua]' (or remove the "
                                "section)")
+    for key in ("certificate", "private_key"):
+        path = getattr(cfg, key)
+        if path is not None and not os.access(path, os.R_OK):
+            raise OpcuaUnavailable(f"{config.path}: service.opcua.{key}: cannot read {path}")
     if cfg.methods and cfg.users_file is not None:
         from controller.operator.opcua.users import read_users
 
