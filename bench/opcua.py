@@ -128,9 +128,10 @@ async def measure(args: argparse.Namespace, daemon: Any, endpoint: str,
                   if b"opcua.main" in Path(f"/proc/{pid}/cmdline").read_bytes())
     one = [await subscribe(endpoint, args.publish_ms)]
     await asyncio.sleep(1.0)
-    c0, t0 = cpu_s(server), time.monotonic()
+    c0, d0, t0 = cpu_s(server), cpu_s(daemon.proc.pid), time.monotonic()
     await asyncio.sleep(args.rest_s)
     rest_pct = 100 * (cpu_s(server) - c0) / (time.monotonic() - t0)
+    daemon_rest_pct = 100 * (cpu_s(daemon.proc.pid) - d0) / (time.monotonic() - t0)
     await one[0][0].disconnect()
     baseline, _ = await job(daemon, program, server)  # the server up, no client
     # One client measures here; the others subscribe from a process of their own, so their
@@ -159,6 +160,7 @@ async def measure(args: argparse.Namespace, daemon: Any, endpoint: str,
     return {"clients": args.clients, "publish_ms": args.publish_ms,
             "latency_ms": {**stats, "samples": int(lat_ms.size),
                            "reports": sum(len(v) for v in progress.times.values())},
+            "cncd_cpu_pct_at_rest": round(daemon_rest_pct, 2),
             "server_cpu_pct": {"rest_one_client": round(rest_pct, 2),
                                f"job_{args.clients}_clients": round(job_pct, 2)},
             "job_no_client": {k: baseline.get(k) for k in KEYS},
