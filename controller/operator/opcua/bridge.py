@@ -10,6 +10,8 @@ import logging
 import time
 from typing import Any
 
+from asyncua import ua
+
 from controller.operator.opcua import values
 from controller.operator.opcua.view import View
 
@@ -35,7 +37,8 @@ class Bridge:
         while not stop.is_set():
             try:
                 await self._session(stop)
-            except (OSError, ConnectionError, asyncio.IncompleteReadError, ValueError) as exc:
+            except (OSError, ConnectionError, asyncio.IncompleteReadError, ValueError,
+                    ua.UaError) as exc:
                 log.warning("control socket %s: %s", self.socket_path, exc)
             self.connected.clear()
             if stop.is_set():
@@ -51,6 +54,7 @@ class Bridge:
     async def _session(self, stop: asyncio.Event) -> None:
         reader, writer = await asyncio.open_unix_connection(self.socket_path, limit=LINE_LIMIT)
         self._writer = writer
+        self._status_ids = set()  # a request of a session before is never answered
         poll = asyncio.create_task(self._poll(stop))
         try:
             await self._send("subscribe", topics=["state", "progress"])
