@@ -195,3 +195,15 @@ def test_a_server_behind_applies_only_the_newest_progress() -> None:
     assert coalesced(messages) == [{"event": "state", "state": "HELD"}, {"id": 3, "ok": True},
                                    {"event": "progress", "line": 3}]
     assert coalesced([]) == []
+
+
+def test_power_on_counts_from_cncds_start() -> None:
+    import time
+
+    from controller.operator.opcua.view import started_epoch_s
+
+    now = time.time()
+    mine = started_epoch_s(os.getpid())
+    assert now - 3600 < mine <= now  # this test process started within the hour
+    assert started_epoch_s(1) <= mine  # init before it
+    assert abs(started_epoch_s(2**22 + 7) - now) < 5  # no such process: now
