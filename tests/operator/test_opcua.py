@@ -1,7 +1,8 @@
 """cncd's OPC UA server from outside: three real cncd, each with its server process on a free
 port, read by one asyncua client in this process as a shop's dashboard reads them; a sim-card
-job seen going idle -> running -> done, a fault and an e-stop raising messages, the methods only
-for a user the users file knows, and every process stopped by its pid."""
+job seen going idle -> running -> done, a fault, an e-stop and a model warning raising messages,
+the methods only for a user the users file knows, a server that dies started again, and every
+process stopped by its pid."""
 
 from __future__ import annotations
 
@@ -128,8 +129,10 @@ def shop(tmp_path_factory: pytest.TempPathFactory) -> Iterator[list[Machine]]:
         for name, methods in (("mill-a", False), ("mill-b", True), ("mill-c", False)):
             config, endpoint = _config(tmp_path, name, _free_port(), methods)
             fault = tmp_path / f"{name}-fault"
+            # mill-c's plant is off its model (poles 30 % slower): its jobs warn.
+            plant = ["--drive-option", "plant_pole_pct=30"] if name == "mill-c" else []
             daemon = start_cncd(tmp_path, "--config", str(config), "--drive-option",
-                                f"drive_fault_file={fault}", name=name)
+                                f"drive_fault_file={fault}", *plant, name=name)
             machines.append(Machine(daemon, endpoint, f"SN-{name}", fault))
         deadline_s = time.monotonic() + SERVER_UP_S
         for m in machines:
@@ -380,6 +383,26 @@ def test_methods_only_for_a_known_user_and_through_the_socket(
     assert seen["result"]["event"] == "aborted"
     assert "aborted by operator" in json.dumps(seen["result"])
     assert "OPC UA user 'op': abort -> IDLE" in m.daemon.log_text()
+
+
+def test_a_job_on_a_machine_off_its_model_raises_a_model_warning(shop: list[Machine]) -> None:
+    m = shop[2]
+
+    async def watch() -> tuple[Recorder, dict[str, Any]]:
+        async with Client(m.endpoint) as client:
+            rec, _ = await _subscribe(client)
+            await _until(lambda: rec.values("ChannelState"), 5.0, "the first values")
+            run = start_run(m.daemon, REPO / "nc_programs/naca2415.nc")
+            await _until(lambda: run.poll() is not None, 60.0, "the job's end")
+            result = _finish(run)
+            await _until(lambda: rec.events, 15.0, "a model warning")
+            return rec, result
+
+    rec, result = asyncio.run(watch())
+    assert result.get("model_warning"), result
+    event = rec.events[0]
+    assert (event.Identifier, event.Severity) == ("model-warning", 500)
+    assert event.Message.Text == result["model_warning"]
 
 
 def test_a_server_that_dies_is_started_again(shop: list[Machine]) -> None:
