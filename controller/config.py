@@ -292,7 +292,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         interpolator=_read_interpolator(top.section("interpolator")),
         drive=_read_drive(top.section("drive")),
         runtime=_read_runtime(top.section("runtime", {})),
-        service=read_service(top.section("service", {})),
+        service=read_service(top.section("service", {}), name),
         allow_unhomed=top.bool("allow_unhomed", False),
         tools=read_tools_section(top.section("tools", {}), tuple(a.name for a in axes),
                                  tuple(a.travel_mm for a in axes)),

@@ -566,7 +566,9 @@ class Machine:
             out: dict[str, Any] = {"state": state, "fault": self.fault,
                                    "tool_change": out_tool,
                                    "program": job.name if job else None,
-                                   "job": job.number if job else None}
+                                   "job": job.number if job else None,
+                                   "program_sha256": job.sha256 if job else None,
+                                   "manual_move": job.manual_move if job else None}
             # On the approach of a run from line N: N, not the approach's own lines.
             approaching = job is not None and job.approaching
         # The last job's line is in last_job.

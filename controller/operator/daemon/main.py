@@ -24,6 +24,7 @@ from controller.operator.daemon.job import PROGRESS_EVERY_S
 from controller.operator.daemon.log import ERR, INFO, NOTICE, WARNING, EventLog
 from controller.operator.daemon.machine import Machine
 from controller.operator.daemon.notify import run_watchdog, sd_notify
+from controller.operator.daemon.opcua_child import OpcuaChild, require_opcua
 from controller.operator.daemon.protocol import ProtocolError
 from controller.operator.daemon.server import Server
 from controller.operator.daemon.web_process import WebProcess, WebProcessError, check_listen
@@ -144,6 +145,8 @@ class Daemon:
         estop = EstopSocket(estop_socket_path(self.socket_path), gid, policy, self.log,
                             self._estop)
         estop.start()
+        opcua = OpcuaChild(self.config, self.socket_path, self.log)
+        opcua.start()  # a client of the socket: it connects once the loop below serves
         threading.Thread(target=run_watchdog, args=(self._healthy, self.stop, self._unhealthy),
                          name="watchdog", daemon=True).start()
         if self.web is not None:
@@ -155,6 +158,7 @@ class Daemon:
         finally:
             if self.web is not None:
                 self.web.stop()
+            opcua.stop()
             estop.close()
             listener.close()
             try:
@@ -204,6 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _arguments(argv)
     try:
         config = config_with_drive_options(load_config(args.config), args.drive_option)
+        require_opcua(config)
     except CncError as exc:
         print(f"<3>cncd: {exc}", file=sys.stderr)
         return 2

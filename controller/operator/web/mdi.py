@@ -41,16 +41,18 @@ def check_text(text: object) -> list[str]:
 
 def prefix_of(state: LineState) -> list[str]:
     """Two lines that bring a fresh program to `state`'s modes. Line 1 is read in mm (a
-    program starts in G21): feed and path tolerances are written in mm there; line 2 sets
-    the units, distance mode and motion mode the next lines read."""
+    program starts in G21): path tolerances are written in mm there; line 2 sets the units,
+    distance mode and motion mode the next lines read, and the feed in those units (an F
+    number means units per minute of the units in force, as in LinuxCNC)."""
     pc = state.path_control
     tolerances = "".join(f" {letter}{value:.6f}" for letter, value in
                          (("P", pc.tolerance_mm), ("Q", pc.naive_cam_tolerance_mm))
                          if value is not None and str(pc.mode) == "G64")
-    feed = f" F{state.feed_mm_s * 60.0:.6f}" if state.feed_mm_s > 0 else ""
+    per_min = state.feed_mm_s * 60.0 / (25.4 if state.inch else 1.0)
+    feed = f" F{per_min:.6f}" if state.feed_mm_s > 0 else ""
     motion = f" {state.motion}" if state.motion in ("G0", "G1") else ""
-    return [f"G21 {pc.mode}{tolerances}{feed}",
-            f"{'G20' if state.inch else 'G21'} {state.distance_mode}{motion}"]
+    return [f"G21 {pc.mode}{tolerances}",
+            f"{'G20' if state.inch else 'G21'} {state.distance_mode}{motion}{feed}"]
 
 
 class MdiSession:
