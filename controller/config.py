@@ -12,6 +12,7 @@ import yaml
 
 from controller.backends import BUILTIN_BACKENDS, backend_names
 from controller.errors import ConfigError
+from controller.io_config import IoConfig, read_io
 from controller.servo_poles import pole_problem
 from controller.yaml_strict import Section, StrictLoader
 
@@ -147,6 +148,7 @@ class MachineConfig:
     runtime: RuntimeConfig = field(default_factory=lambda: RuntimeConfig(64, 20.0, 100.0))
     service: ServiceConfig = field(default_factory=ServiceConfig)
     allow_unhomed: bool = False  # run programs before the axes with a homing sequence are homed
+    io: IoConfig = field(default_factory=IoConfig)  # machine outputs -> backend outputs
 
     @property
     def axis_names(self) -> tuple[str, ...]:
@@ -311,6 +313,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         runtime=_read_runtime(top.section("runtime", {})),
         service=_read_service(top.section("service", {})),
         allow_unhomed=top.bool("allow_unhomed", False),
+        io=read_io(top.section("io", {})),
     )
     top.finish()
     _check_plan_sizes(cfg, path)

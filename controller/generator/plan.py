@@ -15,6 +15,7 @@ from controller.blocks import (
     LineBlock,
     NcBlock,
     NurbsBlock,
+    OutputBlock,
     PathMode,
     StopBlock,
     StopKind,
@@ -23,6 +24,7 @@ from controller.config import MachineConfig
 from controller.errors import PlanningError
 from controller.generator.baselines import FORMULA_FEEDS, plan_formula_run
 from controller.generator.feed.planner import plan_feed
+from controller.generator.output_marks import output_mark
 from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
 from controller.generator.ph.construct import BlockCurve, block_curve
 from controller.generator.repeats import Repeats
@@ -333,6 +335,14 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
                                                   rapid=block.rapid), at_rest=last)
         elif isinstance(block, DwellBlock):
             for chunk in _dwell(block, config, 0.0):
+                yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s)),
+                                      dwell=True)
+        elif isinstance(block, OutputBlock):
+            # Outputs are set at rest (after the in-position hold), then the spin-up wait.
+            yield from queue.emit(PlannedStep(output_mark(block, config, queue.next_t0_s)),
+                                  at_rest=False)
+            wait = DwellBlock(block.wait_s, block.position, block.source)
+            for chunk in _dwell(wait, config, 0.0):
                 yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s)),
                                       dwell=True)
         elif isinstance(block, StopBlock) and block.kind is StopKind.PAUSE:

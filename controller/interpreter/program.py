@@ -31,7 +31,7 @@ _G_CACHE: dict[str, int] = {}  # G number text -> code10, for supported/known co
 _G_BY_VALUE: dict[float, int] = {}  # the same by value (G01 and G1 alike)
 _M_CACHE: dict[str, int] = {}
 MAX_PARAMETER = 5399  # LinuxCNC's numbered parameters
-_VALUE_LETTERS = frozenset("XYZIJKRPQLFSTH")
+_VALUE_LETTERS = frozenset("XYZIJKRPQLFSTHE")
 _CHUNK_CHARS = 1 << 16
 
 

@@ -18,6 +18,7 @@ from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
 from controller.interpreter.line_state import LineState
 from controller.interpreter.modal import Modal
 from controller.interpreter.moves import MAX_BLOCK_S, Moves
+from controller.interpreter.outputs import M_LETTERS, ProgramOutputs
 from controller.interpreter.work_offsets import AXIS_CODES, WorkOffsets
 from controller.offsets import OffsetTable, ProgramOffsets
 
@@ -65,6 +66,7 @@ class InterpState:
         self.coolant: tuple[str, ...] = ()
         self.css = False  # G96: S is a surface speed
         self.tool = 0
+        self.outputs = ProgramOutputs(config)  # what the program's M codes have set
         self.ended = False
         self.mark_pending: int | None = None  # run from this line once the NURBS block ends
         self.at_line: LineState | None = None  # the state where the run from line starts
@@ -89,7 +91,7 @@ class InterpState:
             raise WordError(g_name(nonmodal), f"{g_name(nonmodal)} and {g_name(motion)} both "
                                               f"use axis words: put them on separate lines")
         _check_letters(groups, vals,
-                       motion if motion is not None or axis_code else self.modal.motion)
+                       motion if motion is not None or axis_code else self.modal.motion, ms)
         self._modes(groups, vals)
         self._feed_speed_tool(vals, ms, mgroups, lineno)
         if nonmodal == 40:
@@ -105,6 +107,10 @@ class InterpState:
             moves.move(motion, vals, lineno, machine=nonmodal == 530)
         stop = mgroups.get("stopping")
         if stop is not None:
+            end = self.outputs.program_end(self.modal.pos, self._src(lineno)) \
+                if stop in (2, 30) else None
+            if end is not None:
+                self.out.append(end)
             self.out.append(StopBlock(_STOPS[stop], self.modal.pos, self._src(lineno)))
             self.ended = stop in (2, 30)
             if self.ended and self.offsets.table.active != 1:
@@ -205,8 +211,6 @@ class InterpState:
             if vals["S"] < 0:
                 raise WordError("S", "negative spindle speed")
             self.spindle_rpm = vals["S"]
-            if self.spindle_on and "spindle" not in mgroups:
-                self.out.append(AuxBlock("S", self._rpm(), None, self._src(lineno)))
         if "T" in vals:
             if vals["T"] < 0 or vals["T"] != int(vals["T"]):
                 raise WordError("T", "tool number must be a non-negative integer")
@@ -217,14 +221,15 @@ class InterpState:
         if spindle is not None:
             self.spindle_on = spindle != 5
             self.spindle_code = spindle
-            rpm = self._rpm() if self.spindle_on else None
-            self.out.append(AuxBlock(f"M{spindle}", rpm, None, self._src(lineno)))
         for m in ms:
             if m in (48, 49):
                 self._override(m == 48, lineno)
             if m in (7, 8, 9):
                 self.coolant = () if m == 9 else tuple(sorted({*self.coolant, f"M{m}"}))
-                self.out.append(AuxBlock(f"M{m}", None, None, self._src(lineno)))
+        block = self.outputs.line_block(ms, vals, self._rpm(), self.modal.pos,
+                                        self._src(lineno))
+        if block is not None:  # set at rest before the line's move (M62: with that move)
+            self.out.append(block)
 
     def _override(self, enabled: bool, lineno: int) -> None:
         """M48/M49 (LinuxCNC): feed override on/off from this line; the stretches with it off
@@ -277,16 +282,19 @@ def _groups(codes: list[int], table: dict[int, str], name) -> dict[str, int]:  #
     return groups
 
 
-def _check_letters(groups: dict[str, int], vals: dict[str, float], motion: int | None) -> None:
+def _check_letters(groups: dict[str, int], vals: dict[str, float], motion: int | None,
+                   ms: list[int]) -> None:
     """Every value word must be used by a code of the line (LinuxCNC's 'word with no G code')."""
     allowed = set(_ALWAYS)
+    for m in ms:
+        allowed |= M_LETTERS.get(m, frozenset())
     for code in groups.values():
         allowed |= _USES.get(code, frozenset())
     if motion is not None and not _AXES.isdisjoint(vals):
         allowed |= _USES.get(motion, frozenset())
     unused = vals.keys() - allowed
     if unused:
-        letter = min(unused, key="XYZIJKRPQLHFST".index)
+        letter = min(unused, key="XYZIJKRPQELHFST".index)
         if letter in _AXES:
             raise WordError(letter, f"{letter} word with no motion mode (G0, G1, G2, G3) "
                                     f"in force")
