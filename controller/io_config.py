@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 from controller.errors import ConfigError
 from controller.yaml_strict import Section

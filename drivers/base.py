@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from controller.config import MachineConfig
 from controller.blocks import OutputChange
+from controller.config import MachineConfig
 from controller.errors import DriveError
 from controller.outputs import OutputImage, OutputState
 from drivers.errors import HomingError

@@ -24,8 +24,8 @@ from controller.config import MachineConfig
 from controller.errors import PlanningError
 from controller.generator.baselines import FORMULA_FEEDS, plan_formula_run
 from controller.generator.feed.planner import plan_feed
-from controller.generator.output_marks import output_mark
 from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
+from controller.generator.output_marks import output_mark
 from controller.generator.ph.construct import BlockCurve, block_curve
 from controller.generator.repeats import Repeats
 from controller.generator.replan import (

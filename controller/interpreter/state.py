@@ -298,4 +298,7 @@ def _check_letters(groups: dict[str, int], vals: dict[str, float], motion: int |
         if letter in _AXES:
             raise WordError(letter, f"{letter} word with no motion mode (G0, G1, G2, G3) "
                                     f"in force")
+        if letter == "E":  # most often X1e3: G-code numbers have no exponent
+            raise WordError(letter, "E word with no M67 or M68 on the line (nor exponents: "
+                                    "write 1e3 as 1000)")
         raise WordError(letter, f"{letter} word with no G code on the line that uses it")

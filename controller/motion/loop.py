@@ -14,8 +14,8 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.errors import CncError, DriveError
-from controller.motion.events import EventFn, JobEvents
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
+from controller.motion.events import EventFn, JobEvents
 from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.in_position import InPosition
 from controller.motion.model_watch import ModelWatch

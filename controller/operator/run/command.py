@@ -162,7 +162,8 @@ def run(args: argparse.Namespace) -> int:
         runtime = Sequence()
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
                                                   flush=True), abort_at_pause_without_keys=True)
-    options = replace(options, on_progress=_Announcer(view.progress, keys).progress)
+    options = replace(options, on_progress=_Announcer(view.progress, keys).progress,
+                      on_event=lambda e: view.event(**e))  # an output changed: a line each
     if not shared_drive:
         runtime.options = options
     fd = stdin_fd()
