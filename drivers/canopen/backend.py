@@ -10,8 +10,9 @@ from typing import Any
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.outputs import OutputImage
 from drivers.base import CardStatus, Drive, Feedback
-from drivers.canopen import bringup, homing
+from drivers.canopen import bringup, homing, machine_io
 from drivers.canopen import cia402 as c
 from drivers.canopen.link import Link
 from drivers.canopen.options import CanopenOptions, parse_options
@@ -275,6 +276,15 @@ class CanopenDrive(Drive):
             return False
         with link.lock:
             return any(sw & c.SW_ESTOP_INPUT for sw in link.statusword)
+
+    def _limit_input(self) -> str | None:
+        """Statusword bit 11 (in every TPDO1) says a drive's limit switch is open; its 0x60FD
+        then says which, read once by SDO."""
+        return machine_io.limit_input(self._link, self._nodes, self.axes)
+
+    def _write_outputs(self, image: OutputImage) -> None:
+        self._check_comm()
+        machine_io.write_outputs(self._nodes, self.axes, self.o, image)
 
     # -- bench and probe ------------------------------------------------------------------
     def link_stats(self) -> dict[str, float | int]:
