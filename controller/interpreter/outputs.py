@@ -24,6 +24,7 @@ class ProgramOutputs:
         self.spindle = "off"
         self.rpm = 0.0
         self.coolant = False  # mist or flood on
+        self.values: dict[str, object] = {}  # every output the program has set, as set
 
     def line_block(self, ms: list[int], vals: dict[str, float], rpm: float | None,
                    position: Point3, source: Source) -> OutputBlock | None:
@@ -47,6 +48,7 @@ class ProgramOutputs:
                 changes.append(OutputChange(f"analog_{index}", value))
         if not changes:
             return None
+        self.values.update((ch.name, ch.value) for ch in changes)
         return OutputBlock(tuple(changes), position,
                            self.io.spindle.spin_up_s if wait else 0.0, source)
 
@@ -55,8 +57,18 @@ class ProgramOutputs:
         if self.spindle == "off" and not self.coolant:
             return None
         self.spindle, self.coolant = "off", False
+        self.values.update(spindle="off", coolant_mist=False, coolant_flood=False)
         return OutputBlock((OutputChange("spindle", "off"), OutputChange("coolant_mist", False),
                             OutputChange("coolant_flood", False)), position, 0.0, source)
+
+    def restore_block(self, position: Point3, source: Source) -> OutputBlock | None:
+        """Run from line N: the outputs the lines before it set, set again where it starts
+        (the spindle at speed before the first cut, as LinuxCNC's run from line)."""
+        if not self.values:
+            return None
+        changes = tuple(OutputChange(name, value) for name, value in self.values.items())  # type: ignore[arg-type]
+        wait = self.io.spindle.spin_up_s if self.spindle != "off" else 0.0
+        return OutputBlock(changes, position, wait, source)
 
     def _spindle(self, ms: list[int], vals: dict[str, float], rpm: float | None,
                  changes: list[OutputChange]) -> bool:

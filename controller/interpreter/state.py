@@ -148,8 +148,12 @@ class InterpState:
             raise WordError("G53", "G53 (machine coordinates) needs G0 or G1 in force")
 
     def mark(self, line: int) -> None:
-        """Run from `line`: note the state here and drop what the earlier lines produced."""
+        """Run from `line`: note the state here and drop what the earlier lines produced
+        (but for the outputs they set, which are set again here)."""
         self.out.clear()
+        restore = self.outputs.restore_block(self.modal.pos, self._src(line))
+        if restore is not None:
+            self.out.append(restore)
         self.mark_pending = None
         modal = self.modal
         x, y, z = modal.pos
