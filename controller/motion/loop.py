@@ -354,9 +354,10 @@ class MotionController:
         on resume (from a hold: a planned ramp back to the override's feed). A standstill
         of 0 % override goes on by itself once the override is turned up."""
         if self.state not in (MotionState.PAUSED, MotionState.HELD):
-            if level == 0 and self.output_mark is not None and not self.holding:
-                self._set_outputs(self.output_mark)
-            elif level == 0:
+            if level == 0 and self.output_mark is not None:
+                if not self._set_outputs(self.output_mark) or not self.holding:
+                    return  # set and going on (or a fault); held there: held as below
+            if level == 0:
                 self.state = MotionState.PAUSED if self.program_pause else MotionState.HELD
                 self.requests.resume = False  # a resume must come after the standstill
             return
@@ -372,18 +373,21 @@ class MotionController:
             self.holding = False
             self.state = MotionState.RUNNING
 
-    def _set_outputs(self, line: int) -> None:
+    def _set_outputs(self, line: int) -> bool:
         """At an output mark, the card run out (the machine stands there): set the outputs,
-        then go on (the spin-up wait is planned rows after the mark)."""
+        then go on unless a feed hold came to rest there (the spin-up wait is planned rows
+        after the mark). False: they could not be set, and the job stops."""
         self.output_mark = None
         next_outputs = getattr(self.source, "next_outputs", lambda: None)
         problem = self.outputs.at_mark(next_outputs(), self.figures.executed * self.period_s,
                                        line)
         if problem is not None:
             self._begin_stop(Outcome.FAULT, problem)
-            return
-        self.pausing = False
-        self.restarting = True
+            return False
+        if not self.holding:
+            self.pausing = False
+            self.restarting = True
+        return True
 
     # -- stops otherwise than planned: a fault during a stop, the e-stop ------------------
     def _asked(self) -> str:
