@@ -50,6 +50,8 @@ class CanopenDrive(Drive):
         self.bringup_s = 0.0
         self._last_stats: dict[str, float | int] = {}
         self._last_rtt_ms = np.zeros(0)
+        self._io_written: OutputImage | None = None  # what the io_node holds, as written
+        self._io_written_link: Link | None = None  # ... in this session (a new link: unknown)
 
     # -- open / close ---------------------------------------------------------------------
     def _lock_key(self) -> str:
@@ -284,7 +286,9 @@ class CanopenDrive(Drive):
 
     def _write_outputs(self, image: OutputImage) -> None:
         self._check_comm()
-        machine_io.write_outputs(self._nodes, self.axes, self.o, image)
+        last = self._io_written if self._io_written_link is self._link else None
+        machine_io.write_outputs(self._nodes, self.axes, self.o, image, last)
+        self._io_written, self._io_written_link = image, self._link  # this session's
 
     # -- bench and probe ------------------------------------------------------------------
     def link_stats(self) -> dict[str, float | int]:

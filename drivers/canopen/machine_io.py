@@ -16,16 +16,20 @@ ALL_OUTPUTS_MASK = 0xFFFF  # 0x60FE:2: every output this controller drives is en
 
 
 def write_outputs(nodes: list[Any], axes: tuple[str, ...], o: CanopenOptions,
-                  image: OutputImage) -> None:
-    """The image on the io_node drive: mask, bits, then each analog channel (expedited SDOs
-    while the machine stands at the output mark: a few ms on a 1 Mbit/s bus)."""
+                  image: OutputImage, last: OutputImage | None) -> None:
+    """The image on the io_node drive: what differs from `last` (all of it, mask first, when
+    None), by expedited SDOs while the machine stands at the output mark (each a round trip
+    of a few ms on a 1 Mbit/s bus, more through a loaded slcan adapter)."""
     i = o.node_ids.index(o.io_node)
     node, axis = nodes[i], axes[i]
-    bringup.sdo_write(node, axis, c.DIGITAL_OUTPUTS, 2, ALL_OUTPUTS_MASK, "output mask")
-    bringup.sdo_write(node, axis, c.DIGITAL_OUTPUTS, 1, image.bits, "digital outputs")
+    if last is None:
+        bringup.sdo_write(node, axis, c.DIGITAL_OUTPUTS, 2, ALL_OUTPUTS_MASK, "output mask")
+    if last is None or image.bits != last.bits:
+        bringup.sdo_write(node, axis, c.DIGITAL_OUTPUTS, 1, image.bits, "digital outputs")
     for channel, value in enumerate(image.analog):
-        bringup.sdo_write(node, axis, c.ANALOG_OUTPUTS, channel + 1, value,  # type: ignore[arg-type]
-                          f"analog output {channel}")
+        if last is None or value != last.analog[channel]:
+            bringup.sdo_write(node, axis, c.ANALOG_OUTPUTS, channel + 1,
+                              value, f"analog output {channel}")  # type: ignore[arg-type]
 
 
 def limit_input(link: Any, nodes: list[Any], axes: tuple[str, ...]) -> str | None:
