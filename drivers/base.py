@@ -178,26 +178,32 @@ class Drive(ABC):
         self._require_open()
         self._disable()
         self._disabled = True
-        self.safe_outputs()
+        try:
+            self.safe_outputs()
+        except DriveError as exc:
+            raise DriveError(f"disabled, but the outputs were not set safe: {exc}") from exc
 
     def set_outputs(self, changes: Sequence[OutputChange]) -> list[OutputChange]:
         """Set machine outputs (spindle, coolant, digital, analog; see controller/outputs.py)
         through the config's io map; returns the changes that changed a value."""
-        self._require_open()
-        state = OutputState(self._outputs.io, **self._outputs.as_dict())  # a copy: set
-        # only once written
-        changed = state.apply(changes)
-        if changed:
-            self._write_outputs(state.image())
-            self._outputs = state
-        return changed
+        return self._set(lambda state: state.apply(changes), only_changed=True)
 
     def safe_outputs(self) -> list[OutputChange]:
-        """Every output to its safe state (spindle and coolant off, the configured safe values)
-        and written to the hardware even if it already was; the changes it made."""
+        """Every output to its safe state (spindle and coolant off, the configured safe values),
+        written to the hardware even if the state already was (a backend may skip what it
+        last wrote on the same link); the changes it made."""
+        return self._set(lambda state: state.to_safe(), only_changed=False)
+
+    def _set(self, change: Callable[[OutputState], list[OutputChange]],
+             only_changed: bool) -> list[OutputChange]:
+        """Change a copy of the outputs, write it, then keep it: the state a failed write
+        leaves is still what the hardware was last told."""
         self._require_open()
-        changed = self._outputs.to_safe()
-        self._write_outputs(self._outputs.image())
+        state = OutputState(self._outputs.io, **self._outputs.as_dict())
+        changed = change(state)
+        if changed or not only_changed:
+            self._write_outputs(state.image())
+            self._outputs = state
         return changed
 
     def outputs(self) -> dict[str, Any]:
