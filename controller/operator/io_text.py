@@ -20,3 +20,13 @@ def outputs_text(o: dict[str, Any]) -> str:
     if analog:
         parts.append("analog " + " ".join(f"E{i} {v:g}" for i, v in enumerate(analog)))
     return ", ".join(parts)
+
+
+def output_event_text(fields: dict[str, Any]) -> str:
+    """An output event for a person: 'line 3: coolant_flood on (t 1.003 s)'."""
+    value = fields.get("value")
+    shown = ("on" if value else "off") if isinstance(value, bool) else f"{value:g}" \
+        if isinstance(value, float) else str(value)
+    safe = ", safe state" if fields.get("safe") else ""
+    return f"line {fields.get('line')}: {fields.get('name')} {shown} (t {fields.get('t_s')} s" \
+           f"{safe})"

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from typing import Any, TextIO
 
 from controller.motion.types import MotionProgress, MotionResult, MotionState
+from controller.operator.io_text import output_event_text
 from controller.operator.words import axes_text, fields_text, pulses_text
 
 MAX_MARKS = 4096  # file positions a ProgramLines keeps, whatever the program's length
@@ -170,7 +171,8 @@ class PlainView:
         self.lines, self.out, self._next_s = lines, out or sys.stdout, 0.0
 
     def event(self, event: str, **fields: Any) -> None:
-        print(f"cncctl: {event} {fields_text(fields)}".rstrip(), file=self.out, flush=True)
+        text = output_event_text(fields) if event == "output" else fields_text(fields)
+        print(f"cncctl: {event} {text}".rstrip(), file=self.out, flush=True)
 
     def progress(self, p: MotionProgress) -> None:
         if p.elapsed_s < self._next_s:
@@ -268,7 +270,8 @@ class RichView(PlainView):
     def event(self, event: str, **fields: Any) -> None:
         from rich.markup import escape
 
-        self.live.console.print(f"[bold]{event}[/] " + escape(fields_text(fields)))
+        text = output_event_text(fields) if event == "output" else fields_text(fields)
+        self.live.console.print(f"[bold]{event}[/] " + escape(text))
 
     def progress(self, p: MotionProgress) -> None:
         self.bar.update(self.task, completed=p.executed_s, total=p.planned_s,
