@@ -49,3 +49,11 @@ def read_outputs(path: str) -> dict[str, Any] | None:
             return json.load(fh)
     except FileNotFoundError:
         return None
+
+
+def switch_side(name: str, axes: tuple[str, ...]) -> tuple[int, int] | None:
+    """switch_name read back: (axis index, +1 or -1), or None for another text."""
+    head = name[:2].lower()
+    if len(head) == 2 and head[0] in axes and head[1] in "+-" and name.endswith("limit switch"):
+        return axes.index(head[0]), 1 if head[1] == "+" else -1
+    return None

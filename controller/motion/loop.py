@@ -18,6 +18,7 @@ from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, star
 from controller.motion.events import EventFn, JobEvents
 from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.in_position import InPosition
+from controller.motion.limits import LimitWatch
 from controller.motion.model_watch import ModelWatch
 from controller.motion.outputs import OutputRunner
 from controller.motion.pacing import VirtualPacer, WallPacer
@@ -130,6 +131,7 @@ class MotionController:
         self.seq0: int | None = None  # the drive's number of this run's first frame
         self.pending_tail: tuple | None = None  # a stream's end at rest still to go out
         self.estop_reason: str | None = None  # the e-stop under way (then disable)
+        self.limits = LimitWatch(self.drive, self.config.axis_names, start_mm)
 
     def _cycle(self) -> None:
         try:
@@ -416,7 +418,7 @@ class MotionController:
         reason = self.requests.estop_message
         if reason is None and self.drive.estop_input():
             reason = ESTOP_INPUT
-        limit = self.drive.limit_input() if reason is None else None
+        limit = self.limits.tripped(self.stream.last_mm) if reason is None else None
         if limit is not None:  # a hard limit: the same category 1 stop, latched as a fault
             reason = LIMIT_INPUT.format(limit)
         if reason is not None:

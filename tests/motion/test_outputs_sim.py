@@ -182,3 +182,45 @@ def test_a_feed_hold_at_an_output_mark_sets_it_once_and_resumes(tmp_path: Path,
     assert changes(events) == [(3, "digital_0", True), (5, "digital_1", True)]
     assert card.output_image.bits == (1 << BIT["p0"]) | (1 << BIT["p1"])
     assert result.final_position_mm["x"] == pytest.approx(20.0, abs=0.002)
+
+
+@pytest.mark.parametrize("target_x, stops", [(-5.0, False), (5.0, True)])
+def test_a_job_may_move_off_a_limit_switch_but_not_further_onto_it(
+        tmp_path: Path, target_x: float, stops: bool) -> None:
+    """After a limit stop the axis stands on its switch: a jog or program that moves it away
+    runs; one that goes further toward it stops at once."""
+    config = mill(tmp_path)
+    prog = tmp_path / "prog.nc"
+    prog.write_text(f"G21 G90\nG1 X{target_x} F600\nM2\n")
+    card = SimCard(config, realtime=False)
+    card.trip_limit_input(0, 1)  # X+ is open before the job starts
+    result = Runtime(str(prog), config, RuntimeOptions(virtual_time=True, drive=card,
+                                                       rt_priority=None)).run()
+    if stops:
+        assert result.outcome is Outcome.FAULT
+        assert result.message == "hard limit: X+ limit switch tripped"
+        # Seen in the cycle after the first frames went out: the e-stop's stop then takes back
+        # whole sends only, and the first was the whole high-water mark (100 ms at 10 mm/s).
+        assert 0.0 <= result.final_position_mm["x"] < 1.1 and card.disabled
+    else:
+        assert result.outcome is Outcome.DONE, result.message
+        assert result.final_position_mm["x"] == pytest.approx(-5.0, abs=0.002)
+
+
+def test_another_switch_opening_while_on_one_stops_the_job(tmp_path: Path) -> None:
+    def when(event: dict[str, Any], runtime: Any, card: SimCard) -> None:
+        if event["name"] == "digital_1":
+            card.trip_limit_input(1, -1)  # Y- opens while X+ has been open all along
+    config = mill(tmp_path)
+    prog = tmp_path / "prog.nc"
+    prog.write_text("G21 G90\nM62 P1\nG1 X-20 F600\nM2\n")
+    card = SimCard(config, realtime=False)
+    card.trip_limit_input(0, 1)
+    events: list[dict[str, Any]] = []
+    runtime = Runtime(str(prog), config, RuntimeOptions(
+        virtual_time=True, drive=card, rt_priority=None,
+        on_event=lambda e: (events.append(e), when(e, runtime, card))))
+    result = runtime.run()
+    assert result.outcome is Outcome.FAULT
+    assert result.message == "hard limit: Y- limit switch tripped"
+    assert result.final_position_mm["x"] > -1.0  # stopped long before X-20
