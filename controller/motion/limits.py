@@ -29,3 +29,15 @@ class LimitWatch:
         axis, direction = side
         toward_mm = (commanded_mm[axis] - self.start_mm[axis]) * direction
         return name if toward_mm > TOWARD_MM else None
+
+    def refuses(self, rows_mm: np.ndarray) -> str | None:
+        """Before the first frame: why these first rows may not go (None: they may)."""
+        name = self.open_at_start
+        side = None if name is None else switch_side(name, self.axis_names)
+        if side is None:
+            return None
+        axis, direction = side
+        if float(np.max((rows_mm[:, axis] - self.start_mm[axis]) * direction)) > TOWARD_MM:
+            return (f"hard limit: {name} tripped; the job would move "
+                    f"{self.axis_names[axis].upper()} further onto it")
+        return None

@@ -284,10 +284,12 @@ class MotionController:
                 self.stream.held = np.vstack([self.stream.held, rows])
 
     def _start_ok(self, rows: np.ndarray) -> bool:
-        """The first reference point must be where the machine is (no jump at start)."""
+        """The first reference point must be where the machine is (no jump at start), and the
+        first rows must not go further onto a limit switch open since before the start."""
         if self.stream.sent or len(self.stream.held):
             return True
         problem = start_gap(rows[0, : self.n], self.figures.start_cmd, self.pulse_mm)
+        problem = problem or self.limits.refuses(rows[:, : self.n])
         if problem is not None:
             self._finish(Outcome.FAULT, problem)
         return problem is None
