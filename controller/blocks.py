@@ -247,6 +247,26 @@ class ProbeBlock:
                          PathControl(PathMode.EXACT_STOP), self.source)
 
 
+@dataclass(frozen=True, slots=True)
+class OutputChange:
+    """One machine output set to a value: "spindle" ("off", "cw", "ccw"), "spindle_rpm",
+    "coolant_mist", "coolant_flood" (bool), "digital_<P>" (bool), "analog_<E>" (float)."""
+
+    name: str
+    value: str | bool | float
+
+
+@dataclass(frozen=True, slots=True)
+class OutputBlock:
+    """The outputs one line changes (M3-M5 S, M7-M9, M62-M65, M67, M68), set with the machine
+    at rest at `position`; then wait_s (a spindle's spin-up) before the next move."""
+
+    changes: tuple[OutputChange, ...]
+    position: Point3
+    wait_s: float
+    source: Source
+
+
 MotionBlock = LineBlock | ArcBlock | NurbsBlock
 NcBlock = (LineBlock | ArcBlock | HelixBlock | NurbsBlock | DwellBlock | StopBlock | AuxBlock
-           | ProbeBlock)
+           | ProbeBlock | OutputBlock)

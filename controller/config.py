@@ -12,6 +12,7 @@ import yaml
 
 from controller.backends import BUILTIN_BACKENDS, backend_names
 from controller.errors import ConfigError
+from controller.io_config import IoConfig, read_io
 from controller.service_config import ServiceConfig, read_service
 from controller.servo_poles import pole_problem
 from controller.tools import ToolsConfig, read_tools_section
@@ -144,6 +145,7 @@ class MachineConfig:
     service: ServiceConfig = field(default_factory=ServiceConfig)
     allow_unhomed: bool = False  # run programs before the axes with a homing sequence are homed
     tools: ToolsConfig = field(default_factory=ToolsConfig)  # tool table, M6 position
+    io: IoConfig = field(default_factory=IoConfig)  # machine outputs -> backend outputs
 
     @property
     def axis_names(self) -> tuple[str, ...]:
@@ -296,6 +298,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         allow_unhomed=top.bool("allow_unhomed", False),
         tools=read_tools_section(top.section("tools", {}), tuple(a.name for a in axes),
                                  tuple(a.travel_mm for a in axes)),
+        io=read_io(top.section("io", {})),
     )
     top.finish()
     _check_plan_sizes(cfg, path)

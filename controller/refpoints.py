@@ -15,7 +15,8 @@ class RefChunk:
     Sample i of the chunk is at time t0_s + i * T. line is the NC source line per sample.
     final marks the last chunk of the program: its last row is the programmed end point.
     pause_after marks a program pause (M0): the machine waits at rest after the last row until
-    the operator resumes.
+    the operator resumes. outputs (OutputChange) are set when the machine, at rest, has reached
+    the first row (controller/generator/output_marks.py).
     """
 
     t0_s: float
@@ -24,6 +25,7 @@ class RefChunk:
     line: np.ndarray  # (N,) int32
     final: bool = False
     pause_after: bool = False
+    outputs: tuple = ()
 
     def __len__(self) -> int:
         return int(self.pos_mm.shape[0])

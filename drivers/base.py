@@ -10,8 +10,10 @@ from typing import Any
 
 import numpy as np
 
+from controller.blocks import OutputChange
 from controller.config import MachineConfig
 from controller.errors import DriveError
+from controller.outputs import OutputImage, OutputState
 from drivers.errors import HomingError
 from drivers.homing import plan_for
 from drivers.port_lock import PortLock
@@ -70,6 +72,7 @@ class Drive(ABC):
         self._homing = False  # a home() is running: write_frames is refused
         self._disabled = False  # disable() powered the axes off: until reset()
         self._port_guard: PortLock | None = None  # held while open (see _lock_key)
+        self._outputs = OutputState(config.io)  # the machine outputs, kept across jobs
 
     # -- public API -----------------------------------------------------------------------
     def open(self) -> None:
@@ -175,6 +178,41 @@ class Drive(ABC):
         self._require_open()
         self._disable()
         self._disabled = True
+        try:
+            self.safe_outputs()
+        except DriveError as exc:
+            raise DriveError(f"disabled, but the outputs were not set safe: {exc}") from exc
+
+    def set_outputs(self, changes: Sequence[OutputChange]) -> list[OutputChange]:
+        """Set machine outputs (spindle, coolant, digital, analog; see controller/outputs.py)
+        through the config's io map; returns the changes that changed a value."""
+        return self._set(lambda state: state.apply(changes), only_changed=True)
+
+    def safe_outputs(self) -> list[OutputChange]:
+        """Every output to its safe state (spindle and coolant off, the configured safe values),
+        written to the hardware even if the state already was (a backend may skip what it
+        last wrote on the same link); the changes it made."""
+        return self._set(lambda state: state.to_safe(), only_changed=False)
+
+    def _set(self, change: Callable[[OutputState], list[OutputChange]],
+             only_changed: bool) -> list[OutputChange]:
+        """Change a copy of the outputs, write it, then keep it: the state a failed write
+        leaves is still what the hardware was last told."""
+        self._require_open()
+        state = OutputState(self._outputs.io, **self._outputs.as_dict())
+        changed = change(state)
+        if changed or not only_changed:
+            self._write_outputs(state.image())
+            self._outputs = state
+        return changed
+
+    def outputs(self) -> dict[str, Any]:
+        """The machine outputs as last set (for `status`)."""
+        return self._outputs.as_dict()
+
+    def limit_input(self) -> str | None:
+        """The hard limit switch that is tripped, named ("X+ limit switch"), or None."""
+        return self._limit_input() if self._is_open else None
 
     @property
     def disabled(self) -> bool:
@@ -360,6 +398,15 @@ class Drive(ABC):
 
     def _probe_input(self) -> bool | None:
         """Backend hook; the default: a drive without a probe input."""
+        return None
+
+    def _write_outputs(self, image: OutputImage) -> None:  # noqa: B027 (optional hook)
+        """Backend hook: drive the digital bits and analog channels (default: the state is
+        only kept, as on the sim card)."""
+        return None
+
+    def _limit_input(self) -> str | None:
+        """Backend hook; the default: a drive without limit switch inputs."""
         return None
 
     def _close(self) -> None:  # noqa: B027 (optional hook: most backends have nothing to close)

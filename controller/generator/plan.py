@@ -16,6 +16,7 @@ from controller.blocks import (
     LineBlock,
     NcBlock,
     NurbsBlock,
+    OutputBlock,
     PathMode,
     ProbeBlock,
     StopBlock,
@@ -28,6 +29,7 @@ from controller.generator.feed.planner import plan_feed
 from controller.generator.feed.shape import TransitionShape
 from controller.generator.helix_move import helix_move
 from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
+from controller.generator.output_marks import output_mark
 from controller.generator.ph.construct import BlockCurve, block_curve
 from controller.generator.repeats import Repeats
 from controller.generator.replan import (
@@ -345,6 +347,14 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
                                                   rapid=rapid), at_rest=last)
         elif isinstance(block, DwellBlock):
             for chunk in _dwell(block, config, 0.0):
+                yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s)),
+                                      dwell=True)
+        elif isinstance(block, OutputBlock):
+            # Outputs are set at rest (after the in-position hold), then the spin-up wait.
+            yield from queue.emit(PlannedStep(output_mark(block, config, queue.next_t0_s)),
+                                  at_rest=False)
+            wait = DwellBlock(block.wait_s, block.position, block.source)
+            for chunk in _dwell(wait, config, 0.0):
                 yield from queue.emit(PlannedStep(replace(chunk, t0_s=queue.next_t0_s)),
                                       dwell=True)
         elif isinstance(block, StopBlock) and block.kind is StopKind.PAUSE:

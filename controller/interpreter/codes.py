@@ -56,6 +56,8 @@ M_GROUP: dict[int, str] = {
     3: "spindle", 4: "spindle", 5: "spindle",
     7: "coolant", 8: "coolant", 9: "coolant",
     48: "override", 49: "override",
+    62: "digital output", 63: "digital output", 64: "digital output", 65: "digital output",
+    67: "analog output", 68: "analog output",
 }
 
 # M codes that posts for other controllers write; refused like every unknown M code (LinuxCNC

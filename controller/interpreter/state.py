@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from controller.blocks import (
-    AuxBlock,
     DwellBlock,
     NcBlock,
     PathControl,
@@ -20,6 +19,7 @@ from controller.interpreter.homes import HOME_CODES, HomePositions
 from controller.interpreter.line_state import LineState
 from controller.interpreter.modal import Modal
 from controller.interpreter.moves import MAX_BLOCK_S, Moves
+from controller.interpreter.outputs import M_LETTERS, ProgramOutputs
 from controller.interpreter.params import Parameters
 from controller.interpreter.probing import PROBE_CODE10, Probing
 from controller.interpreter.tool_length import ToolState
@@ -81,6 +81,7 @@ class InterpState:
         self.spindle_code = 5  # M3, M4 or M5
         self.coolant: tuple[str, ...] = ()
         self.css = False  # G96: S is a surface speed
+        self.outputs = ProgramOutputs(config)  # what the program's M codes have set
         self.ended = False
         self.mark_pending: int | None = None  # run from this line once the NURBS block ends
         self.at_line: LineState | None = None  # the state where the run from line starts
@@ -111,7 +112,7 @@ class InterpState:
             raise WordError(word, f"{word} and {g_name(motion)} both use axis words: put "
                                   f"them on separate lines")
         _check_letters(groups, vals,
-                       motion if motion is not None or axis_code else self.modal.motion)
+                       motion if motion is not None or axis_code else self.modal.motion, ms)
         self._modes(groups, vals)
         self._feed_speed_tool(vals, ms, mgroups, lineno)
         if nonmodal == 40:
@@ -139,6 +140,10 @@ class InterpState:
                 moves.move(motion, vals, lineno, machine=nonmodal == 530)
         stop = mgroups.get("stopping")
         if stop is not None:
+            end = self.outputs.program_end(self.modal.pos, self._src(lineno)) \
+                if stop in (2, 30) else None
+            if end is not None:
+                self.out.append(end)
             self.out.append(StopBlock(_STOPS[stop], self.modal.pos, self._src(lineno)))
             self.ended = stop in (2, 30)
             if self.ended and self.offsets.table.active != 1:
@@ -194,8 +199,12 @@ class InterpState:
             raise WordError("G53", "G53 (machine coordinates) needs G0 or G1 in force")
 
     def mark(self, line: int) -> None:
-        """Run from `line`: note the state here and drop what the earlier lines produced."""
+        """Run from `line`: note the state here and drop what the earlier lines produced
+        (but for the outputs they set, which are set again here)."""
         self.out.clear()
+        restore = self.outputs.restore_block(self.modal.pos, self._src(line))
+        if restore is not None:
+            self.out.append(restore)
         self.mark_pending = None
         modal = self.modal
         x, y, z = modal.pos
@@ -272,24 +281,27 @@ class InterpState:
             if vals["S"] < 0:
                 raise WordError("S", "negative spindle speed")
             self.spindle_rpm = vals["S"]
-            if self.spindle_on and "spindle" not in mgroups:
-                self.out.append(AuxBlock("S", self._rpm(), None, self._src(lineno)))
         if "T" in vals:
             self.tools.select(vals["T"])
-        if "tool change" in mgroups and self.tools.change(lineno, self.spindle_on):
-            self.spindle_on, self.spindle_code = False, 5  # M6 stops the spindle
+        if "tool change" in mgroups:
+            stop = self.outputs.spindle_off(self.modal.pos, self._src(lineno))
+            if stop is not None:  # M6 stops the spindle (an output), then the change
+                self.out.append(stop)
+                self.spindle_on, self.spindle_code = False, 5
+            self.tools.change(lineno)
         spindle = mgroups.get("spindle")
         if spindle is not None:
             self.spindle_on = spindle != 5
             self.spindle_code = spindle
-            rpm = self._rpm() if self.spindle_on else None
-            self.out.append(AuxBlock(f"M{spindle}", rpm, None, self._src(lineno)))
         for m in ms:
             if m in (48, 49):
                 self._override(m == 48, lineno)
             if m in (7, 8, 9):
                 self.coolant = () if m == 9 else tuple(sorted({*self.coolant, f"M{m}"}))
-                self.out.append(AuxBlock(f"M{m}", None, None, self._src(lineno)))
+        block = self.outputs.line_block(ms, vals, self._rpm(), self.modal.pos,
+                                        self._src(lineno))
+        if block is not None:  # set at rest before the line's move (M62: with that move)
+            self.out.append(block)
 
     def _override(self, enabled: bool, lineno: int) -> None:
         """M48/M49 (LinuxCNC): feed override on/off from this line; the stretches with it off
@@ -349,17 +361,23 @@ def _groups(codes: list[int], table: dict[int, str], name) -> dict[str, int]:  #
     return groups
 
 
-def _check_letters(groups: dict[str, int], vals: dict[str, float], motion: int | None) -> None:
+def _check_letters(groups: dict[str, int], vals: dict[str, float], motion: int | None,
+                   ms: list[int]) -> None:
     """Every value word must be used by a code of the line (LinuxCNC's 'word with no G code')."""
     allowed = set(_ALWAYS)
+    for m in ms:
+        allowed |= M_LETTERS.get(m, frozenset())
     for code in groups.values():
         allowed |= _USES.get(code, frozenset())
     if motion is not None and not _AXES.isdisjoint(vals):
         allowed |= _USES.get(motion, frozenset())
     unused = vals.keys() - allowed
     if unused:
-        letter = min(unused, key="XYZIJKRPQLHFST".index)
+        letter = min(unused, key="XYZIJKRPQELHFST".index)
         if letter in _AXES:
             raise WordError(letter, f"{letter} word with no motion mode (G0, G1, G2, G3) "
                                     f"in force")
+        if letter == "E":  # most often X1e3: G-code numbers have no exponent
+            raise WordError(letter, "E word with no M67 or M68 on the line (nor exponents: "
+                                    "write 1e3 as 1000)")
         raise WordError(letter, f"{letter} word with no G code on the line that uses it")

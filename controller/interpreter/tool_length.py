@@ -45,12 +45,10 @@ class ToolState:
             raise WordError("T", f"T{number} is not in the tool table (`cncctl tool list`)")
         self.selected = number
 
-    def change(self, lineno: int, spindle_on: bool) -> bool:
-        """M6: stop the spindle, go to the change position, pause for the operator, then the
-        new tool is loaded. Returns whether the spindle was stopped here."""
+    def change(self, lineno: int) -> None:
+        """M6 (the spindle already stopped, an OutputBlock): go to the change position, pause
+        for the operator, then the new tool is loaded."""
         src = Source(self.path, lineno, lineno)
-        if spindle_on:
-            self.out.append(AuxBlock("M5", None, None, src))
         self.out.append(AuxBlock("M6", None, self.selected, src))
         if self.change_mm is not None:
             self._go_to_change_position(src)
@@ -62,7 +60,6 @@ class ToolState:
                                     table_length_mm=self._length_of(self.loaded, "T"),
                                     length_mm=self.length_mm,
                                     position_mm=[round(v, 4) for v in self.modal.pos]))
-        return spindle_on
 
     def _go_to_change_position(self, src: Source) -> None:
         """Rapids in machine coordinates: Z up first (clear of the work), then X Y."""

@@ -15,16 +15,25 @@ import numpy as np
 from controller.config import MachineConfig
 from controller.errors import CncError, DriveError
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
+from controller.motion.events import EventFn, JobEvents
 from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.in_position import InPosition
+from controller.motion.limits import LimitWatch
 from controller.motion.model_watch import ModelWatch
+from controller.motion.outputs import OutputRunner
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter, counts_of
 from controller.motion.recall import SendState
 from controller.motion.requests import OperatorRequests
 from controller.motion.result import RunChecks, RunFigures, build_result
 from controller.motion.retime import Retimer
-from controller.motion.source import RefSource, SourceState, pause_index, row_lines
+from controller.motion.source import (
+    RefSource,
+    SourceState,
+    is_output_mark,
+    pause_index,
+    row_lines,
+)
 from controller.motion.stopping import amax_stop_distances_mm, stop_along_path, with_lead_settled
 from controller.motion.types import (
     MotionProgress,
@@ -39,6 +48,7 @@ from drivers.errors import LostCommunicationError, UnderrunError
 
 SETTLE_HOLD_S = 0.02  # encoder equal to the step counter for this long = settled
 ESTOP_INPUT = "e-stop input on the drive tripped"
+LIMIT_INPUT = "hard limit: {} tripped"
 ESTOP_KEEP_FRAMES = 2  # frames left in the card when the e-stop takes the rest back
 
 
@@ -53,8 +63,11 @@ class MotionController:
     def __init__(self, config: MachineConfig, drive: Drive, source: RefSource,
                  pacer: WallPacer | VirtualPacer, settings: MotionSettings | None = None,
                  on_progress: Callable[[MotionProgress], None] | None = None,
-                 watch: Callable[[], str | None] | None = None) -> None:
+                 watch: Callable[[], str | None] | None = None,
+                 on_event: EventFn | None = None) -> None:
         self.config, self.drive, self.source, self.pacer = config, drive, source, pacer
+        self.events = JobEvents(on_event)  # output changes (and other kinds) as they happen
+        self.outputs = OutputRunner(drive, self.events)
         self.settings = settings or MotionSettings.from_config(config)
         self.on_progress = on_progress
         self.watch = watch  # external health check (dead processes): message -> stop
@@ -74,8 +87,15 @@ class MotionController:
         while self.state is not MotionState.FINISHED:
             self.pacer.wait()
             self._cycle()
+        if self.outcome not in (Outcome.DONE, None):
+            self._outputs_safe()  # abort, e-stop, fault: spindle, coolant, outputs safe
         self._disable_drives()  # after an e-stop's stop: category 1
         return self._result()
+
+    def _outputs_safe(self) -> None:
+        problem = self.outputs.to_safe(self.figures.executed * self.period_s, self.figures.line)
+        if problem is not None:
+            self._then_fault(problem)
 
     def _setup(self) -> None:
         start_cmd, start_enc = self.drive.position_counts()
@@ -105,10 +125,12 @@ class MotionController:
         self.pausing = False  # the frames up to a program pause are sent: wait there
         self.holding = False  # feed hold asked: decelerate along the path, then wait
         self.program_pause = False  # the standstill being reached is a program pause (M0)
+        self.output_mark: int | None = None  # the standstill being reached sets outputs: line
         self.restarting = False  # resumed from a pause: the FIFO is empty by design
         self.seq0: int | None = None  # the drive's number of this run's first frame
         self.pending_tail: tuple | None = None  # a stream's end at rest still to go out
         self.estop_reason: str | None = None  # the e-stop under way (then disable)
+        self.limits = LimitWatch(self.drive, self.config.axis_names, start_mm)
 
     def _cycle(self) -> None:
         try:
@@ -238,7 +260,10 @@ class MotionController:
         whole = self.retimer.frac == 0.0
         at_pause = pause is not None and used == pause + 1 and whole
         at_hold = self.retimer.at_rest and not at_pause
-        self.program_pause = self.program_pause or at_pause
+        mark = at_pause and is_output_mark(float(held[pause, -1]))  # type: ignore[index]
+        if mark:
+            self.output_mark = int(row_lines(held[pause:pause + 1])[0])  # type: ignore[misc]
+        self.program_pause = self.program_pause or (at_pause and not mark)
         end = final and not len(self.stream.held) and whole
         self._send(out, end=end, pause=at_pause or at_hold)
         if end or at_pause or at_hold:
@@ -258,10 +283,12 @@ class MotionController:
                 self.stream.held = np.vstack([self.stream.held, rows])
 
     def _start_ok(self, rows: np.ndarray) -> bool:
-        """The first reference point must be where the machine is (no jump at start)."""
+        """The first reference point must be where the machine is (no jump at start), and the
+        first rows must not go further onto a limit switch open since before the start."""
         if self.stream.sent or len(self.stream.held):
             return True
         problem = start_gap(rows[0, : self.n], self.figures.start_cmd, self.pulse_mm)
+        problem = problem or self.limits.refuses(rows[:, : self.n])
         if problem is not None:
             self._finish(Outcome.FAULT, problem)
         return problem is None
@@ -330,6 +357,9 @@ class MotionController:
         on resume (from a hold: a planned ramp back to the override's feed). A standstill
         of 0 % override goes on by itself once the override is turned up."""
         if self.state not in (MotionState.PAUSED, MotionState.HELD):
+            if level == 0 and self.output_mark is not None:
+                if not self._set_outputs(self.output_mark) or not self.holding:
+                    return  # set and going on (or a fault); held there: held as below
             if level == 0:
                 self.state = MotionState.PAUSED if self.program_pause else MotionState.HELD
                 self.requests.resume = False  # a resume must come after the standstill
@@ -345,6 +375,22 @@ class MotionController:
             self.restarting = True
             self.holding = False
             self.state = MotionState.RUNNING
+
+    def _set_outputs(self, line: int) -> bool:
+        """At an output mark, the card run out (the machine stands there): set the outputs,
+        then go on unless a feed hold came to rest there (the spin-up wait is planned rows
+        after the mark). False: they could not be set, and the job stops."""
+        self.output_mark = None
+        next_outputs = getattr(self.source, "next_outputs", lambda: None)
+        problem = self.outputs.at_mark(next_outputs(), self.figures.executed * self.period_s,
+                                       line)
+        if problem is not None:
+            self._begin_stop(Outcome.FAULT, problem)
+            return False
+        if not self.holding:
+            self.pausing = False
+            self.restarting = True
+        return True
 
     # -- stops otherwise than planned: a fault during a stop, the e-stop ------------------
     def _asked(self) -> str:
@@ -373,9 +419,14 @@ class MotionController:
         reason = self.requests.estop_message
         if reason is None and self.drive.estop_input():
             reason = ESTOP_INPUT
+        limit = self.limits.tripped(self.stream.last_mm) if reason is None else None
+        if limit is not None:  # a hard limit: the same category 1 stop, latched as a fault
+            reason = LIMIT_INPUT.format(limit)
         if reason is not None:
             self.estop_reason = reason
             self._begin_estop(reason, level)
+        if limit is not None:
+            self.outcome = Outcome.FAULT
 
     def _begin_estop(self, reason: str, level: int) -> None:
         if self.outcome is None or self.outcome is Outcome.DONE:
@@ -487,9 +538,14 @@ class MotionController:
         self.on_progress(self._progress(level, now_s))
 
     def _result(self) -> MotionResult:
-        return build_result(self.config, self.figures, self.checks, self.outcome, self.message,
-                            self.stream.pulses.commanded_counts, self.stream.sent,
-                            self.pacer.late_cycles, self.drive)
+        result = build_result(self.config, self.figures, self.checks, self.outcome,
+                              self.message, self.stream.pulses.commanded_counts,
+                              self.stream.sent, self.pacer.late_cycles, self.drive)
+        if self.events.count:
+            result.extra["events"] = self.events.kept
+        if self.drive.is_open:
+            result.extra["outputs"] = self.drive.outputs()
+        return result
 
     def _progress(self, level: int, now_s: float) -> MotionProgress:
         """Where the run is: state, line, feed, following error, card FIFO (level frames),

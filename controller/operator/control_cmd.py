@@ -22,6 +22,7 @@ from controller.operator.client import (
     request_estop,
     socket_argument,
 )
+from controller.operator.io_text import outputs_text
 from controller.operator.run.exit_codes import EXIT_CODES, EXIT_REJECTED, STOP_SIGNALS
 from controller.operator.run.remote import FINAL_EVENTS, RemoteOperator
 from controller.operator.words import axes_text, offsets_table
@@ -141,6 +142,8 @@ def _print_status(s: dict[str, Any], as_json: bool) -> None:
     if s.get("estop_input"):
         print("  e-stop input open (tripped): close it, then `cncctl reset`")
     print(f"  position {where}")
+    if s.get("outputs"):
+        print(f"  outputs: {outputs_text(s['outputs'])}")
     work = s.get("work_position_mm") or {}
     if work:
         system = (s.get("offsets") or {}).get("active", "G54")

@@ -58,6 +58,7 @@ class RuntimeOptions:
     override_off_lines: list[list[int]] = field(default_factory=list)  # M49..M48 stretches
     probes: Any = None  # G38 results known (controller/probe.ProbeResults): a probing run
     probe_watch: Any = None  # watches the probe input (runtime/probe_run.ProbeWatch)
+    on_event: Callable[[dict[str, Any]], None] | None = None  # output changes, as they happen
 
 
 class _Messages:
@@ -68,6 +69,7 @@ class _Messages:
         self.errors: dict[str, str] = {}
         self.rss_kb: dict[str, int] = {}
         self.sched: dict[str, str] = {}  # what each producer runs at ("nice -10")
+        self.outputs: list[tuple] = []  # the changes of each output mark, in stream order
 
     def drain(self, wait_s: float = 0.0, until: Callable[[], bool] | None = None) -> None:
         """Take the messages already sent; wait up to wait_s for more, unless until() holds
@@ -80,6 +82,9 @@ class _Messages:
                     timeout=0.0 if done else max(0.0, deadline - time.monotonic()))
             except (queue.Empty, OSError, ValueError):
                 return
+            if kind == "outputs":
+                self.outputs.append(value)
+                continue
             {"error": self.errors, "sched": self.sched}.get(kind, self.rss_kb)[stage] = value
 
     def failure(self) -> str:
@@ -117,6 +122,12 @@ class RingSource:
 
     def total_rows(self) -> int | None:
         return self.ring.written if self.ring.flags & FLAG_FINAL else None
+
+    def next_outputs(self) -> tuple | None:
+        """The next output mark's changes: sent before its rows, so in the pipe by now."""
+        messages = self.messages
+        messages.drain(MESSAGE_WAIT_S, until=lambda: bool(messages.outputs))
+        return messages.outputs.pop(0) if messages.outputs else None
 
     def primed(self) -> bool:
         """The ring is full (the generator waits on it), or there is no more to wait for."""
@@ -273,7 +284,7 @@ class Runtime:
         self._pacer_t0_epoch_s = time.time()
         self.controller = MotionController(self.config, drive, source, pacer, self.settings,
                                            on_progress=self.options.on_progress,
-                                           watch=watch)
+                                           watch=watch, on_event=self.options.on_event)
         self.controller.set_feed_override(self.feed_override_pct)
         self.controller.set_override_off_lines(self.options.override_off_lines)
         if self.options.offsets is not None:

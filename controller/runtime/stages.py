@@ -156,6 +156,8 @@ def generator_main(config: MachineConfig, generate_fn: GenerateFn, nc_fifo: Queu
     parent = _child_setup(parent_pid, info, "generator")
     try:
         for chunk in generate_fn(drain_fifo(nc_fifo, lambda: _should_stop(ring, parent)), config):
+            if chunk.outputs:  # before its rows: in the motion process when they are
+                info.put(("outputs", "generator", chunk.outputs))
             if not ring.write(chunk_rows(chunk)) or os.getppid() != parent:
                 return
         ring.set_flag(FLAG_FINAL)

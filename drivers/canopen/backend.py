@@ -10,8 +10,9 @@ from typing import Any
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.outputs import OutputImage
 from drivers.base import CardStatus, Drive, Feedback
-from drivers.canopen import bringup, homing
+from drivers.canopen import bringup, homing, machine_io
 from drivers.canopen import cia402 as c
 from drivers.canopen.link import Link
 from drivers.canopen.options import CanopenOptions, parse_options
@@ -49,6 +50,8 @@ class CanopenDrive(Drive):
         self.bringup_s = 0.0
         self._last_stats: dict[str, float | int] = {}
         self._last_rtt_ms = np.zeros(0)
+        self._io_written: OutputImage | None = None  # what the io_node holds, as written
+        self._io_written_link: Link | None = None  # ... in this session (a new link: unknown)
 
     # -- open / close ---------------------------------------------------------------------
     def _lock_key(self) -> str:
@@ -275,6 +278,17 @@ class CanopenDrive(Drive):
             return False
         with link.lock:
             return any(sw & c.SW_ESTOP_INPUT for sw in link.statusword)
+
+    def _limit_input(self) -> str | None:
+        """Statusword bit 11 (in every TPDO1) says a drive's limit switch is open; its 0x60FD
+        then says which, read once by SDO."""
+        return machine_io.limit_input(self._link, self._nodes, self.axes)
+
+    def _write_outputs(self, image: OutputImage) -> None:
+        self._check_comm()
+        last = self._io_written if self._io_written_link is self._link else None
+        machine_io.write_outputs(self._nodes, self.axes, self.o, image, last)
+        self._io_written, self._io_written_link = image, self._link  # this session's
 
     # -- bench and probe ------------------------------------------------------------------
     def link_stats(self) -> dict[str, float | int]:

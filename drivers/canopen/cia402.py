@@ -119,3 +119,12 @@ def period_code(period_s: float) -> tuple[int, int]:
         if abs(mantissa - round(mantissa)) < 1e-6 * mantissa and round(mantissa) <= 255:
             return int(round(mantissa)), exponent
     raise ValueError(f"sample period {period_s} s cannot be written to 0x60C2")
+
+# Machine I/O (docs/canopen.md, "Machine I/O"): digital inputs with the limit switches, the
+# digital outputs on the drive the option io_node names, and its analog outputs, which CiA 402
+# does not define (drives put them in manufacturer objects; 0x2400 in our EDS).
+DIGITAL_INPUTS = 0x60FD  # bit 0: negative limit switch, bit 1: positive limit switch
+DI_NEGATIVE_LIMIT, DI_POSITIVE_LIMIT = 0x1, 0x2
+DIGITAL_OUTPUTS = 0x60FE  # sub 1: physical outputs, sub 2: bit mask (outputs enabled)
+ANALOG_OUTPUTS = 0x2400  # sub 1-4: REAL32, channels 0-3
+SW_INTERNAL_LIMIT = 0x0800  # statusword bit 11: internal limit active (a limit switch)

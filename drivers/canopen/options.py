@@ -28,6 +28,7 @@ class CanopenOptions:
     fifo_frames: int
     sdo_timeout_s: float
     home_offset_sign: int = 1  # -1: a drive whose home point reads -0x607C (docs/canopen.md)
+    io_node: int = 1  # the drive whose outputs (0x60FE, 0x2400) are the machine's outputs
 
 
 DEFAULTS: dict[str, Any] = {
@@ -35,7 +36,7 @@ DEFAULTS: dict[str, Any] = {
     "node_ids": None, "counts_per_mm": None, "master_node_id": 127,
     "master_heartbeat_ms": 50, "drive_heartbeat_ms": 50, "heartbeat_timeout_ms": 300,
     "ferror_window_mm": 1.0, "ferror_timeout_ms": 10, "tpdo_timeout_cycles": 100,
-    "fifo_frames": 256, "sdo_timeout_s": 0.3, "home_offset_sign": 1,
+    "fifo_frames": 256, "sdo_timeout_s": 0.3, "home_offset_sign": 1, "io_node": None,
 }
 # realtime: make_drive passes it; the bus has its own clock, so virtual time is refused.
 OPTIONS = frozenset(DEFAULTS) | {"realtime"}
@@ -94,6 +95,10 @@ def parse_options(config: MachineConfig, options: dict[str, Any]) -> CanopenOpti
         raise DriveError("canopen option home_offset_sign: must be 1 or -1")
     if master in node_ids:
         raise DriveError(f"canopen option master_node_id: {master} is also a drive's node id")
+    io_node = node_ids[0] if o["io_node"] is None else _int("io_node", o["io_node"], 1, 127)
+    if io_node not in node_ids:
+        raise DriveError(f"canopen option io_node: {io_node} is not one of the drives' node "
+                         f"ids {list(node_ids)}")
     return CanopenOptions(
         interface=str(o["interface"]), channel=str(o["channel"]),
         bitrate=_int("bitrate", o["bitrate"], 10_000, 1_000_000),
@@ -105,7 +110,8 @@ def parse_options(config: MachineConfig, options: dict[str, Any]) -> CanopenOpti
         ferror_timeout_ms=_int("ferror_timeout_ms", o["ferror_timeout_ms"], 0, 65_535),
         tpdo_timeout_cycles=_int("tpdo_timeout_cycles", o["tpdo_timeout_cycles"], 2, 100_000),
         fifo_frames=_int("fifo_frames", o["fifo_frames"], 16, 1_000_000),
-        sdo_timeout_s=_float("sdo_timeout_s", o["sdo_timeout_s"]), home_offset_sign=sign)
+        sdo_timeout_s=_float("sdo_timeout_s", o["sdo_timeout_s"]), home_offset_sign=sign,
+        io_node=io_node)
 
 
 def drive_layout(config: MachineConfig) -> CanopenOptions:

@@ -20,6 +20,8 @@ from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.canopen import cia402 as c
 from drivers.canopen.options import drive_layout
 from drivers.canopen.sim_homing import SimHoming402
+from drivers.canopen.sim_io import SimIo402
+from drivers.io_peer import IO_OPTIONS
 from drivers.sim.axes import plant_of
 from drivers.sim.switches import SWITCH_OPTIONS, SimSwitches
 
@@ -48,12 +50,12 @@ class SimAxis402:
 
     def __init__(self, network: canopen.Network, node_id: int, axis: AxisConfig,
                  counts_per_mm: float, period_s: float, inject: Injections,
-                 homing: SimHoming402) -> None:
+                 homing: SimHoming402, io: SimIo402, index: int) -> None:
         self.node = canopen.LocalNode(node_id, canopen.import_od(str(c.EDS_PATH), node_id))
         network.add_node(self.node)
         self.network, self.id, self.name = network, node_id, axis.name
         self.counts_per_mm, self.period_s, self.inject = counts_per_mm, period_s, inject
-        self.homing = homing
+        self.homing, self.io, self.index = homing, io, index  # index: the axis's, for its I/O
         self.stepper = AxisServoStepper(discretise(axis.servo, period_s))
         self.lock = threading.RLock()
         od = self.node.object_dictionary
@@ -84,7 +86,8 @@ class SimAxis402:
         live = {c.STATUSWORD: self.statusword, c.POSITION_ACTUAL: self.position,
                 c.MODE_DISPLAY: self.mode, c.ERROR_CODE: self.error_code,
                 c.ERROR_REGISTER: 0x01 if self.state == "FAULT" else 0,
-                0x6062: self.ref, 0x60F4: self.ref - self.position}
+                0x6062: self.ref, 0x60F4: self.ref - self.position,
+                c.DIGITAL_INPUTS: self.io.digital_inputs(self.index)}
         with self.lock:
             return live.get(index)
 
@@ -109,6 +112,8 @@ class SimAxis402:
                 self.timeout_ms = int(value)
             elif index == c.ABORT_CONNECTION:
                 self.abort_option = int(value)
+            elif self.io.write(index, subindex, value):
+                pass  # an output: recorded by SimIo402
             elif index == c.CONSUMER_HEARTBEAT and subindex == 1:
                 self.consumer_id, self.consumer_ms = (int(value) >> 16) & 0x7F, int(value) & 0xFFFF
             else:
@@ -170,7 +175,7 @@ class SimAxis402:
             sw |= c.SW_FOLLOWING_ERROR
         if self.inject.estop_input_file and os.path.exists(self.inject.estop_input_file):
             sw |= c.SW_ESTOP_INPUT
-        return sw
+        return sw | self.io.statusword_bits(self.index)
 
     def fault(self, code: int) -> None:
         """Fault reaction: power off (the axis holds where it is in the model), EMCY."""
@@ -266,7 +271,8 @@ class SimDriveSet:
     """The simulated drives of a machine on one CAN bus (in-process python-can `virtual` by
     default). Options (strict): drive_fault_after_s, drive_fault_code, lag_mm, lag_after_s,
     silent_after_s, sdo_abort_index, fault_axis (x); times count from the first enable;
-    estop_input_file (every drive's e-stop input is open while that file exists).
+    estop_input_file (every drive's e-stop input is open while that file exists);
+    limit_input_file, outputs_file (machine I/O: drivers/canopen/sim_io.py).
     Homing (mode 6): true_start_mm, home_switch_mm (default: at the home offset the master
     writes; null: no switch), index_pitch_mm (drivers/sim/switches.py) and search_limit_mm
     (default: the travel + 10 %: then statusword bit 13). Each axis's loop: plant_x, plant_y,
@@ -275,7 +281,7 @@ class SimDriveSet:
     OPTIONS = frozenset({"drive_fault_after_s", "drive_fault_code", "lag_mm", "lag_after_s",
                          "silent_after_s", "sdo_abort_index", "fault_axis", "true_start_mm",
                          "home_switch_mm", "index_pitch_mm", "search_limit_mm",
-                         "estop_input_file"}) | PLANT_OPTIONS
+                         "estop_input_file"}) | PLANT_OPTIONS | IO_OPTIONS
 
     def __init__(self, config: MachineConfig, options: dict[str, Any] | None = None,
                  channel: str = "cncsim", interface: str = "virtual",
@@ -301,6 +307,7 @@ class SimDriveSet:
                                                  if k in SWITCH_OPTIONS}, np.zeros(len(names)),
                                     "simulated drive")
         search_limit_mm = _opt_float(options, "search_limit_mm")
+        self.io = SimIo402(options, names)
         for i, (axis, node_id, cpm) in enumerate(zip(plant.axes, layout.node_ids,
                                                      layout.counts_per_mm, strict=True)):
             inject = _injections(options) if axis.name == fault_axis else Injections(
@@ -309,7 +316,7 @@ class SimDriveSet:
             homing = SimHoming402(axis, i, cpm, config.sample_period_s, self.switches,
                                   search_limit_mm)
             self.axes.append(SimAxis402(self.network, node_id, axis, cpm,
-                                        config.sample_period_s, inject, homing))
+                                        config.sample_period_s, inject, homing, self.io, i))
         self.master_seen_s: float | None = None
         self.host_pending: Callable[[], bool] = lambda: False  # frames from the master unread
         self._last_watch_s = time.monotonic()

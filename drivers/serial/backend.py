@@ -10,8 +10,10 @@ from typing import Any
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.outputs import OutputImage
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, LostCommunicationError
+from drivers.io_peer import switch_name
 from drivers.port_lock import device_key
 from drivers.serial import homing
 from drivers.serial import protocol as p
@@ -385,6 +387,18 @@ class SerialCard(Drive):
     def _probe_input(self) -> bool:
         s = self._last  # in every status frame too (io bit PROBE_INPUT)
         return s is not None and bool(s.io & p.IO_PROBE_INPUT)
+
+    def _limit_input(self) -> str | None:
+        s = self._last  # the limit switches ride in the same io word
+        tripped = None if s is None else p.limit_of(s.io, self.n_axes)
+        return None if tripped is None else switch_name(self.config.axis_names[tripped[0]],
+                                                     tripped[1])
+
+    def _write_outputs(self, image: OutputImage) -> None:
+        """An OUTPUTS frame, confirmed by the card's status reply."""
+        self._check_link()
+        self._sync(self._request(lambda token: p.encode_outputs(token, image.bits,
+                                                                image.analog), "outputs"))
 
     # -- measurements -----------------------------------------------------------------------
     def link_stats(self) -> dict[str, Any]:

@@ -21,6 +21,7 @@ T_STATUS_REQUEST = 0x11  # answer with a status frame now
 T_END = 0x12  # end of stream after the samples already sent (no new sample)
 T_HOME = 0x13  # run the homing sequence of the axes in a mask (answered with a status frame)
 T_DISABLE = 0x14  # e-stop: discard the FIFO, amplifiers off until a RESET (answered by status)
+T_OUTPUTS = 0x15  # set the digital outputs and analog channels now (answered by status)
 T_STATUS = 0x80  # card -> host status report
 
 FLAG_END_OF_STREAM = 0x01  # sample flag: the last frame of a program
@@ -37,10 +38,13 @@ ST_HOME_FAILED = 0x20  # the last HOME failed (fault_axis, fault_code = HOME_*);
 ST_HOMING = 0x40  # not latched: a homing sequence is running
 ST_EXECUTED = 0x80  # not latched: the last clock tick executed sample exec_seq
 
-# The status frame's io byte (not latched: what is true now).
+# The status frame's io word, 16 bits little-endian (not latched: what is true now).
 IO_DISABLED = 0x01  # amplifiers off (a DISABLE frame, until a RESET with the input closed)
 IO_ESTOP_INPUT = 0x02  # the card's e-stop input is open (tripped)
-IO_PROBE_INPUT = 0x04  # the probe input (G38) is in contact
+IO_LIMIT_NEG = 0x04  # axis i's negative limit switch is open: this bit shifted left by 2 i
+IO_LIMIT_POS = 0x08  # axis i's positive limit switch is open: this bit shifted left by 2 i
+IO_PROBE_INPUT = 0x100  # the probe input (G38) is in contact (the io word's second byte)
+N_ANALOG = 4  # analog channels in an OUTPUTS frame
 
 # fault_code of ST_HOME_FAILED (a drive fault during homing is ST_DRIVE_FAULT instead)
 HOME_NOT_FOUND = 1  # no switch within the search limit
@@ -59,9 +63,11 @@ _HEADER = 3  # sync, type, len
 _CRC = 2
 _SAMPLE_FIXED = 3  # seq u16, flags u8
 _CONTROL_LEN = 2  # token u16
+_OUTPUTS_FMT = f"<HH{N_ANALOG}f"  # token, digital bits, analog channels (float32)
+_OUTPUTS_LEN = struct.calcsize(_OUTPUTS_FMT)  # 20 bytes
 _STATUS_FMT = "<HHHBBHHH"
-_STATUS_FIXED = struct.calcsize(_STATUS_FMT)  # 14 bytes, then the axes, then the io byte
-_STATUS_TAIL = 1  # io
+_STATUS_FIXED = struct.calcsize(_STATUS_FMT)  # 14 bytes, then the axes, then the io word
+_STATUS_TAIL = 2  # io, uint16 (limit switches of 3 axes fill its first byte)
 _STATUS_AXIS = struct.calcsize("<iihh")  # 12 bytes per axis
 _HOME_FIXED = struct.calcsize("<HB")  # token, axis mask
 _HOME_AXIS_FMT = "<bBIIIiiI"
@@ -142,7 +148,30 @@ class Home:
     axes: tuple[HomeAxis, ...]  # one per axis
 
 
-Frame = Sample | Reset | StatusRequest | End | Status | Home | Disable
+@dataclass(frozen=True)
+class Outputs:
+    """Digital output i is bit i of `bits`; analog[c] is channel c (the card's units)."""
+
+    token: int
+    bits: int
+    analog: tuple[float, ...] = (0.0,) * N_ANALOG
+
+
+def limit_bits(axis: int, direction: int) -> int:
+    """The io bit of axis `axis`'s limit switch on the side `direction` (+1, -1)."""
+    return (IO_LIMIT_POS if direction > 0 else IO_LIMIT_NEG) << (2 * axis)
+
+
+def limit_of(io: int, n_axes: int) -> tuple[int, int] | None:
+    """The first open limit switch in an io byte: (axis, +1 or -1), or None."""
+    for axis in range(n_axes):
+        for direction in (-1, 1):
+            if io & limit_bits(axis, direction):
+                return axis, direction
+    return None
+
+
+Frame = Sample | Reset | StatusRequest | End | Status | Home | Disable | Outputs
 _CONTROL = {T_RESET: Reset, T_STATUS_REQUEST: StatusRequest, T_END: End, T_DISABLE: Disable}
 
 
@@ -206,6 +235,16 @@ def encode_home(token: int, mask: int, axes: tuple[HomeAxis, ...] | list[HomeAxi
     return _wrap(HOST_SYNC, T_HOME, payload)
 
 
+def encode_outputs(token: int, bits: int, analog: tuple[float, ...] | list[float]) -> bytes:
+    if len(analog) != N_ANALOG:
+        raise ProtocolError(f"outputs: {N_ANALOG} analog channels, got {len(analog)}")
+    try:
+        payload = struct.pack(_OUTPUTS_FMT, token % SEQ_MOD, bits, *analog)
+    except struct.error as exc:
+        raise ProtocolError(f"outputs out of range: bits {bits}: {exc}") from exc
+    return _wrap(HOST_SYNC, T_OUTPUTS, payload)
+
+
 def encode_status(s: Status) -> bytes:
     n = len(s.commanded)
     _check_axes(n)
@@ -217,7 +256,7 @@ def encode_status(s: Status) -> bytes:
     for i in range(n):
         payload += struct.pack("<iihh", s.commanded[i], s.encoder[i],
                                _clamp16(s.commanded_delta[i]), _clamp16(s.encoder_delta[i]))
-    return _wrap(CARD_SYNC, T_STATUS, payload + bytes((s.io & 0xFF,)))
+    return _wrap(CARD_SYNC, T_STATUS, payload + struct.pack("<H", s.io & 0xFFFF))
 
 
 def encode(frame: Frame) -> bytes:
@@ -233,6 +272,8 @@ def encode(frame: Frame) -> bytes:
         return encode_disable(frame.token)
     if isinstance(frame, Home):
         return encode_home(frame.token, frame.mask, frame.axes)
+    if isinstance(frame, Outputs):
+        return encode_outputs(frame.token, frame.bits, frame.analog)
     return encode_status(frame)
 
 
@@ -248,6 +289,8 @@ def _plausible(sync: int, ftype: int, length: int) -> bool:
             return any(length == _SAMPLE_FIXED + n * width for n in AXES_ALLOWED)
         if ftype == T_HOME:
             return any(length == _HOME_FIXED + n * _HOME_AXIS for n in AXES_ALLOWED)
+        if ftype == T_OUTPUTS:
+            return length == _OUTPUTS_LEN
         return ftype in _CONTROL and length == _CONTROL_LEN
     return ftype == T_STATUS and any(length == _STATUS_FIXED + n * _STATUS_AXIS + _STATUS_TAIL
                                      for n in AXES_ALLOWED)
@@ -263,6 +306,9 @@ def decode_payload(ftype: int, payload: bytes) -> Frame:
     if ftype in _CONTROL:
         (token,) = struct.unpack("<H", payload)
         return _CONTROL[ftype](token)
+    if ftype == T_OUTPUTS:
+        token, bits, *analog = struct.unpack(_OUTPUTS_FMT, payload)
+        return Outputs(token, bits, tuple(analog))
     if ftype == T_HOME:
         token, mask = struct.unpack_from("<HB", payload)
         n = (len(payload) - _HOME_FIXED) // _HOME_AXIS
@@ -273,7 +319,8 @@ def decode_payload(ftype: int, payload: bytes) -> Frame:
     n = (len(payload) - _STATUS_FIXED - _STATUS_TAIL) // _STATUS_AXIS
     axes = [struct.unpack_from("<iihh", payload, _STATUS_FIXED + i * _STATUS_AXIS)
             for i in range(n)]
-    return Status(*fixed, *(tuple(a[k] for a in axes) for k in range(4)), io=payload[-1])
+    io = int.from_bytes(payload[-_STATUS_TAIL:], "little")
+    return Status(*fixed, *(tuple(a[k] for a in axes) for k in range(4)), io=io)
 
 
 def decode(data: bytes) -> Frame:

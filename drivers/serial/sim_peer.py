@@ -16,6 +16,7 @@ from controller.config import MachineConfig
 from controller.errors import DriveError
 from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.homing import HomingPlan
+from drivers.io_peer import limit_tripped, record_outputs
 from drivers.serial import protocol as p
 from drivers.sim.axes import SimAxes, plant_of
 from drivers.sim.card import workpiece_option
@@ -46,9 +47,11 @@ PEER_OPTIONS: dict[str, Any] = {
     "homing_fault_after_s": None,  # drive_fault_axis faults this long into a HOME
     "estop_input_file": None,  # a path: the e-stop input is open while this file exists
     "probe_workpiece_mm": None,  # x0,y0,z0,x1,y1,z1: the probe is in contact inside this box
+    "limit_input_file": None,  # a path: the limit switch it names ("x+") is open while it exists
+    "outputs_file": None,  # a path: the outputs as JSON, written on every OUTPUTS frame
 } | dict.fromkeys(PLANT_OPTIONS)  # each axis's own loop, mismatch (controller/servo/plant_option)
 LIST_OPTIONS = ("start_mm", "true_start_mm", "home_switch_mm", "probe_workpiece_mm")
-TEXT_OPTIONS = ("estop_input_file",)
+TEXT_OPTIONS = ("estop_input_file", "limit_input_file", "outputs_file")
 
 
 def check_options(options: dict[str, Any]) -> dict[str, Any]:
@@ -112,6 +115,7 @@ class PeerCard:
         self.samples_exec = 0
         self.first_rx_s: float | None = None
         self.injected: set[str] = set()
+        self.outputs = p.Outputs(0, 0)  # the digital outputs and analog channels
         self.t0_s = time.monotonic()
         self.ticks = 0
 
@@ -154,6 +158,10 @@ class PeerCard:
             self.disabled = True
             self.send_status(frame.token)
         elif isinstance(frame, p.StatusRequest):
+            self.send_status(frame.token)
+        elif isinstance(frame, p.Outputs):
+            self.outputs = frame  # the outputs hold these from now (the host sets them safe)
+            record_outputs(self.opt["outputs_file"], frame.bits, frame.analog)
             self.send_status(frame.token)
         elif isinstance(frame, p.End):
             if not self.fifo.mark_end():
@@ -299,6 +307,11 @@ class PeerCard:
         return self.workpiece is not None and self.workpiece.contact(
             self.axes.actual_mm + self.switches.offset_mm)
 
+    def limit_io(self) -> int:
+        """The io bit of the limit switch the option's file names, while it exists."""
+        tripped = limit_tripped(self.opt["limit_input_file"], self.axis_names)
+        return 0 if tripped is None else p.limit_bits(*tripped)
+
     def send_status(self, reply_to: int = 0) -> None:
         if self._after("silent_after_s"):
             return
@@ -313,7 +326,7 @@ class PeerCard:
             commanded_delta=tuple(int(c) for c in cur_cmd - self.prev_cmd),
             encoder_delta=tuple(int(e) for e in cur_enc - self.prev_enc),
             io=(p.IO_DISABLED if self.disabled else 0)
-            | (p.IO_ESTOP_INPUT if self.estop_input() else 0)
+            | (p.IO_ESTOP_INPUT if self.estop_input() else 0) | self.limit_io()
             | (p.IO_PROBE_INPUT if self.probe_input() else 0))
         data = p.encode_status(status)
         if self._after("corrupt_status_after_s"):

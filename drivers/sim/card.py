@@ -10,11 +10,13 @@ from typing import Any
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.outputs import OutputImage
 from controller.probe import Workpiece
 from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, HomingError, LostCommunicationError
 from drivers.homing import plan_for
+from drivers.io_peer import IO_OPTIONS, limit_tripped, record_outputs, switch_name
 from drivers.sim.axes import SimAxes, plant_of
 from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
@@ -38,6 +40,9 @@ class SimCard(Drive):
     estop_input_file (a path: the input reads tripped while that file exists, so that a
     test in another process can trip it; trip_estop_input() does it in-process);
     drive_fault_file (a path: X's amplifier faults, latched, once that file exists).
+    Machine I/O (drivers/io_peer.py): limit_input_file (while it exists, the limit switch it
+    names, "x+", is tripped; trip_limit_input() in-process) and outputs_file (the outputs
+    written there as JSON each time they change); the outputs are kept as `output_image`.
     Card rule (hostmot2 watchdog): an empty FIFO mid-program stops the card and latches
     UNDERRUN until reset(); an empty FIFO after an end-of-stream frame is simply idle.
     """
@@ -45,7 +50,7 @@ class SimCard(Drive):
     OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm",
                          "true_start_mm", "home_switch_mm", "index_pitch_mm", "homed_at_start",
                          "estop_input_file", "drive_fault_file", "probe_workpiece_mm"}) \
-        | PLANT_OPTIONS
+        | PLANT_OPTIONS | IO_OPTIONS
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
@@ -75,6 +80,10 @@ class SimCard(Drive):
         self._fault_file = options.get("drive_fault_file")
         # G38: the probe is in contact while the table's true position is inside this box
         self._workpiece = workpiece_option(options.get("probe_workpiece_mm"), "sim: drive option")
+        self._limit_file = options.get("limit_input_file")
+        self._limit_tripped: tuple[int, int] | None = None  # the in-process input (test hook)
+        self._outputs_file = options.get("outputs_file")
+        self.output_image = OutputImage()  # what the card's outputs hold
         self.frames_clocked = 0  # every period since open, idle ones included
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -184,6 +193,20 @@ class SimCard(Drive):
     def trip_estop_input(self, tripped: bool = True) -> None:
         """The e-stop input opens (True) or closes again (test hook)."""
         self._estop_tripped = tripped
+
+    def _limit_input(self) -> str | None:
+        names = self.config.axis_names
+        tripped = self._limit_tripped or limit_tripped(self._limit_file, names)
+        return None if tripped is None else switch_name(names[tripped[0]], tripped[1])
+
+    def trip_limit_input(self, axis: int | None, direction: int = 1) -> None:
+        """A limit switch trips (axis index, +1 or -1) or none is (None) (test hook)."""
+        self._limit_tripped = None if axis is None else (axis, direction)
+
+    def _write_outputs(self, image: OutputImage) -> None:
+        self._check_comm()
+        self.output_image = image
+        record_outputs(self._outputs_file, image.bits, image.analog)
 
     # -- homing ---------------------------------------------------------------------------
     def _stream_active(self) -> bool:

@@ -11,6 +11,9 @@ STATUS = p.Status(reply_to=3, fifo_level=100, fifo_capacity=256,
                   rx_seq=0x0203, exec_seq=0x0102, commanded=(-21790, 2787),
                   encoder=(-21771, 2790), commanded_delta=(-58, 1), encoder_delta=(-57, 0))
 
+INPUTS = p.Status(0, 0, 256, 0, 0, 0, 1, 1, (1, 2), (3, 4), (0, 0), (0, 0),
+                  io=p.IO_ESTOP_INPUT | p.limit_bits(1, -1))  # the e-stop input and Y-
+
 # (frame, exact bytes) -- docs/serial-protocol.md shows the same frames field by field.
 TRANSCRIPT: list[tuple[p.Frame, str]] = [
     (p.Sample(5, (3, -4), True), "a5 01 05 0500 01 03 fc ae6b"),
@@ -20,8 +23,12 @@ TRANSCRIPT: list[tuple[p.Frame, str]] = [
     (p.StatusRequest(1), "a5 11 02 0100 7d28"),
     (p.End(2), "a5 12 02 0200 f2e6"),
     (p.Disable(4), "a5 14 02 0400 cd6b"),
-    (STATUS, "5a 80 27 0300 6400 0001 81 00 0000 0302 0201"
-             " e2aaffff f5aaffff c6ff c7ff e30a0000 e60a0000 0100 0000 00 9f96"),
+    (STATUS, "5a 80 28 0300 6400 0001 81 00 0000 0302 0201"
+             " e2aaffff f5aaffff c6ff c7ff e30a0000 e60a0000 0100 0000 0000 19f1"),
+    (p.Outputs(5, 0x0031, (1000.0, 2.5, 0.0, -1.0)),
+     "a5 15 14 0500 3100 00007a44 00002040 00000000 000080bf c147"),
+    (INPUTS, "5a 80 28 0000 0000 0001 00 00 0000 0100 0100"
+             " 01000000 03000000 0000 0000 02000000 04000000 0000 0000 1200 c8a5"),
 ]
 
 
@@ -101,5 +108,28 @@ def test_three_axis_status_round_trips() -> None:
     s = p.Status(0, 0, 512, p.ST_DRIVE_FAULT, 2, 0x2310, 1, 0, (1, 2, -3), (4, -5, 6),
                  (0, 0, 0), (0, 1, -1))
     data = p.encode_status(s)
-    assert len(data) == 3 + 14 + 3 * 12 + 1 + 2  # ..., the axes, the io byte, the CRC
+    assert len(data) == 3 + 14 + 3 * 12 + 2 + 2  # ..., the axes, the io word, the CRC
     assert p.decode(data) == s
+
+
+def test_the_probe_input_has_a_bit_of_its_own_beside_three_axes_limits() -> None:
+    every_limit = 0xFC  # bits 2-7: all six switches of X, Y and Z open
+    s = p.Status(0, 0, 256, 0, 0, 0, 1, 1, (1, 2, 3), (3, 4, 5), (0, 0, 0), (0, 0, 0),
+                 io=every_limit | p.IO_PROBE_INPUT)
+    back = p.decode(p.encode_status(s))
+    assert back.io & p.IO_PROBE_INPUT and back.io & 0xFC == every_limit
+
+
+def test_limit_bits_name_each_axis_and_side() -> None:
+    bits = {(axis, side): p.limit_bits(axis, side) for axis in range(3) for side in (-1, 1)}
+    assert sorted(bits.values()) == [0x04, 0x08, 0x10, 0x20, 0x40, 0x80]  # bits 2-7, once each
+    for (axis, side), bit in bits.items():
+        assert p.limit_of(bit | p.IO_DISABLED | p.IO_ESTOP_INPUT, 3) == (axis, side)
+    assert p.limit_of(p.IO_DISABLED | p.IO_ESTOP_INPUT, 3) is None
+
+
+def test_outputs_frame_refuses_what_it_cannot_carry() -> None:
+    with pytest.raises(p.ProtocolError):
+        p.encode_outputs(1, 1 << 16, [0.0] * 4)
+    with pytest.raises(p.ProtocolError):
+        p.encode_outputs(1, 0, [0.0] * 3)

@@ -11,7 +11,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from nc_helpers import REPO, XY_TABLE, XYZ_MILL
 
-from controller.blocks import NcBlock, NurbsBlock, PathMode, StopBlock, StopKind
+from controller.blocks import (
+    NcBlock,
+    NurbsBlock,
+    OutputBlock,
+    OutputChange,
+    PathMode,
+    Source,
+    StopBlock,
+    StopKind,
+)
 from controller.config import MachineConfig
 from controller.errors import NcError
 from controller.interpreter.program import position_at_line, read_program
@@ -59,12 +68,27 @@ def key(block: NcBlock) -> object:
     return block
 
 
-def expected_tail(full: list[NcBlock], n: int) -> list[object] | str:
-    """The blocks from line n on, or the reason from_line=n must be refused."""
+def expected_tail(full: list[NcBlock], n: int, config: MachineConfig = XYZ_MILL,
+                  start: tuple | None = None) -> list[object] | str:
+    """The blocks from line n on, or the reason from_line=n must be refused; led by the outputs
+    the lines before n set, set again where line n starts (LinuxCNC's run from line)."""
     for b in full:
         if b.source.first_line < n <= b.source.last_line:
             return "inside"
-    return [key(b) for b in full if b.source.first_line >= n]
+    tail = [key(b) for b in full if b.source.first_line >= n]
+    values: dict[str, object] = {}
+    for b in full:
+        if isinstance(b, OutputBlock) and b.source.first_line < n:
+            values.update((c.name, c.value) for c in b.changes)
+    if not values:
+        return tail
+    moved = [b.end for b in full if b.source.first_line < n and hasattr(b, "end")]
+    where = moved[-1] if moved else (start or (0.0, 0.0, 0.0))
+    wait = config.io.spindle.spin_up_s if values.get("spindle", "off") != "off" else 0.0
+    path = full[0].source.path
+    restore = OutputBlock(tuple(OutputChange(k, v) for k, v in values.items()),  # type: ignore[arg-type]
+                          where, wait, Source(path, n, n))
+    return [restore, *tail]
 
 
 def check_every_line(path: Path, config: MachineConfig, offsets: OffsetTable | None = None,
@@ -75,7 +99,7 @@ def check_every_line(path: Path, config: MachineConfig, offsets: OffsetTable | N
             if isinstance(b, StopBlock) and b.kind in (StopKind.END, StopKind.END_REWIND)]
     stop = ends[0] if ends else lines  # the last line read
     for n in range(1, lines + 2):
-        want = expected_tail(full, n)
+        want = expected_tail(full, n, config, start)
         if want == "inside":
             with pytest.raises(NcError, match=f"cannot run from line {n}: it is inside the "
                                               f"G[56].2 NURBS block") as info:
@@ -132,7 +156,7 @@ def test_from_any_line_of_a_random_program_is_the_tail(lines: list[str], nums: l
             return  # e.g. an arc radius too small: nothing to compare
         n = data.draw(st.integers(1, len(lines) + 1))
         got = list(read_program(str(path), XYZ_MILL, from_line=n))
-        assert [key(b) for b in got] == expected_tail(full, n)
+        assert [key(b) for b in got] == expected_tail(full, n)  # XYZ_MILL, from the origin
         state = position_at_line(str(path), XYZ_MILL, n)
         before = [b for b in full if b.source.first_line < n and hasattr(b, "end")]
         assert state.position_mm == (before[-1].end if before else (0.0, 0.0, 0.0))

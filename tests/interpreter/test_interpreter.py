@@ -10,9 +10,9 @@ from nc_helpers import XY_TABLE, XYZ_MILL, blocks_of, motion
 
 from controller.blocks import (
     ArcBlock,
-    AuxBlock,
     DwellBlock,
     LineBlock,
+    OutputBlock,
     PathMode,
     StopBlock,
     StopKind,
@@ -102,24 +102,31 @@ def test_dwell_aux_and_stop_blocks_in_linuxcnc_order(tmp_path: Path) -> None:
     b = blocks_of(tmp_path, "T3 M6\nS1200 M3 M8 G4 P0.5 G0 X1 M0\nS900\nM5 M9\nM2\nG0 X50\n")
     kinds = [(type(x).__name__, getattr(x, "code", getattr(x, "kind", None))) for x in b]
     # M6 is a manual tool change: a pause for the operator (no change position configured)
-    assert kinds == [("AuxBlock", "M6"), ("StopBlock", StopKind.PAUSE), ("AuxBlock", "M3"),
-                     ("AuxBlock", "M8"), ("DwellBlock", None), ("LineBlock", None),
-                     ("StopBlock", StopKind.PAUSE), ("AuxBlock", "S"), ("AuxBlock", "M5"),
-                     ("AuxBlock", "M9"), ("StopBlock", StopKind.END)]
-    assert b[0].tool == 3 and b[2].spindle_rpm == 1200 and b[7].spindle_rpm == 900
-    assert isinstance(b[4], DwellBlock) and b[4].seconds == 0.5
+    assert kinds == [("AuxBlock", "M6"), ("StopBlock", StopKind.PAUSE), ("OutputBlock", None),
+                     ("DwellBlock", None), ("LineBlock", None), ("StopBlock", StopKind.PAUSE),
+                     ("OutputBlock", None), ("OutputBlock", None), ("StopBlock", StopKind.END)]
+    assert b[0].tool == 3
+    assert [(c.name, c.value) for c in b[2].changes] == [
+        ("spindle_rpm", 1200.0), ("spindle", "cw"), ("coolant_flood", True)]
+    assert [(c.name, c.value) for c in b[6].changes] == [("spindle_rpm", 900.0)]
+    assert [(c.name, c.value) for c in b[7].changes] == [
+        ("spindle", "off"), ("coolant_mist", False), ("coolant_flood", False)]
+    assert isinstance(b[3], DwellBlock) and b[3].seconds == 0.5
     assert isinstance(b[-1], StopBlock) and b[-1].position == (1.0, 0.0, 0.0)
 
 
 def test_harmless_header_codes_are_accepted(tmp_path: Path) -> None:
     b = blocks_of(tmp_path, "G17 G21 G40 G49 G54 G80 G90 G94 G97 G98\nG43 H1\nG96 S200 M3\n"
                             "G0 X1\n")
-    assert isinstance(b[0], AuxBlock) and b[0].spindle_rpm is None  # G96: S is surface speed
+    # G96: S is a surface speed, not an rpm for the spindle's speed output
+    assert isinstance(b[0], OutputBlock) and [c.name for c in b[0].changes] == ["spindle"]
     assert b[-1].end == (1.0, 0.0, 0.0)
 
 
 def test_mist_and_flood_together(tmp_path: Path) -> None:
-    assert [x.code for x in blocks_of(tmp_path, "M7 M8\n")] == ["M7", "M8"]
+    (block,) = blocks_of(tmp_path, "M7 M8\n")
+    assert [(c.name, c.value) for c in block.changes] == [("coolant_mist", True),
+                                                          ("coolant_flood", True)]
 
 
 def test_parameters_set_after_the_line(tmp_path: Path) -> None:

@@ -47,9 +47,10 @@ def test_g92_and_g10_l20_read_the_position_with_the_length(tmp_path: Path) -> No
 def test_m6_stops_the_spindle_goes_to_the_change_position_and_pauses(tmp_path: Path) -> None:
     b = blocks_of(tmp_path, "G0 X10 Y10 Z5\nM3 S1000\nT1 M6\nG43\nG0 Z0\n", MILL)
     kinds = [(type(x).__name__, getattr(x, "code", getattr(x, "kind", None))) for x in b]
-    assert kinds == [("LineBlock", None), ("AuxBlock", "M3"), ("AuxBlock", "M5"),
+    assert kinds == [("LineBlock", None), ("OutputBlock", None), ("OutputBlock", None),
                      ("AuxBlock", "M6"), ("LineBlock", None), ("LineBlock", None),
                      ("StopBlock", StopKind.PAUSE), ("LineBlock", None)]
+    assert [(c.name, c.value) for c in b[2].changes] == [("spindle", "off")]
     assert [x.end for x in b[4:6]] == [(10, 10, 50), (0, 0, 50)]  # Z up first, then X Y
     assert all(x.rapid for x in b[4:6]) and b[6].position == (0, 0, 50)
     assert b[3].tool == 1 and b[-1].end == (0, 0, 10.5) and b[-1].source.first_line == 5

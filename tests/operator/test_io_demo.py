@@ -51,8 +51,13 @@ def test_io_demo_runs_on_the_sim_card_with_its_tool_changes_and_probe(tmp_path: 
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+    outputs = [(e["line"], e["name"], e["value"]) for e in events if e["event"] == "output"]
+    events = [e for e in events if e["event"] != "output"]
     kinds = [(e["event"], e.get("line")) for e in events]
-    assert kinds == [("start", None), ("tool", 7), ("probe", 13), ("tool", 21), ("done", 25)]
+    assert kinds == [("start", None), ("tool", 7), ("probe", 13), ("tool", 21), ("done", 26)]
+    names = {name for _, name, _ in outputs}
+    assert {"spindle", "coolant_flood"} <= names, outputs
+    assert [v for _, n, v in outputs if n == "spindle"][-1] == "off"  # stopped by the end
     tool1, probe, tool2 = events[1], events[2], events[3]
     assert (tool1["tool"], tool1["length_mm"], tool2["tool"], tool2["length_mm"]) == (1, 0, 2, 12)
     assert tool1["t_s"] < probe["t_s"] < tool2["t_s"]  # one time line over the stretches

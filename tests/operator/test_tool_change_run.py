@@ -33,7 +33,7 @@ def test_m6_waits_at_the_change_position_until_enter(tmp_path: Path) -> None:
             event = json.loads(proc.stdout.readline())
             if event["event"] == "tool":
                 break
-            assert event["event"] in ("start", "progress"), event
+            assert event["event"] in ("start", "progress", "output"), event
         assert event["line"] == 3 and event["tool"] == 1 and event["table_length_mm"] == 10.5
         assert event["position_mm"] == [0.0, 0.0, 50.0] and event["t_s"] > 0
         time.sleep(0.5)

@@ -524,7 +524,8 @@ class Machine:
                 job.emit(io)
             self.publish("progress", event)
         return replace(base, drive=self.drive, keep_drive_open=True, on_progress=progress,
-                       start_mm=job.start_mm, optional_stop=job.optional_stop)
+                       start_mm=job.start_mm, optional_stop=job.optional_stop,
+                       on_event=job.emit)  # output changes: to `cncctl run --json`
 
     def _record(self, job: Job, result: MotionResult, line: int | None = None) -> None:
         """The job's result into the journal, the log and its connection; line: the program
@@ -579,6 +580,7 @@ class Machine:
         out["position_mm"] = self._position_mm()
         out["drives"] = "disabled" if self.drive.disabled else "enabled"
         out["estop_input"] = self._estop_input_open()
+        out["outputs"] = self.drive.outputs()  # spindle, coolant, digital, analog
         out["homed"] = manual.homed_status(self)
         out.update(self.work_offsets.status())
         out["last_homing"] = self.last_homing

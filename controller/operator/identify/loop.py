@@ -111,6 +111,9 @@ def excite_axis(drive: Drive, config: MachineConfig, axis_index: int, excitation
                 stop.request_abort(fault)
         if drive.estop_input():
             stop.request_abort("the e-stop input tripped")
+        limit = drive.limit_input()
+        if limit is not None:
+            stop.request_abort(f"hard limit: {limit} tripped")
         if stop.reason is not None and not faded:
             counts = _faded(counts, excitation, sent, lead, axis.pulse_mm)
             faded = True

@@ -184,7 +184,8 @@ def run(args: argparse.Namespace) -> int:
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
                                                   flush=True), abort_at_pause_without_keys=True)
     tools = ToolChanges(track.io_events, _event_to(view))
-    options = replace(options, on_progress=_Announcer(view.progress, keys, tools).progress)
+    options = replace(options, on_progress=_Announcer(view.progress, keys, tools).progress,
+                      on_event=lambda e: view.event(**e))  # an output changed: a line each
     if not shared_drive:
         runtime.options = options
     fd = stdin_fd()

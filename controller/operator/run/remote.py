@@ -120,6 +120,8 @@ def _follow(client: DaemonClient, view: Any, keys: KeyControl) -> int:
             p = progress_from_event(event)
             keys.progress(p)
             view.progress(p)
+        elif "t_s" in event:  # a job event (an output changed) at a motion time and line
+            view.event(**event)
         elif kind in FINAL_EVENTS:
             if "motion_time_s" in event:
                 view.final_summary(event)

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from typing import Any, TextIO
 
 from controller.motion.types import MotionProgress, MotionResult, MotionState
+from controller.operator.io_text import output_event_text
 from controller.operator.words import axes_text, fields_text, pulses_text
 
 MAX_MARKS = 4096  # file positions a ProgramLines keeps, whatever the program's length
@@ -118,7 +119,7 @@ def result_summary(result: MotionResult) -> dict[str, Any]:
         "time_to_first_motion_s": result.time_to_first_motion_s,
         "model_residual_um": result.model_residual_um,
         **({"model_warning": result.model_warning} if result.model_warning else {}),
-        **{k: v for k, v in result.extra.items()},
+        **{k: v for k, v in result.extra.items() if k != "events"},  # each a line already
     }
 
 
@@ -139,8 +140,8 @@ class JsonView:
         self.out.write(json.dumps(obj) + "\n")
         self.out.flush()
 
-    def event(self, name: str, **fields: Any) -> None:
-        self._emit({"event": name, **fields})
+    def event(self, event: str, **fields: Any) -> None:
+        self._emit({"event": event, **fields})
 
     def progress(self, p: MotionProgress) -> None:
         if p.elapsed_s < self._next_s:
@@ -169,8 +170,9 @@ class PlainView:
     def __init__(self, lines: Sequence[str], out: TextIO | None = None) -> None:
         self.lines, self.out, self._next_s = lines, out or sys.stdout, 0.0
 
-    def event(self, name: str, **fields: Any) -> None:
-        print(f"cncctl: {name} {fields_text(fields)}".rstrip(), file=self.out, flush=True)
+    def event(self, event: str, **fields: Any) -> None:
+        text = output_event_text(fields) if event == "output" else fields_text(fields)
+        print(f"cncctl: {event} {text}".rstrip(), file=self.out, flush=True)
 
     def progress(self, p: MotionProgress) -> None:
         if p.elapsed_s < self._next_s:
@@ -265,10 +267,11 @@ class RichView(PlainView):
         self.live = Live(Group(self.bar, self.status), refresh_per_second=8)
         self.live.start()
 
-    def event(self, name: str, **fields: Any) -> None:
+    def event(self, event: str, **fields: Any) -> None:
         from rich.markup import escape
 
-        self.live.console.print(f"[bold]{name}[/] " + escape(fields_text(fields)))
+        text = output_event_text(fields) if event == "output" else fields_text(fields)
+        self.live.console.print(f"[bold]{event}[/] " + escape(text))
 
     def progress(self, p: MotionProgress) -> None:
         self.bar.update(self.task, completed=p.executed_s, total=p.planned_s,

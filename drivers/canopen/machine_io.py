@@ -1,0 +1,49 @@
+"""The canopen backend's machine I/O: outputs written by SDO to the io_node drive (0x60FE digital
+outputs, 0x2400 analog outputs), limit switches read from the drives' 0x60FD."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from controller.errors import DriveError
+from controller.outputs import OutputImage
+from drivers.canopen import bringup
+from drivers.canopen import cia402 as c
+from drivers.canopen.options import CanopenOptions
+from drivers.io_peer import switch_name
+
+ALL_OUTPUTS_MASK = 0xFFFF  # 0x60FE:2: every output this controller drives is enabled
+
+
+def write_outputs(nodes: list[Any], axes: tuple[str, ...], o: CanopenOptions,
+                  image: OutputImage, last: OutputImage | None) -> None:
+    """The image on the io_node drive: what differs from `last` (all of it, mask first, when
+    None), by expedited SDOs while the machine stands at the output mark (each a round trip
+    of a few ms on a 1 Mbit/s bus, more through a loaded slcan adapter)."""
+    i = o.node_ids.index(o.io_node)
+    node, axis = nodes[i], axes[i]
+    if last is None:
+        bringup.sdo_write(node, axis, c.DIGITAL_OUTPUTS, 2, ALL_OUTPUTS_MASK, "output mask")
+    if last is None or image.bits != last.bits:
+        bringup.sdo_write(node, axis, c.DIGITAL_OUTPUTS, 1, image.bits, "digital outputs")
+    for channel, value in enumerate(image.analog):
+        if last is None or value != last.analog[channel]:
+            bringup.sdo_write(node, axis, c.ANALOG_OUTPUTS, channel + 1,
+                              value, f"analog output {channel}")  # type: ignore[arg-type]
+
+
+def limit_input(link: Any, nodes: list[Any], axes: tuple[str, ...]) -> str | None:
+    """The limit switch a drive reports (statusword bit 11 in its TPDO1, then 0x60FD)."""
+    if link is None:
+        return None
+    with link.lock:
+        flagged = [i for i, sw in enumerate(link.statusword) if sw & c.SW_INTERNAL_LIMIT]
+    if not flagged:
+        return None
+    i = flagged[0]
+    try:
+        inputs = bringup.sdo_read(nodes[i], axes[i], c.DIGITAL_INPUTS, None, "digital inputs")
+    except DriveError as exc:  # the switch is open all the same: say which drive, and why
+        return f"{axes[i].upper()} limit switch (which side unknown: {exc})"
+    direction = 1 if inputs & c.DI_POSITIVE_LIMIT else -1
+    return switch_name(axes[i], direction)

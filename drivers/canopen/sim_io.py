@@ -1,0 +1,46 @@
+"""Machine I/O of the simulated CiA 402 drives: limit switches (0x60FD and statusword bit 11)
+from limit_input_file, and the digital (0x60FE) and analog (0x2400) outputs, recorded to
+outputs_file so a test reads back what the drives hold."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from drivers.canopen import cia402 as c
+from drivers.io_peer import limit_tripped, record_outputs
+
+
+class SimIo402:
+    """Shared by the drives of one bus; each asks with its axis index."""
+
+    def __init__(self, options: dict[str, Any], axes: tuple[str, ...]) -> None:
+        self.limit_file = options.get("limit_input_file")
+        self.outputs_file = options.get("outputs_file")
+        self.axes = axes
+        self.bits = 0
+        self.mask = 0
+        self.analog = [0.0] * 4
+
+    def digital_inputs(self, axis: int) -> int:
+        """0x60FD of axis `axis`'s drive."""
+        tripped = limit_tripped(self.limit_file, self.axes)
+        if tripped is None or tripped[0] != axis:
+            return 0
+        return c.DI_POSITIVE_LIMIT if tripped[1] > 0 else c.DI_NEGATIVE_LIMIT
+
+    def statusword_bits(self, axis: int) -> int:
+        return c.SW_INTERNAL_LIMIT if self.digital_inputs(axis) else 0
+
+    def write(self, index: int, subindex: int, value: Any) -> bool:
+        """An SDO write of an output object (False: not one of them)."""
+        if index == c.DIGITAL_OUTPUTS and subindex in (1, 2):
+            if subindex == 1:
+                self.bits = int(value)
+            else:
+                self.mask = int(value)
+        elif index == c.ANALOG_OUTPUTS and 1 <= subindex <= 4:
+            self.analog[subindex - 1] = float(value)
+        else:
+            return False
+        record_outputs(self.outputs_file, self.bits & self.mask, self.analog)
+        return True
