@@ -30,8 +30,11 @@ def test_motion_time_is_to_in_position_and_settling_is_apart(config: str) -> Non
     assert final["event"] == "done"
     # The plan's own length: the pre-compensation's lead dying away is not planned motion.
     assert final["planned_time_s"] == pytest.approx(planned_s, abs=1e-9)
-    # In position (2 um) within a few samples of the plan's end: the modelled tool follows.
-    assert planned_s <= final["motion_time_s"] <= planned_s + 0.01
+    # In position (2 um) soon after the plan's end: the modelled tool follows. The shipped
+    # table's transitions (ramp_share 0.1) end its last braking with a jerk the loop takes
+    # 14 ms to settle from (to 2 um); the paper's quintic, a few samples.
+    late_s = 0.02 if config == "xy_table" else 0.01
+    assert planned_s <= final["motion_time_s"] <= planned_s + late_s
     if config == "xy_table":  # ~75 ms of frames while the lead dies away, the tool in position
         assert final["settling_time_s"] > 0.05
     else:
