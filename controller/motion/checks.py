@@ -160,11 +160,14 @@ class ContourStats:
                 "mean": self.sum_abs_mm / n * 1e3}
 
 
-def start_gap(first_mm: np.ndarray, start_counts: np.ndarray, pulse_mm: np.ndarray) -> str | None:
-    """Why a program's first reference point cannot start here (more than a pulse from where
-    the machine stands: a jump at start), or None."""
+def start_gap(first_mm: np.ndarray, start_counts: np.ndarray, pulse_mm: np.ndarray,
+              first_step_mm: float = 0.0) -> str | None:
+    """Why a program's first reference point cannot start here (more than a pulse and the
+    first period's step from where the machine stands: a jump at start), or None. The first
+    point is the one at t = T: from rest at Amax it is up to Amax T^2 / 2 on (1.2 um at 2450
+    mm/s^2 and 1 ms; a quintic's start is gentler, a constant acceleration's is not)."""
     here_mm = start_counts * pulse_mm
-    if np.all(np.abs(first_mm - here_mm) <= pulse_mm):
+    if np.all(np.abs(first_mm - here_mm) <= pulse_mm + first_step_mm):
         return None
     return (f"reference starts at {first_mm.tolist()} mm but the machine is at "
             f"{here_mm.tolist()} mm")

@@ -287,7 +287,10 @@ class MotionController:
         first rows must not go further onto a limit switch open since before the start."""
         if self.stream.sent or len(self.stream.held):
             return True
-        problem = start_gap(rows[0, : self.n], self.figures.start_cmd, self.pulse_mm)
+        first_step_mm = (0.5 * self.config.interpolator.max_accel_mm_s2 * self.period_s ** 2
+                         * (1.0 + 1e-6))
+        problem = start_gap(rows[0, : self.n], self.figures.start_cmd, self.pulse_mm,
+                            first_step_mm)
         problem = problem or self.limits.refuses(rows[:, : self.n])
         if problem is not None:
             self._finish(Outcome.FAULT, problem)

@@ -283,3 +283,15 @@ def test_corrupt_feedback_is_a_fault_with_the_position_unknown() -> None:
     assert "Y axis encoder jumped 8388.6" in result.message and "unknown" in result.message
     assert not result.position_known
     assert abs(result.final_position_mm["y"]) < 20.0  # the last believed reading, on the circle
+
+
+def test_the_first_point_may_be_a_period_at_amax_from_rest_but_no_further() -> None:
+    from controller.motion.checks import start_gap
+
+    pulse = np.array([0.001, 0.001])
+    step = 0.5 * 2450.0 * 0.001 ** 2  # 1.225 um: a constant acceleration's first period
+    here = np.array([100, -50])
+    assert start_gap(np.array([0.1, -0.05]) + [step + 0.0009, 0.0], here, pulse, step) is None
+    assert start_gap(np.array([0.1, -0.05]) + [step, 0.0], here, pulse) is not None  # quintic
+    jump = start_gap(np.array([0.1, -0.05]) + [step + 0.0011, 0.0], here, pulse, step)
+    assert jump is not None and "reference starts at" in jump
