@@ -18,6 +18,7 @@ from nc_helpers import XYZ_MILL
 from controller.blocks import HelixBlock, PathControl, Source
 from controller.config import MachineConfig
 from controller.errors import PlanningError
+from controller.generator import helix_move
 from controller.generator.helix_move import plan_helix
 from controller.generator.plan import generate_reference
 from controller.geometry.helix import HelixCurve
@@ -106,9 +107,12 @@ def test_a_limit_no_feed_can_keep_is_a_planning_error() -> None:
         plan_helix(helix("G17", 5.0, 0.0, math.pi, 1.0, 20.0), impossible)
 
 
-def test_a_long_helix_is_checked_on_a_copy_and_keeps_the_limit() -> None:
-    # 40 turns at 2 mm radius: 500 mm, over MAX_CHECK_SAMPLES at the capped feed
-    block = helix("G17", 2.0, 0.0, 80 * math.pi, -8.0, 1.0)
-    assert block.sweep_rad == pytest.approx(80 * math.pi)
+def test_a_long_helix_is_checked_on_a_copy_and_keeps_the_limit(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # A tenth of MAX_CHECK_SAMPLES (20 s), so the independent check runs on 25 s of motion, not
+    # 250 s: 5 turns at 2 mm radius, 62.5 mm, over that bound at the capped feed.
+    monkeypatch.setattr(helix_move, "MAX_CHECK_SAMPLES", helix_move.MAX_CHECK_SAMPLES // 10)
+    block = helix("G17", 2.0, 0.0, 10 * math.pi, -1.0, 1.0)
+    assert block.sweep_rad == pytest.approx(10 * math.pi)
     time_s, worst = check_plan(block, XYZ_MILL)
-    assert time_s > 200.0 and worst <= 0.03
+    assert time_s > 20.0 and worst <= 0.03
