@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -19,6 +18,7 @@ import numpy as np
 
 from controller.errors import OffsetsError
 from controller.probe import ProbeResults
+from controller.table_file import read_capped, write_atomic
 
 Point3 = tuple[float, float, float]
 SYSTEM_NAMES = ("G54", "G55", "G56", "G57", "G58", "G59")  # system n is SYSTEM_NAMES[n - 1]
@@ -202,17 +202,10 @@ def load_offsets(path: str | os.PathLike[str], missing_ok: bool = True) -> Offse
     valid table raises OffsetsError naming it, and so does a missing one a user named
     (`--offsets`: all-zero offsets in its place would move the work elsewhere)."""
     name = os.fspath(path)
-    try:
-        with open(name, "rb") as f:
-            raw = f.read(MAX_FILE_BYTES + 1)
-    except FileNotFoundError as exc:
-        if not missing_ok:
-            raise OffsetsError(name, "no such offset table") from exc
+    raw = read_capped(name, MAX_FILE_BYTES, ("offset table", "an offset table"), OffsetsError,
+                      missing_ok)
+    if raw is None:
         return OffsetTable()
-    except OSError as exc:
-        raise OffsetsError(name, f"cannot read the offset table: {exc.strerror or exc}") from exc
-    if len(raw) > MAX_FILE_BYTES:
-        raise OffsetsError(name, f"not an offset table: larger than {MAX_FILE_BYTES} bytes")
     try:
         return from_json(json.loads(raw.decode("utf-8")))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -225,47 +218,14 @@ def save_offsets(path: str | os.PathLike[str], table: OffsetTable) -> None:
     """Write the table atomically: a temporary file in the same folder, fsync, os.replace, then
     fsync of the folder; a crash leaves the old table or the new one, never half of one."""
     name = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(name))
-    text = json.dumps(to_json(table), indent=2) + "\n"
     try:
         mode = os.stat(name).st_mode & 0o777
     except FileNotFoundError:
         mode = 0o644
     except OSError as exc:
         raise OffsetsError(name, f"cannot write the offset table: {exc.strerror or exc}") from exc
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=".offsets-", suffix=".tmp", dir=folder)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fchmod(f.fileno(), mode)
-            os.fsync(f.fileno())
-        os.replace(tmp, name)
-        tmp = None
-        _fsync_folder(folder)
-    except OSError as exc:
-        raise OffsetsError(name, f"cannot write the offset table: {exc.strerror or exc}") from exc
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-
-
-def _fsync_folder(folder: str) -> None:
-    """Make the rename durable (not every file system lets a folder be opened: best effort)."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
+    write_atomic(name, json.dumps(to_json(table), indent=2) + "\n", ".offsets-", "offset table",
+                 OffsetsError, mode)
 
 
 @dataclass

@@ -11,11 +11,11 @@ from __future__ import annotations
 import math
 import os
 import re
-import tempfile
 from dataclasses import dataclass, replace
 from typing import Any
 
 from controller.errors import CncError
+from controller.table_file import read_capped, write_atomic
 
 MAX_FILE_BYTES = 1 << 20  # a table of a thousand tools is 50 kB; anything larger is not one
 MAX_TOOL = 99999  # LinuxCNC's CANON_POCKETS_MAX is far smaller; a larger T is a typo
@@ -165,17 +165,10 @@ def load_tool_table(path: str | os.PathLike[str], missing_ok: bool = True) -> To
     """The table kept in `path`; an empty table when it does not exist and missing_ok (the
     daemon's own state: none kept yet). A file a user named must exist."""
     name = os.fspath(path)
-    try:
-        with open(name, "rb") as f:
-            raw = f.read(MAX_FILE_BYTES + 1)
-    except FileNotFoundError as exc:
-        if not missing_ok:
-            raise ToolTableError(name, "no such tool table") from exc
+    raw = read_capped(name, MAX_FILE_BYTES, ("tool table", "a tool table"), ToolTableError,
+                      missing_ok)
+    if raw is None:
         return ToolTable()
-    except OSError as exc:
-        raise ToolTableError(name, f"cannot read the tool table: {exc.strerror or exc}") from exc
-    if len(raw) > MAX_FILE_BYTES:
-        raise ToolTableError(name, f"not a tool table: larger than {MAX_FILE_BYTES} bytes")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -186,28 +179,7 @@ def load_tool_table(path: str | os.PathLike[str], missing_ok: bool = True) -> To
 def save_tool_table(path: str | os.PathLike[str], table: ToolTable) -> None:
     """Write the table atomically (temporary file, fsync, os.replace): a crash leaves the old
     table or the new one, never half of one."""
-    from controller.offsets import _fsync_folder
-
-    name = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(name))
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=".tool-", suffix=".tmp", dir=folder)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(table.text())
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, name)
-        tmp = None
-        _fsync_folder(folder)
-    except OSError as exc:
-        raise ToolTableError(name, f"cannot write the tool table: {exc.strerror or exc}") from exc
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
+    write_atomic(os.fspath(path), table.text(), ".tool-", "tool table", ToolTableError)
 
 
 @dataclass(frozen=True, slots=True)

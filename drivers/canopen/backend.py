@@ -51,7 +51,7 @@ class CanopenDrive(Drive):
         self._last_stats: dict[str, float | int] = {}
         self._last_rtt_ms = np.zeros(0)
         self._io_written: OutputImage | None = None  # what the io_node holds, as written
-        self._io_written_link: Link | None = None  # ... in this session (a new link: unknown)
+        self._io_written_link: Link | None = None  # ... over this link (a new link: unknown)
 
     # -- open / close ---------------------------------------------------------------------
     def _lock_key(self) -> str:
@@ -288,7 +288,7 @@ class CanopenDrive(Drive):
         self._check_comm()
         last = self._io_written if self._io_written_link is self._link else None
         machine_io.write_outputs(self._nodes, self.axes, self.o, image, last)
-        self._io_written, self._io_written_link = image, self._link  # this session's
+        self._io_written, self._io_written_link = image, self._link  # this link's
 
     # -- bench and probe ------------------------------------------------------------------
     def link_stats(self) -> dict[str, float | int]:

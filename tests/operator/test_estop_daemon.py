@@ -44,7 +44,7 @@ def test_cncctl_estop_stops_the_job_and_disables_the_drives_until_reset(
             run.kill()
             run.wait()
         final = json.loads(out.splitlines()[-1])
-        assert run.returncode == 4 and final["event"] == "aborted", err
+        assert run.returncode == 4 and final["event"] == "aborted", (final, err)
         assert "e-stop by operator" in final["message"]
         status = d.status()
         assert status["state"] == "ESTOP" and status["drives"] == "disabled"
