@@ -19,6 +19,7 @@ from controller.io_events import io_event
 from controller.motion.loop import ESTOP_KEEP_FRAMES
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
 from controller.probe import ProbeResult, ProbeResults
+from controller.runtime.current_run import CurrentRun
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.base import Drive
 
@@ -93,7 +94,7 @@ def _take_back(ctrl: Any) -> None:
         ctrl.stream.take_back(ctrl.drive, ctrl.drive.fifo_level(), ESTOP_KEEP_FRAMES)
 
 
-class ProbeRun:
+class ProbeRun(CurrentRun):
     """The whole program, a stretch (a Runtime) per probe, on `drive` (open, kept open):
     operator requests go to the stretch now running (the override to every one), an abort
     asked between two stretches stops the next at once; every probe's result goes to
@@ -107,31 +108,16 @@ class ProbeRun:
         self.clock = _RunClock(options.on_progress)  # one time line over the stretches
         self.options = replace(options, on_progress=self.clock.progress
                                if options.on_progress else None)
-        self.current: Runtime | None = None
-        self.abort: str | None = None
+        super().__init__()
         self.override_pct = 100.0
 
     @property
     def controller(self) -> Any:
         return self.current.controller if self.current is not None else None
 
-    def request_abort(self, message: str = "aborted by operator") -> None:
-        self.abort = message
-        if self.current is not None:
-            self.current.request_abort(message)
-
-    def request_hold(self) -> None:
-        if self.current is not None:
-            self.current.request_hold()
-
-    def request_resume(self) -> None:
-        if self.current is not None:
-            self.current.request_resume()
-
     def set_feed_override(self, percent: float) -> None:
-        self.override_pct = percent
-        if self.current is not None:
-            self.current.set_feed_override(percent)
+        self.override_pct = percent  # the next stretches start with it
+        super().set_feed_override(percent)
 
     def run(self) -> MotionResult:
         results = ProbeResults(barrier=True)

@@ -17,6 +17,7 @@ from controller.motion.types import MotionResult, Outcome
 from controller.offsets import OffsetTable
 from controller.operator.check_cmd import check_program
 from controller.operator.run.keys import enter_to_go
+from controller.runtime.current_run import CurrentRun
 from controller.runtime.processes import Runtime, RuntimeOptions, build_drive, open_drive
 from drivers.base import Drive
 from drivers.errors import HomingError
@@ -52,33 +53,19 @@ class HomingAborted(Exception):
     """The operator stopped the run (Ctrl-C, SIGTERM, SIGHUP) while the axes were homing."""
 
 
-class Sequence:
+class Sequence(CurrentRun):
     """The runtime now running (approach, then program): operator requests go to it, and an
     abort asked before it (during the check, the homing or the question) is kept for it."""
 
     def __init__(self) -> None:
-        self.current: Runtime | None = None
-        self.abort: str | None = None
+        super().__init__()
         self.drive: Drive | None = None  # open for the whole sequence: homing can be stopped
 
-    def request_hold(self) -> None:
-        if self.current is not None:
-            self.current.request_hold()
-
-    def request_resume(self) -> None:
-        if self.current is not None:
-            self.current.request_resume()
-
-    def set_feed_override(self, percent: float) -> None:
-        if self.current is not None:
-            self.current.set_feed_override(percent)
-
-    def request_abort(self, message: str) -> None:
-        self.abort = message
+    def request_abort(self, message: str = "aborted by operator") -> None:
+        self.abort = message  # before homing hears of it, as the current run does
         if self.drive is not None:
             self.drive.abort_homing(message)  # a no-op unless homing
-        if self.current is not None:
-            self.current.request_abort(message)
+        super().request_abort(message)
 
 
 def confirm(args: argparse.Namespace, text: str,
