@@ -96,21 +96,10 @@ class ProgramOutputs:
         return direction != "off" and (started or speed_changed)
 
     def _digital(self, vals: dict[str, float], m: int) -> int:
-        count = len(self.io.digital)
-        index = _index(vals, "P", m)
-        if index >= count:
-            mapped = f"P0-P{count - 1}" if count else "none"
-            raise WordError("P", f"M{m} P{index}: no digital output {index} in the config's "
-                                 f"io.digital (mapped: {mapped})")
-        return index
+        return _mapped(vals, "P", m, len(self.io.digital), "digital")
 
     def _analog(self, vals: dict[str, float], m: int) -> tuple[int, float]:
-        count = len(self.io.analog)
-        index = _index(vals, "E", m)
-        if index >= count:
-            mapped = f"E0-E{count - 1}" if count else "none"
-            raise WordError("E", f"M{m} E{index}: no analog output {index} in the config's "
-                                 f"io.analog (mapped: {mapped})")
+        index = _mapped(vals, "E", m, len(self.io.analog), "analog")
         if "Q" not in vals:
             raise WordError(f"M{m}", f"M{m} needs Q (the value)")
         out = self.io.analog[index]
@@ -118,6 +107,16 @@ class ProgramOutputs:
             raise WordError("Q", f"M{m} E{index} Q{vals['Q']:g} is outside "
                                  f"[{out.min_value:g}, {out.max_value:g}] (io.analog[{index}])")
         return index, float(vals["Q"])
+
+
+def _mapped(vals: dict[str, float], letter: str, m: int, count: int, kind: str) -> int:
+    """The output the word names, one of the `count` the config's io.<kind> maps."""
+    index = _index(vals, letter, m)
+    if index >= count:
+        mapped = f"{letter}0-{letter}{count - 1}" if count else "none"
+        raise WordError(letter, f"M{m} {letter}{index}: no {kind} output {index} in the "
+                                f"config's io.{kind} (mapped: {mapped})")
+    return index
 
 
 def _index(vals: dict[str, float], letter: str, m: int) -> int:
