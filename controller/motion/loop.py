@@ -14,6 +14,7 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.errors import CncError, DriveError
+from controller.motion.blocks import block_frames, fault_rows, journal_pieces
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.events import EventFn, JobEvents
 from controller.motion.feedback_check import FeedbackCheck
@@ -23,7 +24,7 @@ from controller.motion.model_watch import ModelWatch
 from controller.motion.outputs import OutputRunner
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter, counts_of
-from controller.motion.recall import SendState
+from controller.motion.recall import SendState, Sent
 from controller.motion.requests import OperatorRequests
 from controller.motion.result import RunChecks, RunFigures, build_result
 from controller.motion.retime import Retimer
@@ -85,7 +86,7 @@ class MotionController:
     def run(self) -> MotionResult:
         self._setup()
         while self.state is not MotionState.FINISHED:
-            self.pacer.wait()
+            self._wait()
             self._cycle()
         if self.outcome not in (Outcome.DONE, None):
             self._outputs_safe()  # abort, e-stop, fault: spindle, coolant, outputs safe
@@ -119,6 +120,7 @@ class MotionController:
         self.outcome: Outcome | None = None
         self.message = ""
         self.sent_eos = False
+        self.marks_every = 0  # the next send's journal pieces (see _journal)
         self.next_progress_s = 0.0
         self.settle_deadline_s = 0.0
         self.position_known = True
@@ -131,6 +133,38 @@ class MotionController:
         self.pending_tail: tuple | None = None  # a stream's end at rest still to go out
         self.estop_reason: str | None = None  # the e-stop under way (then disable)
         self.limits = LimitWatch(self.drive, self.config.axis_names, start_mm)
+        s = self.settings
+        self.block = block_frames(s.block_ms, self.period_s, s.cycle_frames,
+                                  self._frames(s.low_water_ms), self._frames(s.high_water_ms))
+
+    def _wait(self) -> None:
+        """The cycle's wait; in virtual time, while the stream runs steadily, a block of
+        frames at once (motion/blocks.py), no more than the FIFO holds above its low mark."""
+        if not (isinstance(self.pacer, VirtualPacer) and self.pacer.blocks and self._steady()):
+            self.pacer.wait()
+            return
+        room = self.drive.fifo_level() - self._frames(self.settings.low_water_ms)
+        cycle = self.settings.cycle_frames
+        frames = min(self.block, room) // cycle * cycle
+        if frames <= cycle:
+            self.pacer.wait()
+            return
+        self.pacer.wait_block(frames, self._fault_rows)
+
+    def _steady(self) -> bool:
+        """Streaming at the program's own pace, nothing asked or under way that a cycle must
+        see within its two frames (a stop, a pause, a hold, an override, the stream's end)."""
+        r = self.requests
+        return (self.state is MotionState.RUNNING and self.outcome is None and not self.sent_eos
+                and not self.pausing and not self.holding and not self.restarting
+                and self.pending_tail is None and self.retimer.identity and not r.hold
+                and not r.resume and r.abort_message is None and r.estop_message is None
+                and self.estop_reason is None)
+
+    def _fault_rows(self, fb: Feedback) -> int | None:
+        """Rows of a virtual-time block read before a fault a cycle would have acted on."""
+        return fault_rows(self._own_numbers(fb), self.checks.fbcheck, self.checks.ferr,
+                          self.stream.hist)
 
     def _cycle(self) -> None:
         try:
@@ -231,6 +265,8 @@ class MotionController:
             low_fifo = self.figures.min_fifo_frames
             self.figures.min_fifo_frames = level if low_fifo is None else min(level, low_fifo)
         self.restarting = self.restarting and level == 0  # after a pause: empty until refilled
+        if self.state is MotionState.RUNNING and not self.restarting and want < self.block:
+            return  # a block at a time: the FIFO holds more than high water less a block
         finished_before, _ = self.source.state()
         ask = max(0, want + hold - len(self.stream.held))
         rows = self.source.read(ask) if ask else np.zeros((0, self.n + 2))
@@ -253,6 +289,7 @@ class MotionController:
         # (a stop along it is not needed), and the card idles after it, no underrun.
         limit = pause + 1 if pause is not None else sendable
         before = self.stream.before_send()
+        as_they_are = self.retimer.identity  # rows out as they are: a block in pieces
         out, used = self.retimer.take(self.stream.held, limit, max(want, 0),
                                       land=pause is not None or final)
         held = self.stream.held
@@ -265,15 +302,27 @@ class MotionController:
             self.output_mark = int(row_lines(held[pause:pause + 1])[0])  # type: ignore[misc]
         self.program_pause = self.program_pause or (at_pause and not mark)
         end = final and not len(self.stream.held) and whole
+        every = self.marks_every = self.settings.cycle_frames if as_they_are else 0
         self._send(out, end=end, pause=at_pause or at_hold)
         if end or at_pause or at_hold:
             self.stream.journal.clear()  # the card ends its stream there: nothing to take back
         else:
-            self.stream.journal.record(len(out), consumed, before)
+            self._journal(out, consumed, before, every)
         if self.stream.sent and not final and pause is None and not self.pausing \
                 and level + len(out) < low:
             self._begin_stop(Outcome.FAULT, f"feed hold at line {self.figures.line}: reference "
                              "points ran late (generator starved), stopped along the path")
+
+    def _journal(self, out: np.ndarray, consumed: np.ndarray, before: Sent, every: int) -> None:
+        """A send in the journal; a block sent as it is, in pieces of `every` (blocks.py)."""
+        if not every or len(out) <= every:
+            self.stream.journal.record(len(out), consumed, before)
+            return
+        hist = self.stream.hist
+        counts = hist.cmd_counts[(before.hist_count + np.arange(len(out))) % hist.capacity]
+        marks = self.stream.precomp.marks if self.stream.precomp is not None else []
+        for entry in journal_pieces(before, consumed, counts, marks, every):
+            self.stream.journal.record(entry.frames, entry.consumed, entry)
 
     def _read_ahead(self, max_rows: int = 4096) -> None:
         """More held rows while re-timing: a ramp looks at the rows it will cross."""
@@ -300,7 +349,8 @@ class MotionController:
         """Wanted rows (position, feed, line) out as they are or pre-compensated, a stream's end
         with the lead's settling (what exceeds the high-water mark goes out in later cycles)."""
         pos = rows[:, : self.n]
-        cmd = pos if self.stream.precomp is None else self.stream.precomp.push(pos)
+        every, self.marks_every = self.marks_every, 0  # a refill's own send only
+        cmd = pos if self.stream.precomp is None else self.stream.precomp.push(pos, every)
         if self.stream.precomp is not None and (end or pause):
             wanted = len(rows)
             rows, cmd = with_lead_settled(self.stream.precomp, rows, cmd,  # type: ignore[arg-type]

@@ -57,6 +57,15 @@ class SimAxes:
             self.actual_mm = actual[-1].copy()
         return cmd, self.encoder(actual)
 
+    def snapshot(self) -> tuple[np.ndarray, ...]:
+        """What stepping changes: a block clocked ahead can be taken back (block_clock.py)."""
+        return (self.commanded.copy(), self.actual_mm.copy(), self.servo.state.copy(),
+                self.extra_lag_mm.copy())
+
+    def restore(self, snap: tuple[np.ndarray, ...]) -> None:
+        self.commanded, self.actual_mm, self.servo.state, self.extra_lag_mm = (
+            a.copy() for a in snap)
+
     def encoder(self, actual_mm: np.ndarray) -> np.ndarray:
         return np.rint(actual_mm / self.pulse_mm).astype(np.int64)
 

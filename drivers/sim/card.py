@@ -18,6 +18,7 @@ from drivers.errors import BadFrameError, DriveError, HomingError, LostCommunica
 from drivers.homing import plan_for
 from drivers.io_peer import IO_OPTIONS, limit_tripped, record_outputs, switch_name
 from drivers.sim.axes import SimAxes, plant_of
+from drivers.sim.block_clock import BlockClock
 from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
 from drivers.sim.switches import SimSwitches, timeout_message
@@ -25,7 +26,7 @@ from drivers.sim.switches import SimSwitches, timeout_message
 REST_AFTER_S = 2.0  # idle this long, the Table II servo has settled (poles of ~100/s and up)
 
 
-class SimCard(Drive):
+class SimCard(BlockClock, Drive):
     """Frames are clocked one per sample period T, in wall-clock time or virtual time.
 
     Options: realtime (bool, default True), fifo_frames (256), max_pulses_per_frame (127,
@@ -55,6 +56,7 @@ class SimCard(Drive):
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
         self.period_s = config.sample_period_s
+        self._rest_frames = max(1, round(REST_AFTER_S / self.period_s))  # see _sleep_at_rest
         self.realtime = bool(options.get("realtime", True))
         self.max_pulses = int(_option(options, "max_pulses_per_frame", 127, 1, 32767))
         start_mm = np.asarray(options.get("start_mm", np.zeros(self.n_axes)), dtype=float)
@@ -286,10 +288,6 @@ class SimCard(Drive):
                 continue
             next_s = t0 + (self.frames_clocked + 1) * self.period_s
             time.sleep(max(0.0, next_s - time.monotonic()))
-
-    @property
-    def _rest_frames(self) -> int:
-        return max(1, round(REST_AFTER_S / self.period_s))
 
     def _busy(self) -> bool:
         """Anything for the clock to do: frames, a stream, a homing, an injected lag ramping."""
