@@ -13,6 +13,7 @@ end of that cycle (SimCard.advance_until), so the stop starts from the same fram
 from __future__ import annotations
 
 import copy
+from typing import Any
 
 import numpy as np
 
@@ -20,6 +21,7 @@ from controller.motion.checks import FerrorCheck, RefHistory
 from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.recall import Sent
 from controller.motion.retime import SERVO_MEMORY
+from controller.servo.precompensation import Precompensator
 from drivers.base import Feedback
 
 
@@ -53,39 +55,69 @@ def fault_rows(
     return None if bad is None else believed + 1
 
 
-def journal_pieces(
-    before: Sent, consumed: np.ndarray, counts: np.ndarray, precomp_marks: list[tuple], piece: int
-) -> list[Sent]:
-    """A send of whole rows as they are (the re-timer's identity) as the sends of `piece`
-    frames a cycle would have made, each with the state before it, so that a take-back (an
-    e-stop keeps two frames) undoes as much of a block as of cycle-sized sends. counts: the
-    pulse counter after each row; precomp_marks: the pre-compensator's state after each
-    piece but the last (Precompensator.push with every=piece)."""
-    pos = consumed[:, : len(before.last_mm)]
-    back, recent = before.retimer["back"], before.retimer["recent"]
-    entries = []
-    for j, start in enumerate(range(0, len(consumed), piece)):
-        entry = (
-            before
-            if not start
-            else Sent(
-                0,
-                consumed[:0],
-                dict(
-                    before.retimer,
-                    back=np.vstack([back, consumed[:start]])[-SERVO_MEMORY:],
-                    recent=np.vstack([recent, consumed[:start, :2]])[-SERVO_MEMORY:],
-                ),
-                pos[start - 2] if start >= 2 else before.last_mm,
-                pos[start - 1],
-                counts[start - 1],
-                before.hist_count + start,
-                None if before.precomp is None else precomp_marks[j - 1],
-            )
+class BlockSend:
+    """A send of whole rows as they are (the re-timer's identity), journalled as the sends of
+    `piece` frames a cycle would have made, so that a take-back (an e-stop keeps two frames)
+    undoes as much of a block as of cycle-sized sends. The state before each piece is made
+    only when a take-back asks for it (rarely): from the state before the block and the rows
+    sent, as the cycle-sized sends would have left it."""
+
+    def __init__(
+        self, before: Sent, consumed: np.ndarray, counts: np.ndarray, precomp: Precompensator | None
+    ) -> None:
+        self.before, self.consumed, self.counts = before, consumed, counts
+        self.precomp = precomp  # the loop's: copied before any use, never changed here
+
+    def pieces(self, piece: int) -> list[Sent]:
+        """The block's journal entries, oldest first (the first is the state before it)."""
+        out: list[Sent] = []
+        for start in range(0, len(self.consumed), piece):
+            entry = self.before if not start else Piece(self, start)
+            entry.frames = min(piece, len(self.consumed) - start)
+            entry.consumed = self.consumed[start : start + piece]
+            out.append(entry)  # type: ignore[arg-type]
+        return out
+
+    def state_at(self, start: int) -> dict[str, Any]:
+        """What Sent holds for the piece starting at row `start` (> 0)."""
+        b, rows = self.before, self.consumed[:start]
+        pos = self.consumed[:, : len(b.last_mm)]
+        retimer = dict(
+            b.retimer,
+            back=np.vstack([b.retimer["back"], rows])[-SERVO_MEMORY:],
+            recent=np.vstack([b.retimer["recent"], rows[:, :2]])[-SERVO_MEMORY:],
         )
-        entry.frames, entry.consumed = (
-            min(piece, len(consumed) - start),
-            consumed[start : start + piece],
-        )
-        entries.append(entry)
-    return entries
+        return {
+            "retimer": retimer,
+            "prev_mm": pos[start - 2] if start >= 2 else b.last_mm,
+            "last_mm": pos[start - 1],
+            "counts": self.counts[start - 1],
+            "hist_count": b.hist_count + start,
+            "precomp": self._precomp_at(pos[:start]),
+        }
+
+    def _precomp_at(self, pos: np.ndarray) -> tuple | None:
+        if self.precomp is None or self.before.precomp is None:
+            return None
+        comp = copy.copy(self.precomp)
+        comp.stacked = copy.copy(comp.stacked)  # its matrices shared, its state its own
+        comp.restore(self.before.precomp)
+        comp.push(pos)
+        return comp.state()
+
+
+class Piece:
+    """A journal entry of a BlockSend: frames and consumed rows now, the state on demand."""
+
+    FIELDS = ("retimer", "prev_mm", "last_mm", "counts", "hist_count", "precomp")
+
+    def __init__(self, block: BlockSend, start: int) -> None:
+        self.block, self.start = block, start
+        self.frames, self.consumed = 0, block.consumed[:0]
+
+    def __getattr__(self, name: str) -> Any:
+        if name not in Piece.FIELDS:
+            raise AttributeError(name)
+        for key, value in self.block.state_at(self.start).items():
+            setattr(self, key, value)
+        return getattr(self, name)

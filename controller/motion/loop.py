@@ -14,7 +14,7 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.errors import CncError, DriveError
-from controller.motion.blocks import block_frames, fault_rows, journal_pieces
+from controller.motion.blocks import BlockSend, block_frames, fault_rows
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.events import EventFn, JobEvents
 from controller.motion.feedback_check import FeedbackCheck
@@ -120,7 +120,7 @@ class MotionController:
         self.outcome: Outcome | None = None
         self.message = ""
         self.sent_eos = False
-        self.marks_every = 0  # the next send's journal pieces (see _journal)
+        self.block_early_s = 0.0  # see _wait
         self.next_progress_s = 0.0
         self.settle_deadline_s = 0.0
         self.position_known = True
@@ -140,6 +140,7 @@ class MotionController:
     def _wait(self) -> None:
         """The cycle's wait; in virtual time, while the stream runs steadily, a block of
         frames at once (motion/blocks.py), no more than the FIFO holds above its low mark."""
+        self.block_early_s = 0.0
         if not (isinstance(self.pacer, VirtualPacer) and self.pacer.blocks and self._steady()):
             self.pacer.wait()
             return
@@ -149,7 +150,9 @@ class MotionController:
         if frames <= cycle:
             self.pacer.wait()
             return
-        self.pacer.wait_block(frames, self._fault_rows)
+        clocked = self.pacer.wait_block(frames, self._fault_rows)
+        # The block's first cycle ended this much before its last (the first motion's time).
+        self.block_early_s = (clocked - cycle) * self.period_s
 
     def _steady(self) -> bool:
         """Streaming at the program's own pace, nothing asked or under way that a cycle must
@@ -213,7 +216,7 @@ class MotionController:
             return
         now_s = self.pacer.elapsed_s()
         if self.figures.first_motion_s is None:
-            self.figures.first_motion_s = now_s
+            self.figures.first_motion_s = now_s - self.block_early_s
         self.figures.last_motion_s = now_s
         self.figures.executed = int(fb.seq[-1]) + 1
         self.figures.last_enc = fb.encoder_counts[-1]
@@ -302,7 +305,7 @@ class MotionController:
             self.output_mark = int(row_lines(held[pause:pause + 1])[0])  # type: ignore[misc]
         self.program_pause = self.program_pause or (at_pause and not mark)
         end = final and not len(self.stream.held) and whole
-        every = self.marks_every = self.settings.cycle_frames if as_they_are else 0
+        every = self.settings.cycle_frames if as_they_are else 0
         self._send(out, end=end, pause=at_pause or at_hold)
         if end or at_pause or at_hold:
             self.stream.journal.clear()  # the card ends its stream there: nothing to take back
@@ -320,8 +323,8 @@ class MotionController:
             return
         hist = self.stream.hist
         counts = hist.cmd_counts[(before.hist_count + np.arange(len(out))) % hist.capacity]
-        marks = self.stream.precomp.marks if self.stream.precomp is not None else []
-        for entry in journal_pieces(before, consumed, counts, marks, every):
+        block = BlockSend(before, consumed, counts, self.stream.precomp)  # type: ignore[arg-type]
+        for entry in block.pieces(every):
             self.stream.journal.record(entry.frames, entry.consumed, entry)
 
     def _read_ahead(self, max_rows: int = 4096) -> None:
@@ -349,8 +352,7 @@ class MotionController:
         """Wanted rows (position, feed, line) out as they are or pre-compensated, a stream's end
         with the lead's settling (what exceeds the high-water mark goes out in later cycles)."""
         pos = rows[:, : self.n]
-        every, self.marks_every = self.marks_every, 0  # a refill's own send only
-        cmd = pos if self.stream.precomp is None else self.stream.precomp.push(pos, every)
+        cmd = pos if self.stream.precomp is None else self.stream.precomp.push(pos)
         if self.stream.precomp is not None and (end or pause):
             wanted = len(rows)
             rows, cmd = with_lead_settled(self.stream.precomp, rows, cmd,  # type: ignore[arg-type]

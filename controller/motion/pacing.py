@@ -81,14 +81,17 @@ class VirtualPacer:
         self._advance(self.cycle_frames * steps)
         self._cycles += steps
 
-    def wait_block(self, frames: int, cut: Callable[[Feedback], int | None]) -> None:
+    def wait_block(self, frames: int, cut: Callable[[Feedback], int | None]) -> int:
         """Up to `frames` periods (whole cycles) at once; fewer when cut finds in the block's
-        feedback a row the loop had to act on (the cycle holding it ends the block)."""
+        feedback a row the loop had to act on (the cycle holding it ends the block). Returns
+        the periods clocked."""
         if self._advance_until is None:
             self.wait()
-            return
+            return self.cycle_frames
         self._wait_ready()
-        self._cycles += self._advance_until(frames, cut, self.cycle_frames) // self.cycle_frames
+        clocked = self._advance_until(frames, cut, self.cycle_frames)
+        self._cycles += clocked // self.cycle_frames
+        return clocked
 
     def _wait_ready(self) -> None:
         while self._ready is not None and not self._ready():

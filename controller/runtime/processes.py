@@ -263,8 +263,9 @@ class Runtime:
         if self.options.probe_watch is not None:
             watch = self.options.probe_watch.wrap(watch, lambda: self.controller)
         if self.options.virtual_time:
-            need = round((self.settings.high_water_ms + self.settings.holdback_ms) * 1e-3
-                         / period_s) + 2 * self.settings.cycle_frames
+            s = self.settings  # a block a cycle (motion/blocks.py): the ring ahead by two
+            need = round((s.high_water_ms + s.holdback_ms + 2 * s.block_ms) * 1e-3
+                         / period_s) + 2 * s.cycle_frames
 
             def ready() -> bool:
                 # Rows produced but not yet executed (ring + held back + card FIFO) must cover
@@ -277,7 +278,8 @@ class Runtime:
                 return ((ahead >= need and not (starting and not source.primed())) or aborted
                         or watch() is not None or source.state()[0] is not SourceState.STREAMING)
             pacer: Any = VirtualPacer(self.settings.cycle_frames, period_s, drive.advance,
-                                      ready=ready)
+                                      ready=ready,
+                                      advance_until=getattr(drive, "advance_until", None))
         else:
             pacer = WallPacer(self.settings.cycle_frames * period_s)
         self._pacer_t0_s = time.monotonic()

@@ -136,34 +136,18 @@ class Precompensator:
         self.stacked = StackedFilter([f for f in self.filters if f is not None]) \
             if self.axes else None
         self.lead_mm = np.zeros(len(self.filters))
-        self.marks: list[tuple] = []  # see push
 
-    def push(self, wanted_mm: np.ndarray, every: int = 0) -> np.ndarray:
-        """Frames for the next wanted rows (same shape). every > 0: the states after every
-        `every` rows (not the last) are kept in `marks`, as state() gives them."""
-        self.marks = []
+    def push(self, wanted_mm: np.ndarray) -> np.ndarray:
+        """Frames for the next wanted rows (same shape)."""
         if not len(wanted_mm):
             return wanted_mm
         v = np.diff(np.vstack([self.last_mm[None, :], wanted_mm]), axis=0) / self.period_s
         out = np.array(wanted_mm, float, copy=True)
-        lead = np.zeros((len(out), len(self.axes)))
         if self.stacked is not None:
-            lead = self.stacked.step(v[:, self.axes], every)
+            lead = self.stacked.step(v[:, self.axes])
             out[:, self.axes] += lead
             self.lead_mm[self.axes] = lead[-1]
-        if every:
-            self.marks = self._marks(wanted_mm, lead, every)
         self.last_mm = np.asarray(wanted_mm[-1], float).copy()
-        return out
-
-    def _marks(self, wanted_mm: np.ndarray, lead: np.ndarray, every: int) -> list[tuple]:
-        filt = self.stacked.marks if self.stacked is not None else None
-        out = []
-        for j, r in enumerate(range(every, len(wanted_mm), every)):
-            lead_mm = self.lead_mm.copy()
-            lead_mm[self.axes] = lead[r - 1]
-            out.append((np.asarray(wanted_mm[r - 1], float).copy(),
-                        None if filt is None else filt[j].copy(), lead_mm))
         return out
 
     def settling_rows(self) -> np.ndarray:

@@ -33,31 +33,18 @@ class StackedFilter:
         self.powers = np.stack([_pad(b[3], (BLOCK + 1, order, order)) for b in blocks])
         self.orders = [s.order for s in servos]
         self.state = np.zeros((len(servos), order))
-        self.marks: list[np.ndarray] = []  # see step
 
-    def step(self, u: np.ndarray, every: int = 0) -> np.ndarray:
-        """Outputs (m, n_axes) for the next input rows (m, n_axes); the states go on. every > 0:
-        the states after every `every` rows (not the last) are kept in `marks`, so that a
-        block can be taken back in part (the motion loop's journal, motion/blocks.py)."""
+    def step(self, u: np.ndarray) -> np.ndarray:
+        """Outputs (m, n_axes) for the next input rows (m, n_axes); the states go on."""
         out = np.empty(u.shape)
-        self.marks = []
         x = self.state[:, :, None]
         for k0 in range(0, len(u), BLOCK):
             chunk = u[k0 : k0 + BLOCK].T[:, :, None]  # (A, m, 1)
             m = chunk.shape[1]
             out[k0 : k0 + m] = (self.obs[:, :m] @ x + self.toeplitz[:, :m, :m] @ chunk)[:, :, 0].T
-            x_end = self.powers[:, m] @ x + self.reach[:, :, BLOCK - m :] @ chunk
-            if every:
-                for r in range((k0 // every + 1) * every, min(k0 + m + 1, len(u)), every):
-                    at = self._within(x, chunk, r - k0) if r - k0 < m else x_end
-                    self.marks.append(at[:, :, 0])
-            x = x_end
+            x = self.powers[:, m] @ x + self.reach[:, :, BLOCK - m :] @ chunk
         self.state = x[:, :, 0]
         return out
-
-    def _within(self, x: np.ndarray, chunk: np.ndarray, j: int) -> np.ndarray:
-        """The states after the first j rows of a chunk, from states x before it."""
-        return self.powers[:, j] @ x + self.reach[:, :, BLOCK - j :] @ chunk[:, :j]
 
     def axis_state(self, axis: int) -> np.ndarray:
         """One axis's state, as filter_block keeps it (its own order)."""
