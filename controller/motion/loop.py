@@ -136,6 +136,10 @@ class MotionController:
         s = self.settings
         self.block = block_frames(s.block_ms, self.period_s, s.cycle_frames,
                                   self._frames(s.low_water_ms), self._frames(s.high_water_ms))
+        # Clocked in real time, half a block: the FIFO stays nearer its high-water mark,
+        # where a late wake-up under load takes it from.
+        virtual = isinstance(self.pacer, VirtualPacer) and self.pacer.blocks
+        self.refill = self.block if virtual else max(s.cycle_frames, self.block // 2)
 
     def _wait(self) -> None:
         """The cycle's wait; in virtual time, while the stream runs steadily, a block of
@@ -144,7 +148,10 @@ class MotionController:
         if not (isinstance(self.pacer, VirtualPacer) and self.pacer.blocks and self._steady()):
             self.pacer.wait()
             return
-        room = self.drive.fifo_level() - self._frames(self.settings.low_water_ms)
+        try:
+            room = self.drive.fifo_level() - self._frames(self.settings.low_water_ms)
+        except DriveError:  # the cycle reads it again and stops on it
+            room = 0
         cycle = self.settings.cycle_frames
         frames = min(self.block, room) // cycle * cycle
         if frames <= cycle:
@@ -268,7 +275,7 @@ class MotionController:
             low_fifo = self.figures.min_fifo_frames
             self.figures.min_fifo_frames = level if low_fifo is None else min(level, low_fifo)
         self.restarting = self.restarting and level == 0  # after a pause: empty until refilled
-        if self.state is MotionState.RUNNING and not self.restarting and want < self.block:
+        if self.state is MotionState.RUNNING and not self.restarting and want < self.refill:
             return  # a block at a time: the FIFO holds more than high water less a block
         finished_before, _ = self.source.state()
         ask = max(0, want + hold - len(self.stream.held))
