@@ -19,7 +19,7 @@ FIFTH = DiscreteServo(
     a=np.poly([0.5, 0.6, 0.7, 0.8, 0.9]),
     sample_period_s=0.001,
 )
-TOL_MM = 2e-11
+TOL_MM = (2e-11, 2e-11, 1e-10)  # per kind: the 5th-order filter's states are larger
 
 
 def servos(kinds: list[int]) -> list:
@@ -55,13 +55,13 @@ def test_blocks_of_any_size_equal_the_per_frame_filter_of_each_axis(
             blocks.append(e)
         # The companion form's states are large next to its output: either order of the
         # sums rounds to ~1e-11 mm (the per-axis blocks and the per-frame path differ as much).
-        assert np.max(np.abs(got[:, axis] - np.concatenate(blocks))) <= TOL_MM
+        assert np.max(np.abs(got[:, axis] - np.concatenate(blocks))) <= TOL_MM[kinds[axis]]
         assert np.allclose(stacked.axis_state(axis), state, rtol=1e-9, atol=1e-12)
         state, frames = np.zeros(servo.order), []
         for k in range(len(v)):  # the per-frame path: one sample at a time
             e, state = filter_block(servo, v[k : k + 1, axis], state)
             frames.append(e[0])
-        assert np.max(np.abs(got[:, axis] - frames)) <= TOL_MM
+        assert np.max(np.abs(got[:, axis] - frames)) <= TOL_MM[kinds[axis]]
 
 
 def test_an_empty_block_changes_nothing() -> None:
