@@ -25,15 +25,11 @@ from controller.servo.precompensation import Precompensator
 from drivers.base import Feedback
 
 
-def block_frames(
-    block_ms: float, period_s: float, cycle_frames: int, low_frames: int, high_frames: int
-) -> int:
-    """Frames of a refill block and of a virtual-time cycle: block_ms in whole cycles, at most
-    half the span between the water marks (a block never takes the FIFO near its low mark),
-    at least one cycle."""
-    want = int(round(block_ms * 1e-3 / period_s))
-    span = max(cycle_frames, (high_frames - low_frames) // 2)
-    return max(cycle_frames, min(want, span) // cycle_frames * cycle_frames)
+def block_frames(block_ms: float, period_s: float, cycle_frames: int, span_frames: int) -> int:
+    """Frames of a block: block_ms in whole cycles, at most span_frames (a block clocked from
+    the high-water mark must not take the FIFO below its low one), at least one cycle."""
+    want = min(int(round(block_ms * 1e-3 / period_s)), span_frames)
+    return max(cycle_frames, want // cycle_frames * cycle_frames)
 
 
 def fault_rows(

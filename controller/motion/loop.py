@@ -134,12 +134,13 @@ class MotionController:
         self.estop_reason: str | None = None  # the e-stop under way (then disable)
         self.limits = LimitWatch(self.drive, self.config.axis_names, start_mm)
         s = self.settings
-        self.block = block_frames(s.block_ms, self.period_s, s.cycle_frames,
-                                  self._frames(s.low_water_ms), self._frames(s.high_water_ms))
-        # Clocked in real time, half a block: the FIFO stays nearer its high-water mark,
+        span = self._frames(s.high_water_ms) - self._frames(s.low_water_ms) - s.cycle_frames
+        self.block = block_frames(s.block_ms, self.period_s, s.cycle_frames, span)
+        # Clocked in real time, smaller refills: the FIFO stays nearer its high-water mark,
         # where a late wake-up under load takes it from.
         virtual = isinstance(self.pacer, VirtualPacer) and self.pacer.blocks
-        self.refill = self.block if virtual else max(s.cycle_frames, self.block // 2)
+        self.refill = self.block if virtual else block_frames(s.refill_ms, self.period_s,
+                                                              s.cycle_frames, span // 2)
 
     def _wait(self) -> None:
         """The cycle's wait; in virtual time, while the stream runs steadily, a block of

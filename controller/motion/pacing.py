@@ -94,8 +94,12 @@ class VirtualPacer:
         return clocked
 
     def _wait_ready(self) -> None:
+        # Each look costs the motion process CPU (the ring, the producers' exit codes): a
+        # producer behind is looked at less and less often, up to READY_POLL_MAX_S apart.
+        pause_s = READY_POLL_S
         while self._ready is not None and not self._ready():
-            time.sleep(0.0002)
+            time.sleep(pause_s)
+            pause_s = min(2 * pause_s, READY_POLL_MAX_S)
 
     def elapsed_s(self) -> float:
         return self._cycles * self.cycle_s
@@ -107,3 +111,5 @@ class VirtualPacer:
 
 
 IDLE_SLEEP_S = 0.001
+READY_POLL_S = 0.0002
+READY_POLL_MAX_S = 0.002
