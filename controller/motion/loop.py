@@ -277,6 +277,9 @@ class MotionController:
             self.figures.min_fifo_frames = level if low_fifo is None else min(level, low_fifo)
         self.restarting = self.restarting and level == 0  # after a pause: empty until refilled
         if self.state is MotionState.RUNNING and not self.restarting and want < self.refill:
+            state, problem = self.source.state()  # a failed producer is seen every cycle
+            if state is SourceState.FAILED:
+                self._begin_stop(Outcome.FAULT, problem)
             return  # a block at a time: the FIFO holds more than high water less a block
         finished_before, _ = self.source.state()
         ask = max(0, want + hold - len(self.stream.held))

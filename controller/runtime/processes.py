@@ -263,9 +263,8 @@ class Runtime:
         if self.options.probe_watch is not None:
             watch = self.options.probe_watch.wrap(watch, lambda: self.controller)
         if self.options.virtual_time:
-            s = self.settings  # a block a cycle (motion/blocks.py): the ring ahead by two
-            need = round((s.high_water_ms + s.holdback_ms + 2 * s.block_ms) * 1e-3
-                         / period_s) + 2 * s.cycle_frames
+            need = round((self.settings.high_water_ms + self.settings.holdback_ms) * 1e-3
+                         / period_s) + 2 * self.settings.cycle_frames
 
             def ready() -> bool:
                 # Rows produced but not yet executed (ring + held back + card FIFO) must cover
