@@ -224,7 +224,8 @@ class MotionController:
             return
         now_s = self.pacer.elapsed_s()
         if self.figures.first_motion_s is None:
-            self.figures.first_motion_s = now_s - self.block_early_s
+            early_s = self.block_early_s  # virtual time: whole cycles (no float residue)
+            self.figures.first_motion_s = round(now_s - early_s, 9) if early_s else now_s
         self.figures.last_motion_s = now_s
         self.figures.executed = int(fb.seq[-1]) + 1
         self.figures.last_enc = fb.encoder_counts[-1]
