@@ -7,7 +7,10 @@ it and watches the requests; it refills once the card has room for a block. In v
 while the stream runs steadily, one cycle clocks the card a whole block (no more than the FIFO
 holds above its low-water mark), and a fault inside the block is found where a loop clocking
 two frames a cycle would have found it: the card takes the block back and clocks only to the
-end of that cycle (SimCard.advance_until), so the stop starts from the same frame.
+end of that cycle (SimCard.advance_until), so the stop begins at the same cycle. A fault's
+stop is queued behind what the card holds: with up to a block less queued, it ends up to a
+block sooner along the same path than cycle by cycle (an e-stop or a hold takes the queue
+back either way, see BlockSend).
 """
 
 from __future__ import annotations
