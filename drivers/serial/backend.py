@@ -295,6 +295,25 @@ class SerialCard(Drive):
             self._stream_open = not end_of_stream and (bool(n) or self._stream_open)
         self._write(data)
 
+    def _recall_frames(self, n: int, keep: int) -> int:
+        """RECALL: the card takes back the last n samples if `keep` stay queued before them
+        (it checks against what it has clocked by then); its reply's rx_seq says whether it
+        did. No reply: the link is lost (the next feedback() raises), nothing taken back."""
+        self._check_link()
+        first_seq = self._base + self._written - n
+        try:
+            reply = self._request(lambda token: p.encode_recall(token, first_seq, keep),
+                                  "recall")
+        except LostCommunicationError as exc:
+            self._mark_lost(str(exc))
+            return 0
+        with self._cond:
+            if self._unwrap(reply.rx_seq) != self._written - n - 1:
+                return 0
+            self._written -= n
+            self._rx_idx = self._written - 1
+            return n
+
     def _estimate_level(self) -> int:
         with self._cond:
             s = self._last
