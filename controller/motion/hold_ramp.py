@@ -58,11 +58,15 @@ def hold_distances_mm(v0_mm_s: float, accel_mm_s2: float, period_s: float,
     return v0_mm_s * n * period_s * (tau - shape.distance(tau))
 
 
-def hold_steps(pos_mm: np.ndarray, tau0: float, distances_mm: np.ndarray) -> np.ndarray:
+def hold_steps(pos_mm: np.ndarray, tau0: float, distances_mm: np.ndarray,
+               cap: float = 1.0) -> np.ndarray:
     """Rows advanced at each sample so that the path, from fractional row tau0, covers
-    distances_mm (by arc length along the rows). Where the rows themselves come to rest first
-    (a pause, the program end, a stop the plan makes) the hold follows them there at their own
-    timing, as a stop along the path does (motion/stopping.py)."""
+    distances_mm (by arc length along the rows), never more than `cap` rows a sample: never
+    faster than the plan (times the override now) at the same point, where its normal
+    acceleration and contour error were checked (a hold in a deceleration into a corner
+    follows the plan's deceleration until its own is the slower). Where the rows themselves
+    come to rest first (a pause, the program end, a stop the plan makes) the hold follows them
+    there at their own timing, as a stop along the path does (motion/stopping.py)."""
     first = int(math.floor(tau0))
     tau0 -= first
     ahead = 4 * len(distances_mm) + 8  # rows enough unless the plan slows right down
@@ -72,11 +76,28 @@ def hold_steps(pos_mm: np.ndarray, tau0: float, distances_mm: np.ndarray) -> np.
             and first + len(cum) < len(pos_mm):  # the window ends first: all the rows
         cum, rest = _rows_to_rest(pos_mm[first:])
     idx = np.arange(rest + 1, dtype=float)
-    if s0 + distances_mm[-1] >= cum[rest] or rest <= tau0:
+    if s0 + distances_mm[-1] >= cum[rest] or rest <= tau0:  # the plan comes to rest first
         tau = np.minimum(tau0 + np.arange(1, math.ceil(rest - tau0 - 1e-12) + 1), rest)
-    else:
-        tau = np.interp(s0 + distances_mm, cum[: rest + 1], idx)
-    return np.diff(np.concatenate([[tau0], tau])) if len(tau) else np.zeros(1)
+        return np.diff(np.concatenate([[tau0], tau])) if len(tau) else np.zeros(1)
+    tau = np.interp(s0 + distances_mm, cum[: rest + 1], idx)
+    steps = np.diff(np.concatenate([[tau0], tau]))
+    if steps.max() <= cap:
+        return steps
+    return _capped(cum[: rest + 1], idx, tau0, np.diff(distances_mm, prepend=0.0), cap)
+
+
+def _capped(cum: np.ndarray, idx: np.ndarray, tau0: float, step_mm: np.ndarray,
+            cap: float) -> np.ndarray:
+    """Each sample the shape's own distance or `cap` rows, whichever is the shorter, from
+    where the last one ended. A loop over the ramp's samples (tens), each depending on the
+    one before; done once a hold."""
+    out = np.empty(len(step_mm))
+    tau, s = tau0, float(np.interp(tau0, idx, cum))
+    for k, ds in enumerate(step_mm):
+        nxt = min(float(np.interp(s + ds, cum, idx)), tau + cap)
+        out[k], tau = nxt - tau, nxt
+        s = float(np.interp(tau, idx, cum))
+    return out
 
 
 def _rows_to_rest(pos_mm: np.ndarray) -> tuple[np.ndarray, int]:

@@ -32,8 +32,9 @@ CAP_EVERY_ROWS = 20  # ... looked at again after this many rows (the horizon is 
 CONTOUR_SHARE = 0.9  # above 100 %: the plan's error times rate^2 kept within this of the limit
 HOLD_MEMORY = 96  # outputs that start the model of a hold's check (its slowest mode, 11 ms,
 #                  has died away to 0.02 % in them)
-HOLD_STRETCH = (1.0, 1.5, 2.25)  # a hold's ramp: at Amax, then (if the model check fails)
-#                                   this much longer; the last is kept (a bound, not a search)
+HOLD_TRIES = 5  # a hold's ramp: at Amax, then (if the model check fails) longer; a bound
+HOLD_MARGIN = 1.1  # ... by the error's ratio to the limit and this margin
+HOLD_GROWTH_MIN, HOLD_GROWTH_MAX = 1.5, 4.0  # ... at least and at most this much a try
 
 
 def smoothstep5(u: np.ndarray) -> np.ndarray:
@@ -239,16 +240,20 @@ class Retimer:
         """To rest from the path speed now: the transition shape at Amax along the rows by arc
         length (so the plan's own acceleration there does not add to it), checked once on the
         servo model (the tool within the contour limit, or no worse than the plan's own there,
-        through its standstill and settling). Only if that fails, longer by HOLD_STRETCH's
-        steps; the last is kept whatever it gives."""
+        through its standstill and settling). Only if that fails (without pre-compensation
+        a stop at Amax leaves the path by about twice the limit), longer by the ratio of the
+        error to the limit, at most HOLD_TRIES times in all; the last is kept whatever it
+        gives."""
         tau0 = max(0.0, len(self.back) - 1 + self.frac)
         feed = float(np.interp(tau0, np.arange(len(base)), np.abs(base[:, self.n_axes])))
         pos = base[:, : self.n_axes]
         plan_mm: float | None = None
-        for stretch in HOLD_STRETCH:
+        stretch = 1.0
+        for _ in range(HOLD_TRIES):
             dist = hold_distances_mm(self.rate * feed, self.accel_mm_s2, self.period_s,
                                      self.shape, stretch)
-            ramp = PathRamp(hold_steps(pos, tau0, dist))
+            # Ends on a sample that does not move: the feed sent there (rate x the row's) is 0.
+            ramp = PathRamp(np.append(hold_steps(pos, tau0, dist, max(1.0, self.rate)), 0.0))
             worst_mm = self._worst_distance_mm(base, ramp, HOLD_MEMORY)
             if worst_mm <= self.limit_mm:
                 break
@@ -257,6 +262,10 @@ class Retimer:
                                                   HOLD_MEMORY)
             if worst_mm <= plan_mm:
                 break
+            # The error a ramp adds goes about as its deceleration, 1 / its length.
+            # Short ramps (a few servo time constants) gain less: at least HOLD_GROWTH_MIN.
+            stretch *= min(HOLD_GROWTH_MAX,
+                           max(HOLD_GROWTH_MIN, HOLD_MARGIN * worst_mm / self.limit_mm))
         return ramp
 
     def _land(self, ramp: Ramp) -> Ramp:
