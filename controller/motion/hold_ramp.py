@@ -38,7 +38,7 @@ class PathRamp:
 
     def rates(self, count: int) -> np.ndarray:
         """The next `count` rates (rate1 once the ramp is over); does not advance."""
-        ahead = self.steps[self.k: self.k + count]
+        ahead = self.steps[self.k : self.k + count]
         return np.concatenate([ahead, np.full(count - len(ahead), self.rate1)])
 
     @property
@@ -46,8 +46,13 @@ class PathRamp:
         return self.k >= self.n
 
 
-def hold_distances_mm(v0_mm_s: float, accel_mm_s2: float, period_s: float,
-                      shape: TransitionShape, stretch: float = 1.0) -> np.ndarray:
+def hold_distances_mm(
+    v0_mm_s: float,
+    accel_mm_s2: float,
+    period_s: float,
+    shape: TransitionShape,
+    stretch: float = 1.0,
+) -> np.ndarray:
     """Distance travelled at samples k = 1..n of the shape's transition from v0 to rest with
     its peak at ACCEL_SHARE x Amax (stretch > 1: that much longer); the last is the whole."""
     if v0_mm_s <= 0.0:
@@ -58,8 +63,9 @@ def hold_distances_mm(v0_mm_s: float, accel_mm_s2: float, period_s: float,
     return v0_mm_s * n * period_s * (tau - shape.distance(tau))
 
 
-def hold_steps(pos_mm: np.ndarray, tau0: float, distances_mm: np.ndarray,
-               cap: float = 1.0) -> np.ndarray:
+def hold_steps(
+    pos_mm: np.ndarray, tau0: float, distances_mm: np.ndarray, cap: float = 1.0
+) -> np.ndarray:
     """Rows advanced at each sample so that the path, from fractional row tau0, covers
     distances_mm (by arc length along the rows), never more than `cap` rows a sample: never
     faster than the plan (times the override now) at the same point, where its normal
@@ -70,10 +76,13 @@ def hold_steps(pos_mm: np.ndarray, tau0: float, distances_mm: np.ndarray,
     first = int(math.floor(tau0))
     tau0 -= first
     ahead = 4 * len(distances_mm) + 8  # rows enough unless the plan slows right down
-    cum, rest = _rows_to_rest(pos_mm[first: first + ahead + 1])
+    cum, rest = _rows_to_rest(pos_mm[first : first + ahead + 1])
     s0 = float(np.interp(tau0, np.arange(rest + 1), cum[: rest + 1]))
-    if s0 + distances_mm[-1] >= cum[rest] and rest == len(cum) - 1 \
-            and first + len(cum) < len(pos_mm):  # the window ends first: all the rows
+    if (
+        s0 + distances_mm[-1] >= cum[rest]
+        and rest == len(cum) - 1
+        and first + len(cum) < len(pos_mm)
+    ):  # the window ends first: all the rows
         cum, rest = _rows_to_rest(pos_mm[first:])
     idx = np.arange(rest + 1, dtype=float)
     if s0 + distances_mm[-1] >= cum[rest] or rest <= tau0:  # the plan comes to rest first
@@ -86,8 +95,9 @@ def hold_steps(pos_mm: np.ndarray, tau0: float, distances_mm: np.ndarray,
     return _capped(cum[: rest + 1], idx, tau0, np.diff(distances_mm, prepend=0.0), cap)
 
 
-def _capped(cum: np.ndarray, idx: np.ndarray, tau0: float, step_mm: np.ndarray,
-            cap: float) -> np.ndarray:
+def _capped(
+    cum: np.ndarray, idx: np.ndarray, tau0: float, step_mm: np.ndarray, cap: float
+) -> np.ndarray:
     """Each sample the shape's own distance or `cap` rows, whichever is the shorter, from
     where the last one ended. A loop over the ramp's samples (tens), each depending on the
     one before; done once a hold."""

@@ -15,7 +15,7 @@ from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, LostCommunicationError
 from drivers.io_peer import switch_name
 from drivers.port_lock import device_key
-from drivers.serial import homing
+from drivers.serial import homing, take_back
 from drivers.serial import protocol as p
 
 _BITS = ((p.ST_UNDERRUN, CardStatus.UNDERRUN), (p.ST_BAD_FRAME, CardStatus.BAD_FRAME),
@@ -296,23 +296,7 @@ class SerialCard(Drive):
         self._write(data)
 
     def _recall_frames(self, n: int, keep: int) -> int:
-        """RECALL: the card takes back the last n samples if `keep` stay queued before them
-        (it checks against what it has clocked by then); its reply's rx_seq says whether it
-        did. No reply: the link is lost (the next feedback() raises), nothing taken back."""
-        self._check_link()
-        first_seq = self._base + self._written - n
-        try:
-            reply = self._request(lambda token: p.encode_recall(token, first_seq, keep),
-                                  "recall")
-        except LostCommunicationError as exc:
-            self._mark_lost(str(exc))
-            return 0
-        with self._cond:
-            if self._unwrap(reply.rx_seq) != self._written - n - 1:
-                return 0
-            self._written -= n
-            self._rx_idx = self._written - 1
-            return n
+        return take_back.recall(self, n, keep)
 
     def _estimate_level(self) -> int:
         with self._cond:
