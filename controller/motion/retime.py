@@ -92,9 +92,10 @@ class Retimer:
     rate is a quintic ramp, lengthened until the tangential acceleration of the re-timed
     points, rate^2 a + rate' v, stays within Amax on the rows it will cross, and until the
     servo model's distance of the tool from the points sent stays within the contour limit
-    (the hold's own standstill and its settling included), or no worse than the plan's own
-    there. At rate 1 with no ramp the rows pass through unchanged: a run without hold or
-    override is the plan.
+    (a standstill's settling included), or no worse than the plan's own there. A ramp to
+    rest (a hold, 0 %) is the transition shape at Amax by arc length instead (_hold_ramp,
+    motion/hold_ramp.py). At rate 1 with no ramp the rows pass through unchanged: a run
+    without hold or override is the plan.
     """
 
     def __init__(self, config: MachineConfig) -> None:
