@@ -5,11 +5,14 @@ than the plan, checked on the servo model; on the shipped config (pre-compensate
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from refgen import circle_chunks
 
 from controller.config import load_config
+from controller.generator.plan import generate_reference
+from controller.interpreter.program import read_program
 from controller.motion.hold_ramp import ACCEL_SHARE, hold_distances_mm, hold_steps
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer
@@ -24,6 +27,7 @@ T = CFG.sample_period_s
 AMAX = CFG.interpolator.max_accel_mm_s2
 SHAPE = TransitionShape(CFG.interpolator.ramp_share)
 V_MM_S = 58.333  # the circle's feed (refgen.circle_chunks)
+BUTTERFLY = Path(__file__).resolve().parents[2] / "nc_programs" / "butterfly.nc"
 
 
 def _ramp_samples(v_mm_s: float, shape: TransitionShape = SHAPE) -> int:
@@ -64,9 +68,9 @@ def test_rows_that_come_to_rest_first_are_followed_there() -> None:
     assert np.sum(steps) == 4.0 and steps.max() == 1.0  # to row 4, the plan's own stop
 
 
-def _hold_on_circle(at_s: float) -> tuple[object, list[np.ndarray], dict]:
-    """The circle on the virtual sim card, a hold at executed time at_s, resumed once held:
-    (result, rows sent as (first frame, XY), {asked: frames executed then})."""
+def _hold_on(chunks: list, at_s: float) -> tuple[object, np.ndarray, dict]:
+    """The chunks on the virtual sim card, a hold at executed time at_s, resumed once held:
+    (result, the XY rows the card ran, {asked: frames executed then})."""
     card = SimCard(CFG, realtime=False)
     card.open()
     settings = MotionSettings.from_config(CFG, progress_every_s=T)
@@ -82,9 +86,7 @@ def _hold_on_circle(at_s: float) -> tuple[object, list[np.ndarray], dict]:
             info["held"] = True
             ctrl.request_resume()
 
-    ctrl = MotionController(
-        CFG, card, ChunkSource(list(circle_chunks())), pacer, settings, on_progress=progress
-    )
+    ctrl = MotionController(CFG, card, ChunkSource(chunks), pacer, settings, on_progress=progress)
     send = ctrl._send
 
     def record(rows: np.ndarray, end: bool, pause: bool = False) -> None:
@@ -100,14 +102,33 @@ def _hold_on_circle(at_s: float) -> tuple[object, list[np.ndarray], dict]:
     return result, xy, info
 
 
+def _frames_to_rest(xy: np.ndarray, k0: int) -> int:
+    """Frames from the request until the wanted path stands still."""
+    step = np.linalg.norm(np.diff(xy[k0:], axis=0), axis=1)
+    return 1 + int(np.flatnonzero(step == 0.0)[0])
+
+
+def _bound(v_mm_s: float) -> int:
+    """The request is seen at the next cycle (2 frames), the card runs what it kept, then the
+    ramp: the shape at Amax from v, and the sample at rest that ends it."""
+    return 2 * 2 + math.ceil(HOLD_KEEP_MS * 1e-3 / T) + _ramp_samples(v_mm_s) + 2
+
+
 def test_a_hold_on_the_circle_starts_at_once_and_rests_after_the_shape() -> None:
-    result, xy, info = _hold_on_circle(0.4)
+    result, xy, info = _hold_on(list(circle_chunks()), 0.4)
     assert result.outcome is Outcome.DONE and result.underruns == 0  # type: ignore[attr-defined]
     assert result.contour_error_um["max"] <= 30.0  # type: ignore[attr-defined]
-    k0 = info["asked"]
-    step = np.linalg.norm(np.diff(xy[k0:], axis=0), axis=1)
-    at_rest = k0 + 1 + int(np.flatnonzero(step == 0.0)[0])  # the wanted path stands still
-    # The request is seen at the next cycle (2 frames); the card runs what it kept; then the
-    # ramp: the shape at Amax from the circle's feed, and the sample at rest that ends it.
-    bound = 2 * 2 + math.ceil(HOLD_KEEP_MS * 1e-3 / T) + _ramp_samples(V_MM_S) + 2
-    assert at_rest - k0 <= bound, (at_rest - k0, bound)
+    assert _frames_to_rest(xy, info["asked"]) <= _bound(V_MM_S)
+
+
+def test_a_hold_while_the_plan_brakes_rests_as_soon() -> None:
+    """Where the plan itself brakes near Amax no ramp in the time scale kept Amax, and the
+    hold took seconds; by arc length, never faster than the plan, it is at rest as soon."""
+    chunks = list(generate_reference(read_program(str(BUTTERFLY), CFG), CFG))
+    feed = np.concatenate([c.feed_mm_s for c in chunks])
+    braking = np.flatnonzero(np.diff(feed) / T < -0.5 * AMAX)
+    k = int(braking[len(braking) // 3])
+    result, xy, info = _hold_on(chunks, k * T)
+    assert result.outcome is Outcome.DONE and result.underruns == 0  # type: ignore[attr-defined]
+    assert result.contour_error_um["max"] <= 30.0  # type: ignore[attr-defined]
+    assert _frames_to_rest(xy, info["asked"]) <= _bound(float(feed[:k].max()))
