@@ -15,8 +15,9 @@ class ParamError(Exception):
 class Parameters:
     """Numbered and named parameters with subroutine scopes.
 
-    Reading a numbered parameter that was never set is an error (LinuxCNC reads 0: a typo in
-    a parameter number would then move the machine to 0). A subroutine call starts a scope:
+    Reading a numbered parameter that was never set gives 0, as LinuxCNC reads it; the number
+    is noted in `unset_reads` so that the interpreter warns (a typo in a parameter number then
+    moves to 0, which the warning names). A subroutine call starts a scope:
     #1-#30 are its arguments (the ones not passed read 0) and named parameters without a
     leading underscore are its own; both are restored when it returns. `#<_name>` is global.
     Other parts of the interpreter (G28/G30, probing, tool length) read and write the
@@ -27,6 +28,7 @@ class Parameters:
         self.globals: dict[str, float] = {}
         self.locals: dict[str, float] = {}
         self._saved: list[tuple[dict[int, float], dict[str, float]]] = []
+        self.unset_reads: list[int] = []  # numbered parameters read as 0; the reader drains it
 
     @property
     def depth(self) -> int:
@@ -35,10 +37,15 @@ class Parameters:
 
     def get(self, number: int) -> float:
         _check_number(number)
-        try:
-            return self.numbered[number]
-        except KeyError:
-            raise ParamError(f"parameter #{number} is not set") from None
+        value = self.numbered.get(number)
+        if value is None:
+            self.unset_reads.append(number)
+            return 0.0
+        return value
+
+    def is_set(self, number: int) -> bool:
+        """Whether the numbered parameter was set (read it with `get`: 0 when it was not)."""
+        return number in self.numbered
 
     def set(self, number: int, value: float) -> None:
         _check_number(number)

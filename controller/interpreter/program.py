@@ -127,6 +127,8 @@ class Interpreter:
                     self._execute_plain(words, text, lineno)
             else:
                 line = lex_line(raw, self.path, lineno, self.params)
+                if self.params.unset_reads:
+                    self._warn_unset(lineno)
                 if line is None:
                     continue
                 if line == "%":
@@ -136,6 +138,8 @@ class Interpreter:
                 if isinstance(line, OWord):
                     self.words_seen = True
                     flow.run(line, lineno, raw)
+                    if self.params.unset_reads:
+                        self._warn_unset(lineno)
                     continue
                 self._execute(line, lineno)  # type: ignore[arg-type]
             if not emitting:
@@ -160,6 +164,13 @@ class Interpreter:
                                                    f"program ends at line {lineno}")
         yield from out
         out.clear()
+
+    def _warn_unset(self, lineno: int) -> None:
+        """Numbered parameters the line read before any setting: 0, as LinuxCNC reads them."""
+        for number in dict.fromkeys(self.params.unset_reads):
+            self.state.warn_word(lineno, f"#{number}", f"parameter #{number} is not set: read "
+                                 "as 0 (LinuxCNC's rule for a numbered parameter)")
+        self.params.unset_reads.clear()
 
     def _start_here(self, line: int) -> bool:
         """Run from `line`: the state here starts the run, unless a NURBS block is open (G5.2:

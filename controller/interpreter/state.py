@@ -181,14 +181,18 @@ class InterpState:
         self.modal.motion = code
         self.cycles.run(code, vals, lineno, new)
 
-    def warn(self, lineno: int, message: str) -> None:
+    def warn(self, lineno: int, message: str, prefix: str | None = None) -> None:
         """Note something accepted that LinuxCNC refuses (the first MAX_WARNINGS, no repeats)."""
         if self.track is None:
             return
         warnings = self.track.warnings
-        text = f"line {lineno}: {message}"
+        text = f"{prefix or f'line {lineno}'}: {message}"
         if len(warnings) < MAX_WARNINGS and text not in warnings:
             warnings.append(text)
+
+    def warn_word(self, lineno: int, word: str, message: str) -> None:
+        """Warn about a word accepted beyond LinuxCNC, naming the file, line, word and rule."""
+        self.warn(lineno, f"{word}: {message}", prefix=f"{self.path}:{lineno}")
 
     def _src(self, lineno: int) -> Source:
         return Source(self.path, lineno, lineno)
@@ -280,7 +284,7 @@ class InterpState:
         if "S" in vals:
             if vals["S"] < 0:
                 raise WordError("S", "negative spindle speed")
-            self.spindle_rpm = vals["S"]
+            self.spindle_rpm = self._clamped_rpm(vals["S"], lineno)
         if "T" in vals:
             self.tools.select(vals["T"])
         if "tool change" in mgroups:
@@ -302,6 +306,17 @@ class InterpState:
                                         self._src(lineno))
         if block is not None:  # set at rest before the line's move (M62: with that move)
             self.out.append(block)
+
+    def _clamped_rpm(self, rpm: float, lineno: int) -> float:
+        """S above io.spindle.max_rpm runs at that maximum, as grbl clamps S to its $30 (under
+        G96, S is a surface speed and is not clamped)."""
+        top = self.config.io.spindle.max_rpm
+        if self.css or rpm <= top:
+            return rpm
+        self.warn_word(lineno, f"S{rpm:g}", f"above the spindle's {top:g} rpm "
+                                            f"(io.spindle.max_rpm): clamped to {top:g} rpm "
+                                            "(grbl's rule: S is clamped to its maximum)")
+        return top
 
     def _override(self, enabled: bool, lineno: int) -> None:
         """M48/M49 (LinuxCNC): feed override on/off from this line; the stretches with it off
