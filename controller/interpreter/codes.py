@@ -56,6 +56,7 @@ M_GROUP: dict[int, str] = {
     3: "spindle", 4: "spindle", 5: "spindle",
     7: "coolant", 8: "coolant", 9: "coolant",
     48: "override", 49: "override",
+    70: "modal state", 71: "modal state", 72: "modal state", 73: "modal state",
     62: "digital output", 63: "digital output", 64: "digital output", 65: "digital output",
     67: "analog output", 68: "analog output",
 }

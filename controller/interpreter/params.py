@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
+from controller.interpreter.system_params import SystemParams, is_system_number
+
 MAX_PARAMETER = 5399  # LinuxCNC's numbered parameters
 LOCAL_NUMBERED = 30  # #1-#30 are a subroutine's arguments, saved and restored around a call
 G28_HOME = 5161  # #5161-#5166: the G28 position (X Y Z A B C, machine coordinates, program units)
@@ -29,6 +33,8 @@ class Parameters:
         self.locals: dict[str, float] = {}
         self._saved: list[tuple[dict[int, float], dict[str, float]]] = []
         self.unset_reads: list[int] = []  # numbered parameters read as 0; the reader drains it
+        self.system: SystemParams | None = None  # the read-only ones (set by the interpreter)
+        self.on_return: Callable[[int], None] | None = None  # told the depth a return closes
 
     @property
     def depth(self) -> int:
@@ -36,6 +42,8 @@ class Parameters:
         return len(self._saved)
 
     def get(self, number: int) -> float:
+        if self.system is not None and is_system_number(number):
+            return self.system.numbered(number)  # type: ignore[return-value]
         _check_number(number)
         value = self.numbered.get(number)
         if value is None:
@@ -48,20 +56,28 @@ class Parameters:
         return number in self.numbered
 
     def set(self, number: int, value: float) -> None:
+        if is_system_number(number):
+            raise ParamError(f"parameter #{number} is read-only (a system parameter)")
         _check_number(number)
         self.numbered[number] = value
 
     def get_named(self, name: str) -> float:
         store = self.globals if name.startswith("_") else self.locals
-        try:
-            return store[name]
-        except KeyError:
-            raise ParamError(f"named parameter #<{name}> is not set") from None
+        value = store.get(name)
+        if value is None and self.system is not None:
+            value = self.system.named(name)
+        if value is None:
+            raise ParamError(f"named parameter #<{name}> is not set")
+        return value
 
     def set_named(self, name: str, value: float) -> None:
+        if self.system is not None and name in self.system.named_values:
+            raise ParamError(f"parameter #<{name}> is read-only (a system parameter)")
         (self.globals if name.startswith("_") else self.locals)[name] = value
 
     def exists(self, name: str) -> bool:
+        if self.system is not None and name in self.system.named_values:
+            return True
         return name in (self.globals if name.startswith("_") else self.locals)
 
     def call(self, args: list[float]) -> None:
@@ -76,6 +92,8 @@ class Parameters:
 
     def ret(self) -> None:
         """Close the innermost subroutine scope: its caller's #1-#30 and locals come back."""
+        if self.on_return is not None:
+            self.on_return(len(self._saved))
         saved, self.locals = self._saved.pop()
         for n in range(1, LOCAL_NUMBERED + 1):
             self.numbered.pop(n, None)

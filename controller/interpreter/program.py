@@ -137,6 +137,7 @@ class Interpreter:
                     continue
                 if isinstance(line, OWord):
                     self.words_seen = True
+                    self.state.contexts.return_line = lineno  # an M73 return's blocks
                     flow.run(line, lineno, raw)
                     if self.params.unset_reads:
                         self._warn_unset(lineno)

@@ -18,10 +18,12 @@ from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
 from controller.interpreter.homes import HOME_CODES, HomePositions
 from controller.interpreter.line_state import LineState
 from controller.interpreter.modal import Modal
+from controller.interpreter.modal_save import MODAL_SAVE_CODES, ModalContexts
 from controller.interpreter.moves import MAX_BLOCK_S, Moves
 from controller.interpreter.outputs import M_LETTERS, ProgramOutputs
 from controller.interpreter.params import Parameters
 from controller.interpreter.probing import PROBE_CODE10, Probing
+from controller.interpreter.system_params import SystemParams
 from controller.interpreter.tool_length import ToolState
 from controller.interpreter.work_offsets import AXIS_CODES, WorkOffsets
 from controller.offsets import OffsetTable, ProgramOffsets
@@ -74,6 +76,9 @@ class InterpState:
                                None if track is None else track.probes)
         self.track = track
         self.params = Parameters()
+        self.params.system = SystemParams(self)
+        self.contexts = ModalContexts(self)  # M70-M73
+        self.params.on_return = self.contexts.returned
         self.cycles = CannedCycles(self.modal, self.moves, path)
         self.homes = HomePositions(self.modal, self.moves, self.params)
         self.spindle_rpm = 0.0
@@ -298,6 +303,9 @@ class InterpState:
             self.spindle_on = spindle != 5
             self.spindle_code = spindle
         for m in ms:
+            if m in MODAL_SAVE_CODES:  # after the spindle, before coolant (LinuxCNC's order)
+                self.contexts.run(m, lineno)
+        for m in ms:
             if m in (48, 49):
                 self._override(m == 48, lineno)
             if m in (7, 8, 9):
@@ -305,6 +313,17 @@ class InterpState:
         block = self.outputs.line_block(ms, vals, self._rpm(), self.modal.pos,
                                         self._src(lineno))
         if block is not None:  # set at rest before the line's move (M62: with that move)
+            self.out.append(block)
+
+    def restore_outputs(self, code: int, rpm: float, coolant: tuple[str, ...],
+                        lineno: int) -> None:
+        """M72 or M73's return: the spindle and coolant as saved, one OutputBlock if changed."""
+        ms = [code] + ([9, *(int(c[1:]) for c in coolant)] if coolant != self.coolant else [])
+        self.spindle_code, self.spindle_on = code, code != 5
+        self.spindle_rpm, self.coolant = rpm, coolant
+        block = self.outputs.line_block(ms, {"S": rpm}, self._rpm(), self.modal.pos,
+                                        self._src(lineno))
+        if block is not None:
             self.out.append(block)
 
     def _clamped_rpm(self, rpm: float, lineno: int) -> float:
