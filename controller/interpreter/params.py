@@ -1,4 +1,4 @@
-"""The parameter store: numbered (#1-#5399), named local (#<name>) and global (#<_name>)."""
+"""The parameter store: numbered (#1-#5601), named local (#<name>) and global (#<_name>)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 from controller.interpreter.system_params import SystemParams, is_system_number
 
-MAX_PARAMETER = 5399  # LinuxCNC's numbered parameters
+MAX_PARAMETER = 5601  # LinuxCNC's numbered parameters (its rs274 refuses #5602)
 LOCAL_NUMBERED = 30  # #1-#30 are a subroutine's arguments, saved and restored around a call
 G28_HOME = 5161  # #5161-#5166: the G28 position (X Y Z A B C, machine coordinates, program units)
 G30_HOME = 5181  # #5181-#5186: the G30 position

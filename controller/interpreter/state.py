@@ -292,7 +292,9 @@ class InterpState:
             self.spindle_rpm = self._clamped_rpm(vals["S"], lineno)
         if "T" in vals:
             self.tools.select(vals["T"])
-        if "tool change" in mgroups:
+        if mgroups.get("tool change") == 61:
+            self.tools.set_loaded(vals.get("Q"))
+        elif "tool change" in mgroups:
             stop = self.outputs.spindle_off(self.modal.pos, self._src(lineno))
             if stop is not None:  # M6 stops the spindle (an output), then the change
                 self.out.append(stop)

@@ -1,4 +1,4 @@
-"""LinuxCNC's read-only system parameters: #5400-#5409 (tool), #5420-#5428 (position) and the
+"""LinuxCNC's read-only system parameters: #5400-#5413 (tool), #5420-#5428 (position) and the
 named ones (#<_x>, #<_feed>, #<_imperial>, ...), read from the interpreter's state."""
 
 from __future__ import annotations
@@ -9,7 +9,9 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from controller.interpreter.state import InterpState
 
-TOOL_NUMBER = 5400  # the loaded tool; #5401-#5409 its offsets X Y Z A B C U V W
+TOOL_NUMBER = 5400  # the loaded tool; #5401-#5409 the tool offsets X Y Z A B C U V W in force
+TOOL_DIAMETER = 5410  # the loaded tool's diameter; #5411-#5413 lathe angles and orientation
+TOOL_LAST = 5413
 POSITION_FIRST = 5420  # #5420-#5428: X Y Z A B C U V W in the program frame and units
 SYSTEM_LAST = 5428
 _AXES = "xyzabcuvw"
@@ -47,12 +49,18 @@ class SystemParams:
         }
 
     def numbered(self, number: int) -> float | None:
-        """#5400-#5409 and #5420-#5428; None for any other number."""
+        """#5400-#5413 and #5420-#5428; None for any other number."""
+        state = self.state
         if number == TOOL_NUMBER:
-            return float(self.state.tools.loaded)
-        if TOOL_NUMBER < number < TOOL_NUMBER + 10:
-            # the tool length in force is the Z offset (#5403); phcnc has no other
-            return self.state.offsets.tool_mm / self.state.modal.scale if number == 5403 else 0.0
+            return float(state.tools.loaded)
+        if number == TOOL_NUMBER + 3:  # the tool length in force: phcnc's one tool offset
+            return state.offsets.tool_mm / state.modal.scale
+        if number == TOOL_DIAMETER:
+            table, loaded = state.tools.table, state.tools.loaded
+            tool = None if table is None or not loaded else table.get(loaded)
+            return 0.0 if tool is None else tool.diameter_mm / state.modal.scale
+        if TOOL_NUMBER < number <= TOOL_LAST:
+            return 0.0  # offsets on other axes, lathe angles: none in phcnc
         if POSITION_FIRST <= number <= SYSTEM_LAST:
             return self._position_of(number - POSITION_FIRST)()
         return None
@@ -76,4 +84,4 @@ class SystemParams:
 
 def is_system_number(number: int) -> bool:
     """A numbered parameter the program may read but not set."""
-    return TOOL_NUMBER <= number < TOOL_NUMBER + 10 or POSITION_FIRST <= number <= SYSTEM_LAST
+    return TOOL_NUMBER <= number <= TOOL_LAST or POSITION_FIRST <= number <= SYSTEM_LAST
