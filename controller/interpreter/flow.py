@@ -9,6 +9,7 @@ loop's line, found by the check before any motion.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -20,6 +21,10 @@ from controller.interpreter.params import ParamError, Parameters
 MAX_LOOP_PASSES = 100_000  # one loop's passes; CAM loops (pecks, passes, holes) stay far below
 MAX_TOTAL_PASSES = 1_000_000  # all loops and calls of a program together
 MAX_CALL_DEPTH = 64
+# The lines of a subroutine file (`o<name> call` of `name.ngc`) are numbered from
+# k * EXTERNAL_LINE_BASE (k = 1, 2, ...), after any line of the program itself.
+EXTERNAL_LINE_BASE = 1_000_000_000
+MAX_SUB_FILE_BYTES = 1 << 20
 _BRANCHES = frozenset(("ELSEIF", "ELSE", "ENDIF"))
 _LOOP_END = {"WHILE": "ENDWHILE", "REPEAT": "ENDREPEAT", "DO": "WHILE"}
 
@@ -33,13 +38,18 @@ class LineCursor:
         self.first_kept = 0
         self.read = 0  # lines read from the file so far
         self.next_line = 1  # the number of the line the next iteration returns
+        self.files: list[tuple[str, list[str]]] = []  # subroutine files: path, lines
 
     def __iter__(self) -> Iterator[str]:
         """The lines in the order they run (a generator: cheaper per line than __next__)."""
         raw_lines = self._raw
         while True:
             n = self.next_line
-            if n <= self.read:
+            if n >= EXTERNAL_LINE_BASE:
+                raw = self.line(n)
+                if raw is None:
+                    return
+            elif n <= self.read:
                 raw = self.kept[n - self.first_kept]  # type: ignore[index]
             else:
                 raw = next(raw_lines, None)
@@ -59,6 +69,10 @@ class LineCursor:
 
     def line(self, n: int) -> str | None:
         """Raw line n (n >= the first kept line); None after the end of the file."""
+        if n >= EXTERNAL_LINE_BASE:
+            k, i = divmod(n, EXTERNAL_LINE_BASE)
+            lines = self.files[k - 1][1]
+            return lines[i - 1] if 1 <= i <= len(lines) else None
         while self.read < n:
             try:
                 raw = next(self._raw)
@@ -70,6 +84,18 @@ class LineCursor:
 
     def jump(self, n: int) -> None:
         self.next_line = n
+
+    def add_file(self, path: str, lines: list[str]) -> int:
+        """A subroutine file's lines; returns the number its first line has here."""
+        self.files.append((path, lines))
+        return len(self.files) * EXTERNAL_LINE_BASE + 1
+
+    def locate(self, path: str, n: int) -> tuple[str, int]:
+        """The file and line that line number n is: the program's or a subroutine file's."""
+        if n < EXTERNAL_LINE_BASE:
+            return path, n
+        k, i = divmod(n, EXTERNAL_LINE_BASE)
+        return self.files[k - 1][0], i
 
 
 @dataclass(slots=True)
@@ -187,8 +213,7 @@ class Flow:
             try:
                 start, _ = self._find(ow, lineno, {"SUB"})
             except NcError:
-                raise self._error(ow, lineno, f"no subroutine O{ow.label} sub in the "
-                                              f"program") from None
+                start = self._sub_file(ow, lineno)
             self.subs[ow.label] = start
         if len(self.frames) > MAX_CALL_DEPTH:
             raise self._error(ow, lineno, f"subroutine calls nested deeper than "
@@ -203,6 +228,30 @@ class Flow:
             raise self._error(ow, lineno, str(exc)) from None
         self.frames.append(_Frame(ow.label, lineno + 1, lineno))
         self.cursor.jump(start + 1)
+
+    def _sub_file(self, ow: OWord, lineno: int) -> int:
+        """`o<name> call` of a subroutine not in the program: the `o<name> sub` of `name.ngc`
+        in the program's folder (LinuxCNC looks in its SUBROUTINE_PATH folders the same way)."""
+        missing = f"no subroutine O{ow.label} sub in the program"
+        if not ow.label.startswith("<"):
+            raise self._error(ow, lineno, missing)
+        folder = os.path.dirname(os.path.abspath(self.path))
+        sub_path = os.path.join(folder, ow.label[1:-1] + ".ngc")
+        try:
+            with open(sub_path, "rb") as f:
+                data = f.read(MAX_SUB_FILE_BYTES + 1)
+        except OSError:
+            raise self._error(ow, lineno, f"{missing} nor a file {sub_path}") from None
+        if len(data) > MAX_SUB_FILE_BYTES:
+            raise self._error(ow, lineno, f"subroutine file {sub_path} is larger than "
+                                          f"{MAX_SUB_FILE_BYTES >> 20} MiB")
+        lines = data.decode("utf-8-sig", errors="replace").splitlines()
+        first = self.cursor.add_file(sub_path, lines)
+        for n in range(first, first + len(lines)):
+            head = peek_oword(lines[n - first])
+            if head is not None and head[0] == ow.label and head[1] == "SUB":
+                return n
+        raise self._error(ow, lineno, f"{sub_path} has no O{ow.label} sub")
 
     def _endsub(self, ow: OWord, lineno: int) -> None:
         frame = self.frames[-1]

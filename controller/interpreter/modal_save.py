@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from controller.blocks import PathControl
+from controller.blocks import PathControl, Source
 from controller.interpreter.codes import WordError
 
 if TYPE_CHECKING:
@@ -95,4 +95,20 @@ class ModalContexts:
         s.tools.length_mm, s.tools.follows_loaded = snap.tool_length_mm, snap.tool_follows_loaded
         s.offsets.set_tool_length(snap.tool_mm)
         s.cycles.retract_to_r, s.css = snap.retract_to_r, snap.css
-        s.restore_outputs(snap.spindle_code, snap.spindle_rpm, snap.coolant, lineno)
+        self._restore_outputs(snap, lineno)
+
+    def _restore_outputs(self, snap: Snapshot, lineno: int) -> None:
+        """The spindle and coolant as saved: one OutputBlock if they changed."""
+        s = self.state
+        coolant = snap.coolant
+        ms = [snap.spindle_code] + (
+            [9, *(int(c[1:]) for c in coolant)] if coolant != s.coolant else []
+        )
+        s.spindle_code, s.spindle_on = snap.spindle_code, snap.spindle_code != 5
+        s.spindle_rpm, s.coolant = snap.spindle_rpm, coolant
+        rpm = None if s.css else s.spindle_rpm
+        block = s.outputs.line_block(
+            ms, {"S": s.spindle_rpm}, rpm, s.modal.pos, Source(s.path, lineno, lineno)
+        )
+        if block is not None:
+            s.out.append(block)

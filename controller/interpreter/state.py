@@ -90,6 +90,7 @@ class InterpState:
         self.ended = False
         self.mark_pending: int | None = None  # run from this line once the NURBS block ends
         self.at_line: LineState | None = None  # the state where the run from line starts
+        self.locate = lambda n: (path, n)  # line number -> (file, line): subroutine files
 
     # ---- one line ---------------------------------------------------------------------------
     def execute(self, gs: list[int], ms: list[int], vals: dict[str, float], lineno: int) -> None:
@@ -191,13 +192,17 @@ class InterpState:
         if self.track is None:
             return
         warnings = self.track.warnings
-        text = f"{prefix or f'line {lineno}'}: {message}"
+        path, line = self.locate(lineno)
+        if prefix is None:
+            prefix = f"line {line}" if path == self.path else f"{path}:{line}"
+        text = f"{prefix}: {message}"
         if len(warnings) < MAX_WARNINGS and text not in warnings:
             warnings.append(text)
 
     def warn_word(self, lineno: int, word: str, message: str) -> None:
         """Warn about a word accepted beyond LinuxCNC, naming the file, line, word and rule."""
-        self.warn(lineno, f"{word}: {message}", prefix=f"{self.path}:{lineno}")
+        path, line = self.locate(lineno)
+        self.warn(lineno, f"{word}: {message}", prefix=f"{path}:{line}")
 
     def _src(self, lineno: int) -> Source:
         return Source(self.path, lineno, lineno)
@@ -315,17 +320,6 @@ class InterpState:
         block = self.outputs.line_block(ms, vals, self._rpm(), self.modal.pos,
                                         self._src(lineno))
         if block is not None:  # set at rest before the line's move (M62: with that move)
-            self.out.append(block)
-
-    def restore_outputs(self, code: int, rpm: float, coolant: tuple[str, ...],
-                        lineno: int) -> None:
-        """M72 or M73's return: the spindle and coolant as saved, one OutputBlock if changed."""
-        ms = [code] + ([9, *(int(c[1:]) for c in coolant)] if coolant != self.coolant else [])
-        self.spindle_code, self.spindle_on = code, code != 5
-        self.spindle_rpm, self.coolant = rpm, coolant
-        block = self.outputs.line_block(ms, {"S": rpm}, self._rpm(), self.modal.pos,
-                                        self._src(lineno))
-        if block is not None:
             self.out.append(block)
 
     def _clamped_rpm(self, rpm: float, lineno: int) -> float:
