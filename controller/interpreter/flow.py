@@ -117,8 +117,11 @@ class _Frame:
 class Flow:
     """Runs O-word lines: moves the cursor, opens and closes subroutine scopes."""
 
-    def __init__(self, path: str, cursor: LineCursor, params: Parameters) -> None:
+    def __init__(self, path: str, cursor: LineCursor, params: Parameters,
+                 sub_folders: tuple[str, ...] = ()) -> None:
         self.path = path
+        # where `o<name> call` finds name.ngc: the program's folder, then the config's
+        self.sub_folders = (os.path.dirname(os.path.abspath(path)), *sub_folders)
         self.cursor = cursor
         self.params = params
         self.subs: dict[str, int] = {}  # label -> line of its `sub`
@@ -231,17 +234,22 @@ class Flow:
 
     def _sub_file(self, ow: OWord, lineno: int) -> int:
         """`o<name> call` of a subroutine not in the program: the `o<name> sub` of `name.ngc`
-        in the program's folder (LinuxCNC looks in its SUBROUTINE_PATH folders the same way)."""
+        in the program's folder or a folder of the config's gcode.subroutine_path (LinuxCNC
+        looks in its SUBROUTINE_PATH folders the same way)."""
         missing = f"no subroutine O{ow.label} sub in the program"
         if not ow.label.startswith("<"):
             raise self._error(ow, lineno, missing)
-        folder = os.path.dirname(os.path.abspath(self.path))
-        sub_path = os.path.join(folder, ow.label[1:-1] + ".ngc")
+        name = ow.label[1:-1] + ".ngc"
+        found = [p for p in (os.path.join(d, name) for d in self.sub_folders) if os.path.isfile(p)]
+        if not found:
+            raise self._error(ow, lineno, f"{missing} nor a file {name} in "
+                                          f"{', '.join(self.sub_folders)}")
+        sub_path = found[0]
         try:
             with open(sub_path, "rb") as f:
                 data = f.read(MAX_SUB_FILE_BYTES + 1)
-        except OSError:
-            raise self._error(ow, lineno, f"{missing} nor a file {sub_path}") from None
+        except OSError as exc:
+            raise self._error(ow, lineno, f"cannot read {sub_path}: {exc.strerror}") from None
         if len(data) > MAX_SUB_FILE_BYTES:
             raise self._error(ow, lineno, f"subroutine file {sub_path} is larger than "
                                           f"{MAX_SUB_FILE_BYTES >> 20} MiB")

@@ -123,7 +123,7 @@ class Interpreter:
         emitting = from_line is None
         cursor = self.cursor = LineCursor(_raw_lines(handle, self.path))
         self.state.locate = lambda n: cursor.locate(self.path, n)
-        flow = Flow(self.path, cursor, self.params)
+        flow = Flow(self.path, cursor, self.params, self.state.config.gcode.subroutine_path)
         for raw in cursor:
             lineno = cursor.next_line - 1
             if not emitting and first <= lineno < EXTERNAL_LINE_BASE:

@@ -6,10 +6,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from nc_helpers import XYZ_MILL
+import yaml
+from nc_helpers import REPO, XYZ_MILL
 
 from controller.blocks import LineBlock
-from controller.errors import NcError
+from controller.config import load_config
+from controller.errors import ConfigError, NcError
 from controller.interpreter.program import position_at_line, read_program
 from controller.offsets import ProgramOffsets
 
@@ -70,7 +72,7 @@ def test_a_missing_file_or_sub_is_an_error_at_the_call(tmp_path: Path) -> None:
     with pytest.raises(
         NcError,
         match=r"main.ngc:2:1: error: no subroutine O<gone> sub in "
-        r"the program nor a file .*gone.ngc",
+        r"the program nor a file gone.ngc in ",
     ):
         list(read_program(main, XYZ_MILL))
     write(tmp_path, "other.ngc", "o<else> sub\no<else> endsub\n")
@@ -83,3 +85,42 @@ def test_run_from_a_line_after_a_call_is_not_started_inside_the_file(tmp_path: P
     write(tmp_path, "side.ngc", SIDE)
     main = write(tmp_path, "main.ngc", "G21 F100\no<side> call [5]\nG1 X1\nG1 X2\nM2\n")
     assert position_at_line(main, XYZ_MILL, 4).position_mm == (1.0, 0.0, 0.0)
+
+
+def config_with(tmp_path: Path, gcode: object) -> object:
+    data = yaml.safe_load((REPO / "config" / "xyz_mill.yaml").read_text())
+    data["gcode"] = gcode
+    path = tmp_path / "mill.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return load_config(str(path))
+
+
+def test_the_configured_subroutine_path_is_searched_after_the_program_folder(
+    tmp_path: Path,
+) -> None:
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    write(lib, "side.ngc", SIDE)
+    progs = tmp_path / "progs"
+    progs.mkdir()
+    main = write(progs, "main.ngc", "G21 F100\no<side> call [3]\nM2\n")
+    config = config_with(tmp_path, {"subroutine_path": ["lib"]})
+    assert config.gcode.subroutine_path == (str(lib),)
+    (move,) = [b for b in read_program(main, config) if isinstance(b, LineBlock)]
+    assert move.end[0] == 3.0 and move.source.path == str(lib / "side.ngc")
+    write(progs, "side.ngc", SIDE.replace("X#1", "X[#1 + 1]"))
+    (move,) = [b for b in read_program(main, config) if isinstance(b, LineBlock)]
+    assert move.end[0] == 4.0  # the program's own folder first
+
+
+@pytest.mark.parametrize(
+    ("gcode", "message"),
+    [
+        ({"subroutine_path": ["nowhere"]}, "gcode.subroutine_path: nowhere: no such folder"),
+        ({"subroutine_path": "lib"}, "gcode.subroutine_path: must be a list of folder names"),
+        ({"sub_path": ["lib"]}, "gcode.sub_path"),
+    ],
+)
+def test_the_gcode_section_is_read_strictly(tmp_path: Path, gcode: object, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        config_with(tmp_path, gcode)
