@@ -4,13 +4,10 @@ subroutine that saved it returns."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
 from controller.blocks import PathControl, Source
 from controller.interpreter.codes import WordError
-
-if TYPE_CHECKING:
-    from controller.interpreter.state import InterpState
 
 SAVE, INVALIDATE, RESTORE, SAVE_AUTO = 70, 71, 72, 73
 MODAL_SAVE_CODES = frozenset((SAVE, INVALIDATE, RESTORE, SAVE_AUTO))
@@ -43,7 +40,7 @@ class ModalContexts:
     """One saved state per call level (LinuxCNC keeps it in the call's context): M73's is
     restored when that level's subroutine returns, and any is dropped then."""
 
-    def __init__(self, state: InterpState) -> None:
+    def __init__(self, state: Any) -> None:  # the InterpState (it imports this module)
         self.state = state
         self.saved: dict[int, tuple[Snapshot, bool]] = {}  # call level -> (state, auto)
         self.return_line = 0  # the line of the endsub/return being run, for its blocks

@@ -4,10 +4,7 @@ named ones (#<_x>, #<_feed>, #<_imperial>, ...), read from the interpreter's sta
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from controller.interpreter.state import InterpState
+from typing import Any
 
 TOOL_NUMBER = 5400  # the loaded tool; #5401-#5409 the tool offsets X Y Z A B C U V W in force
 TOOL_DIAMETER = 5410  # the loaded tool's diameter; #5411-#5413 lathe angles and orientation
@@ -20,7 +17,7 @@ _AXES = "xyzabcuvw"
 class SystemParams:
     """Values LinuxCNC computes when a program reads them (never stored: always current)."""
 
-    def __init__(self, state: InterpState) -> None:
+    def __init__(self, state: Any) -> None:  # the InterpState (it imports this module)
         self.state = state
         self.named_values: dict[str, Callable[[], float]] = {
             **{f"_{axis}": self._position_of(i) for i, axis in enumerate(_AXES)},
