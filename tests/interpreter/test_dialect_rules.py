@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from nc_helpers import XYZ_MILL
+from nc_helpers import REPO, XYZ_MILL
 
 from controller.blocks import LineBlock, OutputBlock
 from controller.errors import NcError
@@ -81,3 +81,14 @@ def test_s_at_the_maximum_and_a_surface_speed_are_not_clamped(tmp_path: Path) ->
     top = XYZ_MILL.io.spindle.max_rpm
     blocks, warnings, _ = read(tmp_path, f"G21\nM3 S{top:g}\nG96 S{top * 2:g}\nM2\n")
     assert spindle_rpms(blocks) == [top] and warnings == []
+
+
+def test_pcb2gcode_s30000_runs_at_the_spindle_maximum_with_one_warning() -> None:
+    """A CAM program asking for more rpm than xyz_mill's spindle has (pcb2gcode's lift-mill
+    test, tests/data/cam/LICENSE-NOTE.md): accepted, clamped, one warning naming line 8."""
+    path = REPO / "tests" / "data" / "cam" / "pcb2gcode" / "lift-mill" / "outline.ngc"
+    track = ProgramOffsets()
+    blocks = list(read_program(str(path), XYZ_MILL, track=track))
+    assert set(spindle_rpms(blocks)) == {XYZ_MILL.io.spindle.max_rpm}
+    assert [w.split(": ")[1] for w in track.warnings] == ["S30000"]
+    assert track.warnings[0].startswith(f"{path}:8: S30000: ")
