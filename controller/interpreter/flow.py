@@ -239,6 +239,9 @@ class Flow:
         missing = f"no subroutine O{ow.label} sub in the program"
         if not ow.label.startswith("<"):
             raise self._error(ow, lineno, missing)
+        if "/" in ow.label or "\\" in ow.label or ow.label.startswith("<."):
+            raise self._error(ow, lineno, f"{missing}; a file name without folders is looked "
+                                          "up (a name with '/', '\\' or a leading '.' is not)")
         name = ow.label[1:-1] + ".ngc"
         found = [p for p in (os.path.join(d, name) for d in self.sub_folders) if os.path.isfile(p)]
         if not found:

@@ -124,3 +124,11 @@ def test_the_configured_subroutine_path_is_searched_after_the_program_folder(
 def test_the_gcode_section_is_read_strictly(tmp_path: Path, gcode: object, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         config_with(tmp_path, gcode)
+
+
+def test_a_name_with_a_folder_is_not_looked_up(tmp_path: Path) -> None:
+    (tmp_path / "lib").mkdir()
+    write(tmp_path / "lib", "side.ngc", SIDE)
+    main = write(tmp_path, "main.ngc", "G21\no<lib/side> call\nM2\n")
+    with pytest.raises(NcError, match=r"a file name without folders is looked up"):
+        list(read_program(main, XYZ_MILL))
