@@ -11,10 +11,11 @@ printed decimals: 0.05 um in mm, 1.27 um in inch programs). rs274 prints in the 
 (USE_LENGTH_UNITS); they are converted to mm. Zero-length traverses that rs274 prints (G28
 through the point where the tool stands, a `G0` with no axis words) are dropped, as we drop them.
 NURBS programs are not compared (rs274 prints NURBS_FEED, a different form of the same curve).
-In a program that probes (G38.x) only the moves before the first probe are compared: rs274
-standalone simulates the probe tripping 0.01 in (0.254 mm) short of its end point, our check
-takes it to the end, so the positions after it differ by design. rs274 runs with an INI whose
-[RS274NGC]SUBROUTINE_PATH is the program's folder, where our check finds `o<name> call` files.
+A program that probes (G38.x) and differs is compared up to its first probe (not-compared when
+those moves are the same): rs274 standalone simulates the probe tripping 0.01 in (0.254 mm)
+short of its end point, our check takes it to the end, so positions read after it differ by
+design. A program with an `o<name> call` runs in rs274 with an INI whose
+[RS274NGC]SUBROUTINE_PATH is the program's folder, where our check finds `name.ngc`.
 
 Each file is one of: same (both accept, same moves), differ (both accept, the first move that
 differs is shown), rs274-only, ours-only (with our warning rule), both-refuse, not-compared. The
@@ -90,11 +91,21 @@ def sub_ini(folder: str, program: str) -> str:
     return path
 
 
+def _calls_by_name(program: str) -> bool:
+    """Whether the program has an `o<name> call` (which may be of a subroutine file)."""
+    with open(program, encoding="utf-8", errors="replace") as f:
+        return _NAMED_CALL_RE.search(f.read()) is not None
+
+
+_NAMED_CALL_RE = re.compile(r"o\s*<[^>]*>\s*call", re.IGNORECASE)
+
+
 def run_rs274(rs274: str, program: str, folder: str) -> Oracle:
     """rs274's canonical calls for `program`, run in `folder` (no parameter file there)."""
     try:
-        proc = subprocess.run([rs274, "-g", "-t", tool_table(folder), "-i",
-                               sub_ini(folder, program), os.path.abspath(program)],
+        ini = ["-i", sub_ini(folder, program)] if _calls_by_name(program) else []
+        proc = subprocess.run([rs274, "-g", "-t", tool_table(folder), *ini,
+                               os.path.abspath(program)],
                               cwd=folder, capture_output=True, text=True, errors="replace",
                               timeout=RS274_TIMEOUT_S, stdin=subprocess.DEVNULL, check=False)
     except subprocess.TimeoutExpired:
@@ -262,12 +273,12 @@ def compare(program: str, config: MachineConfig, rs274: str, folder: str) -> dic
         if theirs.nurbs or ours.nurbs:
             row["status"] = "not-compared"
             row["why"] = "NURBS"
-        elif theirs.probe_at is not None or ours.probe_at is not None:
-            _compare_to_probe(row, theirs, ours)
         else:
             diff = first_difference(theirs.moves, ours.moves)
             row["status"] = "differ" if diff else "same"
             row["why"] = diff or f"{len(ours.moves)} moves"
+            if diff and (theirs.probe_at is not None or ours.probe_at is not None):
+                _compare_to_probe(row, theirs, ours)
     elif theirs.accepted:
         row["status"] = "rs274-only"
     elif ours.accepted:
@@ -278,8 +289,8 @@ def compare(program: str, config: MachineConfig, rs274: str, folder: str) -> dic
 
 
 def _compare_to_probe(row: dict, theirs: Oracle, ours: Oracle) -> None:
-    """A program that probes: the moves before its first probe (what follows depends on where
-    each side takes the probe to trip)."""
+    """A program that probes and differs: the moves before its first probe (what follows
+    depends on where each side takes the probe to trip)."""
     a = theirs.moves[:theirs.probe_at if theirs.probe_at is not None else len(theirs.moves)]
     b = ours.moves[:ours.probe_at if ours.probe_at is not None else len(ours.moves)]
     diff = first_difference(a, b)
