@@ -1,4 +1,4 @@
-"""O-word control flow as LinuxCNC runs it: subroutines in the file, if, while, do, repeat.
+"""O-word control flow as LinuxCNC runs it: subroutines (in the program or a file), loops, if.
 
 The program's lines are read one at a time; from the first O-word line on they are also kept
 (`LineCursor`), since every jump lands on or after an O-word line. A program without O-words is
