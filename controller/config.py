@@ -12,6 +12,7 @@ import yaml
 
 from controller.backends import BUILTIN_BACKENDS, backend_names
 from controller.errors import ConfigError
+from controller.gcode_config import GcodeConfig, read_gcode_section
 from controller.io_config import IoConfig, read_io
 from controller.service_config import ServiceConfig, read_service
 from controller.servo_poles import pole_problem
@@ -146,6 +147,7 @@ class MachineConfig:
     allow_unhomed: bool = False  # run programs before the axes with a homing sequence are homed
     tools: ToolsConfig = field(default_factory=ToolsConfig)  # tool table, M6 position
     io: IoConfig = field(default_factory=IoConfig)  # machine outputs -> backend outputs
+    gcode: GcodeConfig = field(default_factory=GcodeConfig)  # subroutine folders
 
     @property
     def axis_names(self) -> tuple[str, ...]:
@@ -299,6 +301,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         tools=read_tools_section(top.section("tools", {}), tuple(a.name for a in axes),
                                  tuple(a.travel_mm for a in axes)),
         io=read_io(top.section("io", {})),
+        gcode=read_gcode_section(top.section("gcode", {})),
     )
     top.finish()
     _check_plan_sizes(cfg, path)

@@ -11,7 +11,7 @@ DIGITAL_SYNC, DIGITAL_NOW = (62, 63), (64, 65)  # on, off: with the next move / 
 ANALOG_SYNC, ANALOG_NOW = 67, 68
 IO_M_CODES = frozenset((3, 4, 5, 7, 8, 9, 62, 63, 64, 65, 67, 68))
 M_LETTERS = {62: frozenset("P"), 63: frozenset("P"), 64: frozenset("P"), 65: frozenset("P"),
-             67: frozenset("EQ"), 68: frozenset("EQ")}
+             67: frozenset("EQ"), 68: frozenset("EQ"), 61: frozenset("Q")}  # M61 Q: tool.py
 _DIRECTIONS = {3: "cw", 4: "ccw", 5: "off"}
 
 
