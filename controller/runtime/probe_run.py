@@ -22,6 +22,8 @@ from controller.probe import ProbeResult, ProbeResults
 from controller.runtime.current_run import CurrentRun
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.base import Drive
+from drivers.errors import DriveError
+from drivers.probe_latch import ProbeLatch
 
 TRIPPED_BY_PROBE = "the probe tripped"
 
@@ -69,7 +71,26 @@ class ProbeWatch:
             _take_back(ctrl)
             ctrl.request_abort(f"{TRIPPED_BY_PROBE} at line {line}")
         else:
+            if self.line is None:
+                self._arm(ctrl, line, code, toward)
             self.line = line
+
+    def _arm(self, ctrl: Any, line: int, code: str, toward: bool) -> None:
+        """A drive that latches the edge (CANopen's touch probe) is armed as its G38 move
+        starts: an edge before it (a move that brushes the work) is not the probe's."""
+        if isinstance(self.drive, ProbeLatch):
+            try:
+                self.drive.arm_probe(toward)
+            except DriveError as exc:
+                self._fail(ctrl, f"line {line}: {code}: arming the probe failed: {exc}")
+
+    def latched_trip_mm(self) -> tuple[float, float, float] | None:
+        """The trip point the drives latched (after the stretch, at rest), None from a drive
+        without a latch or one that latched nothing (then the encoders' at the trip stands)."""
+        if not self.tripped or not isinstance(self.drive, ProbeLatch):
+            return None
+        pulses = self.drive.probe_latch_pulses()
+        return None if pulses is None else self._xyz_mm(pulses)
 
     def _fail(self, ctrl: Any, message: str) -> None:
         self.error = message
@@ -78,10 +99,12 @@ class ProbeWatch:
     def _encoder_mm(self, ctrl: Any) -> tuple[float, float, float]:
         """Where the encoders were when the trip was seen (machine mm, Z of the start on a
         table without Z)."""
+        return self._xyz_mm(ctrl.figures.last_enc)
+
+    def _xyz_mm(self, pulses: Any) -> tuple[float, float, float]:
         xyz = list(self.start_mm)
-        enc = ctrl.figures.last_enc
         for i, axis in enumerate(self.config.axes):
-            xyz["xyz".index(axis.name)] = float(enc[i]) * axis.pulse_mm
+            xyz["xyz".index(axis.name)] = float(pulses[i]) * axis.pulse_mm
         return xyz[0], xyz[1], xyz[2]
 
 
@@ -142,7 +165,8 @@ class ProbeRun(CurrentRun):
                 return result
             stop = self.drive.commanded_xyz_mm()
             line, code = watch.line, self.lines[watch.line]
-            probe = ProbeResult(line, watch.tripped, watch.trip_mm or stop, stop)
+            trip = watch.latched_trip_mm() or watch.trip_mm or stop
+            probe = ProbeResult(line, watch.tripped, trip, stop)
             results.by_line[line] = probe
             self.on_event(io_event("probe", t_s, line, code=code, **{
                 k: v for k, v in probe.describe().items() if k != "line"}))

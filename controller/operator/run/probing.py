@@ -30,7 +30,8 @@ def run_probing(args: argparse.Namespace, config: MachineConfig, offsets: Offset
     try:
         if drive.probe_input() is None:
             refuse_probes(args.program, lines, f"the {config.drive.backend} drive has no probe "
-                          "input (the sim card's: drive option probe_workpiece_mm)")
+                          "input (drive option probe_workpiece_mm on the sim card, touch_probe "
+                          "on canopen)")
         # checked again from where the drive stands, as every run on a kept-open drive is
         check_program(args.program, config, start_mm=drive.commanded_xyz_mm(), offsets=offsets,
                       summary=False)
