@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 from test_serial_card import CLI, LINK_S, REPO
+from test_canopen_process import peer as canopen_peer
 from test_serial_card import peer as serial_peer
 
 
@@ -45,3 +46,45 @@ def test_a_serial_card_without_contact_ends_a_g38_2_as_an_error(tmp_path: Path) 
     assert done.returncode == 4
     assert "line 2: G38.2: the probe move ended without making contact" in done.stderr \
         + done.stdout
+
+
+def canopen_run(path: str, program: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*CLI, "run", str(program), "--config", "canopen", "--json",
+                           "--drive-option", f"channel={path}", "--drive-option",
+                           "touch_probe=true"], capture_output=True, text=True, timeout=120,
+                          stdin=subprocess.DEVNULL, cwd=REPO)
+
+
+def test_a_probe_on_canopen_latches_the_trip_in_the_drives_touch_probe(tmp_path: Path) -> None:
+    program = tmp_path / "probe.nc"
+    # in at F1200 (20 um per 1 ms cycle) to the face, then out of the work through it
+    program.write_text("G21 G90 F1200\nG38.2 X20\nG0 X12\nG38.4 X0\nG0 X#5061\nM2\n")
+    face_x = 10.0004  # between two of the drives' counts (1 um), crossed mid-cycle
+    with canopen_peer(f"probe_workpiece_mm={face_x},-50,-50,50,50,50") as (_, path):
+        done = canopen_run(path, program)
+    events = [json.loads(line) for line in done.stdout.splitlines()]
+    assert done.returncode == 0, done.stderr
+    made, lost = [e for e in events if e["event"] == "probe"]
+    assert (made["code"], lost["code"]) == ("G38.2", "G38.4")
+    # the drives' latch (0x60BA, then 0x60BB) to the count: the host's encoders, read a
+    # TPDO1 or more after the edge, are up to 20 um further on per cycle
+    assert made["tripped"] and made["trip_mm"][0] == pytest.approx(face_x, abs=0.0011)
+    assert lost["tripped"] and lost["trip_mm"][0] == pytest.approx(face_x, abs=0.0011)
+    # The host FIFO gives its frames back: the stop at Amax starts once the trip is seen (a
+    # TPDO1 and a look of the motion loop later), not behind the FIFO's 100 ms of frames
+    # (2 mm at 20 mm/s): under half of that, with the stop's own distance.
+    for probe, sign in ((made, 1), (lost, -1)):
+        over_mm = sign * (probe["stop_mm"][0] - probe["trip_mm"][0])
+        assert 0.0 < over_mm < 20.0 * 0.050 + 20.0**2 / (2 * 2450.0)
+    assert events[-1]["final_position_mm"]["x"] == pytest.approx(lost["trip_mm"][0], abs=0.0011)
+
+
+def test_canopen_without_a_touch_probe_refuses_a_g38_before_moving(tmp_path: Path) -> None:
+    program = tmp_path / "probe.nc"
+    program.write_text("G21 G90 F300\nG0 X1\nG38.2 X20\nM2\n")
+    with canopen_peer() as (_, path):
+        done = subprocess.run([*CLI, "run", str(program), "--config", "canopen",
+                               "--drive-option", f"channel={path}"], capture_output=True,
+                              text=True, timeout=120, stdin=subprocess.DEVNULL, cwd=REPO)
+    assert done.returncode == 2, done.stderr
+    assert "canopen drive has no probe input" in done.stderr and "touch_probe" in done.stderr
