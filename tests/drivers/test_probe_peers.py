@@ -1,5 +1,6 @@
 """G38 on the backends with a simulated peer in its own process: the serial card's probe
-input (an io bit of its status frame, docs/serial-protocol.md)."""
+input (an io bit of its status frame, docs/serial-protocol.md) and the CANopen drives' touch
+probe (docs/canopen.md)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from test_serial_card import CLI, LINK_S, REPO
 from test_canopen_process import peer as canopen_peer
+from test_serial_card import CLI, LINK_S, REPO
 from test_serial_card import peer as serial_peer
 
 
