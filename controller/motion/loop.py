@@ -77,6 +77,7 @@ class MotionController:
         self.retimer = Retimer(config)
         self.requests = OperatorRequests()
         self.work_origin_mm: tuple[float, ...] = ()  # for the progress reports' work position
+        self.keep_outputs_at_abort = False  # a probe's trip: its abort ends a stretch, not the job
 
     def _frames(self, ms: float) -> int:
         return max(1, math.ceil(ms * 1e-3 / self.period_s - 1e-9))
@@ -87,7 +88,8 @@ class MotionController:
         while self.state is not MotionState.FINISHED:
             self.pacer.wait()
             self._cycle()
-        if self.outcome not in (Outcome.DONE, None):
+        if self.outcome not in (Outcome.DONE, None) and not (
+                self.outcome is Outcome.ABORTED and self.keep_outputs_at_abort):
             self._outputs_safe()  # abort, e-stop, fault: spindle, coolant, outputs safe
         self._disable_drives()  # after an e-stop's stop: category 1
         return self._result()

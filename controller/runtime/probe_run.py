@@ -69,6 +69,7 @@ class ProbeWatch:
             self.line, self.tripped = line, True
             self.trip_mm = self._encoder_mm(ctrl)
             _take_back(ctrl)
+            ctrl.keep_outputs_at_abort = True  # spindle, coolant, outputs go on after it
             ctrl.request_abort(f"{TRIPPED_BY_PROBE} at line {line}")
         else:
             if self.line is None:
@@ -130,7 +131,8 @@ class ProbeRun(CurrentRun):
         self.on_event = on_event
         self.clock = _RunClock(options.on_progress)  # one time line over the stretches
         self.options = replace(options, on_progress=self.clock.progress
-                               if options.on_progress else None)
+                               if options.on_progress else None,
+                               on_event=self.clock.event(options.on_event))
         super().__init__()
         self.override_pct = 100.0
 
@@ -191,6 +193,17 @@ class _RunClock:
     def progress(self, p: MotionProgress) -> None:
         if self.inner is not None:
             self.inner(replace(p, elapsed_s=p.elapsed_s + self.before_s))
+
+    def event(self, inner: Callable[[dict[str, Any]], None] | None
+              ) -> Callable[[dict[str, Any]], None] | None:
+        """The motion loop's events (output changes) timed on the run's line."""
+        if inner is None:
+            return None
+
+        def on_event(e: dict[str, Any]) -> None:
+            t_s = e.get("t_s")
+            inner(e if t_s is None else e | {"t_s": round(t_s + self.before_s, 6)})
+        return on_event
 
     def stretch_done(self, runtime: Runtime) -> float:
         """The run's time at the end of this stretch."""
