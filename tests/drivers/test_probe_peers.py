@@ -7,11 +7,16 @@ from __future__ import annotations
 import json
 import subprocess
 from pathlib import Path
+from typing import Any
 
 import pytest
+import yaml
 from test_canopen_process import peer as canopen_peer
+from test_io_peers import peer as io_peer
 from test_serial_card import CLI, LINK_S, REPO
 from test_serial_card import peer as serial_peer
+
+from drivers.io_peer import read_outputs
 
 
 def test_a_probe_on_the_serial_card_through_its_peer_process(tmp_path: Path) -> None:
@@ -89,3 +94,55 @@ def test_canopen_without_a_touch_probe_refuses_a_g38_before_moving(tmp_path: Pat
                               text=True, timeout=120, stdin=subprocess.DEVNULL, cwd=REPO)
     assert done.returncode == 2, done.stderr
     assert "canopen drive has no probe input" in done.stderr and "touch_probe" in done.stderr
+
+
+def test_the_io_demo_runs_on_three_canopen_drives_with_their_touch_probe(tmp_path: Path) -> None:
+    """nc_programs/io_demo.nc (spindle, coolant, outputs, two tool changes, a probe) on the
+    mill's axes as three CiA 402 drives in the peer process."""
+    mill = yaml.safe_load((REPO / "config" / "xyz_mill.yaml").read_text())
+    mill["drive"] = yaml.safe_load((REPO / "config" / "canopen.yaml").read_text())["drive"]
+    mill["drive"]["options"] |= {"node_ids": [1, 2, 3], "counts_per_mm": [1000.0] * 3,
+                                 "touch_probe": True}
+    mill["sample_period_s"] = 0.002  # 3 drives through a pty: half the frames of 1 ms
+    config = tmp_path / "mill_canopen.yaml"
+    config.write_text(yaml.safe_dump(mill))
+    tools = tmp_path / "tool.tbl"
+    tools.write_text("T1 P1 Z5 D6\nT2 P2 Z12 D3\n")
+    record = tmp_path / "outputs.json"
+    with io_peer("canopen", config, "probe_workpiece_mm=-50,-50,-50,50,50,0",
+                 f"outputs_file={record}") as path:
+        events = run_confirming_tools([*CLI, "run", str(REPO / "nc_programs" / "io_demo.nc"),
+                                       "--config", str(config), "--tools", str(tools),
+                                       "--drive-option", f"channel={path}", "--json"])
+    kinds = [(e["event"], e.get("line")) for e in events if e["event"] != "output"]
+    assert kinds == [("start", None), ("tool", 8), ("probe", 16), ("tool", 24), ("done", 30)]
+    (probe,) = [e for e in events if e["event"] == "probe"]
+    # the drives' latch: the work's top face at machine Z0, to Z's count
+    assert probe["tripped"] and probe["trip_mm"][2] == pytest.approx(0.0, abs=0.0011)
+    assert events[-1]["final_position_mm"] == {"x": 25.0, "y": 25.0, "z": 32.0}
+    # at the peer: spindle, coolant and P0 off at the end, E0 (channel 1) as the program left it
+    held = read_outputs(str(record))
+    assert held is not None and held["bits"] == 0 and held["analog"][1] == 2.5
+
+
+def run_confirming_tools(args: list[str]) -> list[dict[str, Any]]:
+    """`cncctl run --json` answering each manual tool change with Enter; its events but the
+    progress reports. The process is stopped by its pid if it outlives the reading."""
+    proc = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=REPO)
+    events = []
+    try:
+        assert proc.stdout is not None and proc.stdin is not None
+        for line in proc.stdout:
+            event = json.loads(line)
+            if event["event"] != "progress":
+                events.append(event)
+            if event["event"] == "tool":
+                proc.stdin.write("\n")
+                proc.stdin.flush()
+        assert proc.wait(timeout=60) == 0, (events[-1], proc.stderr.read() if proc.stderr else "")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return events
