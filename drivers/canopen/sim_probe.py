@@ -9,7 +9,7 @@ from typing import Any
 
 from controller.probe import Workpiece, trip_point
 from drivers.canopen import cia402 as c
-from drivers.sim.card import workpiece_option
+from drivers.io_peer import workpiece_option
 
 PROBE_OPTIONS = frozenset({"probe_workpiece_mm"})
 
