@@ -350,7 +350,7 @@ class MotionController:
                 self.stream.pulses.counts = counts  # these frames were never queued
                 self._write_failed(exc)
                 return
-            if len(pos) and self.synced.pending:  # M62: with the first frame of its move
+            if len(pos) and (self.synced.pending or self.synced.written):  # M62: see there
                 self.synced.on_write(line, self.stream.sent)
         self.stream.sent += len(pos)
         self.sent_eos = self.sent_eos or end

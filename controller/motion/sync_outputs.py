@@ -41,7 +41,9 @@ class SyncOutputs:
 
     def on_write(self, lines: np.ndarray, first_frame: int) -> None:
         """Frames first_frame... were queued with these lines: each pending change goes with
-        the first frame of its line (the drive clocks it there, where it can)."""
+        the first frame of its line (the drive clocks it there, where it can). Frames taken
+        back (a feed hold) are written again from first_frame: theirs wait for their line."""
+        self._taken_back(first_frame)
         while self.pending:
             line, changes = self.pending[0]
             hit = np.flatnonzero(lines == line)
@@ -53,12 +55,15 @@ class SyncOutputs:
                 self.drive.schedule_outputs(changes, len(lines) - 1 - k)
             self.written.append((first_frame + k, line, changes))
 
+    def _taken_back(self, sent: int) -> None:
+        while self.written and self.written[-1][0] >= sent:
+            _, line, changes = self.written.pop()
+            self.pending.insert(0, (line, changes))
+
     def due(self, executed: int, sent: int) -> str | None:
         """Frames executed so far: the changes of those done are reported (and set, on a drive
         that does not clock them); those on frames taken back wait for their line again."""
-        while self.written and self.written[-1][0] >= sent:
-            frame, line, changes = self.written.pop()
-            self.pending.insert(0, (line, changes))
+        self._taken_back(sent)
         while self.written and self.written[0][0] < executed:
             frame, line, changes = self.written.pop(0)
             t_s = frame * self.period_s
