@@ -29,12 +29,13 @@ class SyncOutputs:
         """Rows as read: the marks taken off (the rest of the loop sees plain lines), their
         changes noted by line."""
         for k in sync_marked(rows):
-            line = int(row_lines(rows[k:k + 1])[0])
+            line = int(row_lines(rows[k : k + 1])[0])
             rows[k, -1] = float(line)
             changes = getattr(source, "next_sync_outputs", lambda: None)()
             if changes is None:
-                self.problem = f"the M62/M63/M67 changes of line {line} did not reach the " \
-                               "motion process"
+                self.problem = (
+                    f"the M62/M63/M67 changes of line {line} did not reach the motion process"
+                )
             else:
                 self.pending.append((line, changes))
         return rows

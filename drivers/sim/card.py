@@ -16,7 +16,7 @@ from controller.outputs import OutputImage
 from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, HomingError, LostCommunicationError
-from drivers.frame_outputs import FrameOutputs
+from drivers.frame_outputs import FrameOutputQueue, FrameOutputs
 from drivers.homing import plan_for
 from drivers.io_peer import (
     IO_OPTIONS,
@@ -80,8 +80,7 @@ class SimCard(Drive, FrameOutputs):
         self._messages: list[str] = []
         self._streaming = False  # frames since the last end-of-stream (an empty FIFO is an error)
         self._written = 0  # frames accepted since open (sequence numbers)
-        self._frame_outputs: list[tuple[int, Sequence[OutputChange]]] = []  # (seq, changes)
-        self.outputs_clocked: list[tuple[int, tuple]] = []  # (seq, changes) as set (tests)
+        self.frame_outputs = FrameOutputQueue()  # M62's, each set as its frame is clocked
         self._discarded = np.zeros(self.n_axes, dtype=np.int64)
         self._trace: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._comm_ok = True
@@ -119,8 +118,7 @@ class SimCard(Drive, FrameOutputs):
         with self._lock:
             got = self._fifo.recall(n, keep) if not self._status.halted else 0
             self._written -= got
-            # M62's outputs on frames taken back: the motion loop schedules them again
-            self._frame_outputs = [e for e in self._frame_outputs if e[0] < self._written]
+            self.frame_outputs.taken_back(self._written)
             return got
 
     def _send_frames(self, frames: np.ndarray, end_of_stream: bool) -> None:
@@ -180,7 +178,7 @@ class SimCard(Drive, FrameOutputs):
         self._check_comm()
         with self._lock:
             self._discarded += self._fifo.clear()
-            self._frame_outputs.clear()
+            self.frame_outputs.waiting.clear()
             self._status = CardStatus.OK
             self._messages = []
             self._streaming = False
@@ -192,7 +190,7 @@ class SimCard(Drive, FrameOutputs):
         self._check_comm()
         with self._lock:
             self._discarded += self._fifo.clear()
-            self._frame_outputs.clear()
+            self.frame_outputs.waiting.clear()
             self._streaming = False
 
     def _estop_input(self) -> bool:
@@ -344,20 +342,12 @@ class SimCard(Drive, FrameOutputs):
         cmd, enc = self._axes.step(np.concatenate([frames, idle]))
         if len(frames):
             self._trace.append((seq, cmd[: len(frames)], enc[: len(frames)]))
-            self._outputs_due(int(seq[-1]))
+            self.frame_outputs.due(int(seq[-1]), self.set_outputs)
         self.frames_clocked += n
 
     def schedule_outputs(self, changes: Sequence[OutputChange], frames_back: int) -> None:
         with self._lock:
-            self._frame_outputs.append((self._written - 1 - frames_back, changes))
-
-    def _outputs_due(self, clocked_seq: int) -> None:
-        """M62's outputs whose frame is clocked (within this clock's frames: the sim card has
-        no output hardware whose timing within them could be seen)."""
-        while self._frame_outputs and self._frame_outputs[0][0] <= clocked_seq:
-            seq, changes = self._frame_outputs.pop(0)
-            self.set_outputs(changes)
-            self.outputs_clocked.append((seq, tuple(changes)))
+            self.frame_outputs.waiting.append((self._written - 1 - frames_back, changes))
 
     def _latch(self, flag: CardStatus, message: str) -> None:
         with self._lock:

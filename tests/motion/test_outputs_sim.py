@@ -183,7 +183,7 @@ def test_a_feed_hold_at_an_output_mark_sets_it_once_and_resumes(tmp_path: Path,
     assert asked == ["hold", "resume"]
     assert changes(events) == [(4, "digital_0", True), (5, "digital_1", True)]
     assert card.output_image.bits == (1 << BIT["p0"]) | (1 << BIT["p1"])
-    ((seq, _),) = card.outputs_clocked  # the card set P0 once, at one frame
+    ((seq, _),) = card.frame_outputs.clocked  # the card set P0 once, at one frame
     assert result.final_position_mm["x"] == pytest.approx(20.0, abs=0.002)
 
 
