@@ -15,7 +15,7 @@ from dataclasses import replace
 from typing import Any
 
 from controller.config import MachineConfig
-from controller.io_events import io_event
+from controller.io_events import T_DECIMALS, io_event
 from controller.motion.loop import ESTOP_KEEP_FRAMES
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
 from controller.probe import ProbeResult, ProbeResults
@@ -202,7 +202,7 @@ class _RunClock:
 
         def on_event(e: dict[str, Any]) -> None:
             t_s = e.get("t_s")
-            inner(e if t_s is None else e | {"t_s": round(t_s + self.before_s, 6)})
+            inner(e if t_s is None else e | {"t_s": round(t_s + self.before_s, T_DECIMALS)})
         return on_event
 
     def stretch_done(self, runtime: Runtime) -> float:
