@@ -23,7 +23,7 @@ from controller.motion.model_watch import ModelWatch
 from controller.motion.outputs import OutputRunner
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter, counts_of
-from controller.motion.recall import SendState
+from controller.motion.recall import HOLD_KEEP_MS, SendState
 from controller.motion.requests import OperatorRequests
 from controller.motion.result import RunChecks, RunFigures, build_result
 from controller.motion.retime import Retimer
@@ -156,7 +156,7 @@ class MotionController:
             return
         self._supervise(fb)
         self._check_estop(level)
-        self._operator_requests(level)
+        level = self._operator_requests(level)
         if self.pending_tail is not None:
             self._send_tail(level)  # a stream's last frames, the lead settling: nothing first
         elif self.pausing and self.outcome is None:
@@ -208,9 +208,10 @@ class MotionController:
         if self.requests.abort_message is not None:
             self._begin_stop(Outcome.ABORTED, self.requests.abort_message)
 
-    def _operator_requests(self, level: int) -> None:
+    def _operator_requests(self, level: int) -> int:
         """Hold and override become the re-timer's target rate (resume: see _pause_step); a
-        slower one first takes back what the card has queued beyond its low-water mark."""
+        slower one first takes back what the card has queued beyond HOLD_KEEP_MS. Returns the
+        FIFO level after it (the refill that follows fills the card again at once)."""
         before = self.retimer.wanted
         if self.requests.hold and not self.holding:
             self.holding = True
@@ -222,8 +223,9 @@ class MotionController:
         rate = 0.0 if self.holding else override
         if rate < before and self.state is MotionState.RUNNING and not self.pausing \
                 and self.outcome is None:
-            self.stream.take_back(self.drive, level, self._frames(self.settings.low_water_ms))
+            level -= self.stream.take_back(self.drive, level, self._frames(HOLD_KEEP_MS))
         self.retimer.set_target(rate)
+        return level
 
     # -- streaming ------------------------------------------------------------------------
     def _refill(self, level: int) -> None:

@@ -165,6 +165,9 @@ class PeerCard:
         elif isinstance(frame, p.End):
             if not self.fifo.mark_end():
                 self.streaming = False
+        elif isinstance(frame, p.Recall):
+            self._recall(frame)
+            self.send_status(frame.token)
 
     def _sample(self, s: p.Sample) -> None:
         self.samples_rx += 1
@@ -186,6 +189,16 @@ class PeerCard:
         self.rx_seq = s.seq
         self.expect_seq = (s.seq + 1) % p.SEQ_MOD
         self.streaming = True
+
+    def _recall(self, r: p.Recall) -> None:
+        """Take back the samples from r.first_seq through the last received, all or none
+        (docs/serial-protocol.md, RECALL); the reply's rx_seq says which happened."""
+        if self.latched & p.ST_LATCHED or self.disabled or self.expect_seq is None:
+            return
+        n = (self.rx_seq - r.first_seq + 1) % p.SEQ_MOD
+        if 0 < n <= len(self.fifo) and self.fifo.recall(n, r.keep) == n:
+            self.rx_seq = (r.first_seq - 1) % p.SEQ_MOD
+            self.expect_seq = r.first_seq % p.SEQ_MOD
 
     # -- homing -----------------------------------------------------------------------------
     def _home(self, h: p.Home) -> None:
