@@ -258,13 +258,15 @@ class OutputChange:
 
 @dataclass(frozen=True, slots=True)
 class OutputBlock:
-    """The outputs one line changes (M3-M5 S, M7-M9, M62-M65, M67, M68), set with the machine
-    at rest at `position`; then wait_s (a spindle's spin-up) before the next move."""
+    """The outputs one line changes (M3-M5 S, M7-M9, M64, M65, M68), set with the machine
+    at rest at `position`; then wait_s (a spindle's spin-up) before the next move. synced
+    (M62, M63, M67): set at the first sample of the next move instead, without a stop."""
 
     changes: tuple[OutputChange, ...]
     position: Point3
     wait_s: float
     source: Source
+    synced: bool = False
 
 
 MotionBlock = LineBlock | ArcBlock | NurbsBlock

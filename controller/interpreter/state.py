@@ -319,8 +319,11 @@ class InterpState:
                 self.coolant = () if m == 9 else tuple(sorted({*self.coolant, f"M{m}"}))
         block = self.outputs.line_block(ms, vals, self._rpm(), self.modal.pos,
                                         self._src(lineno))
-        if block is not None:  # set at rest before the line's move (M62: with that move)
+        if block is not None:  # set at rest before the line's move
             self.out.append(block)
+        synced = self.outputs.synced_block(self.modal.pos, self._src(lineno))
+        if synced is not None:  # M62/M63/M67: with the next move (this line's, if it has one)
+            self.out.append(synced)
 
     def _clamped_rpm(self, rpm: float, lineno: int) -> float:
         """S above io.spindle.max_rpm runs at that maximum, as grbl clamps S to its $30 (under

@@ -35,6 +35,7 @@ from controller.motion.source import (
     row_lines,
 )
 from controller.motion.stopping import amax_stop_distances_mm, stop_along_path, with_lead_settled
+from controller.motion.sync_outputs import SyncOutputs
 from controller.motion.types import (
     MotionProgress,
     MotionResult,
@@ -68,6 +69,7 @@ class MotionController:
         self.config, self.drive, self.source, self.pacer = config, drive, source, pacer
         self.events = JobEvents(on_event)  # output changes (and other kinds) as they happen
         self.outputs = OutputRunner(drive, self.events)
+        self.synced = SyncOutputs(drive, self.outputs, config.sample_period_s)  # M62/M63/M67
         self.settings = settings or MotionSettings.from_config(config)
         self.on_progress = on_progress
         self.watch = watch  # external health check (dead processes): message -> stop
@@ -77,6 +79,7 @@ class MotionController:
         self.retimer = Retimer(config)
         self.requests = OperatorRequests()
         self.work_origin_mm: tuple[float, ...] = ()  # for the progress reports' work position
+        self.keep_outputs_at_abort = False  # a probe's trip: its abort ends a stretch, not the job
 
     def _frames(self, ms: float) -> int:
         return max(1, math.ceil(ms * 1e-3 / self.period_s - 1e-9))
@@ -87,7 +90,8 @@ class MotionController:
         while self.state is not MotionState.FINISHED:
             self.pacer.wait()
             self._cycle()
-        if self.outcome not in (Outcome.DONE, None):
+        if self.outcome not in (Outcome.DONE, None) and not (
+                self.outcome is Outcome.ABORTED and self.keep_outputs_at_abort):
             self._outputs_safe()  # abort, e-stop, fault: spindle, coolant, outputs safe
         self._disable_drives()  # after an e-stop's stop: category 1
         return self._result()
@@ -144,6 +148,8 @@ class MotionController:
             self.position_known = False
             self._begin_stop(Outcome.FAULT, bad.message)
         self._account(fb)
+        if (problem := self.synced.due(self.figures.executed, self.stream.sent)) is not None:
+            self._begin_stop(Outcome.FAULT, problem)
         if status.halted:
             self.figures.underruns += int(CardStatus.UNDERRUN in status)
             self._finish(Outcome.FAULT, self.drive.fault_message())
@@ -235,7 +241,8 @@ class MotionController:
         self.restarting = self.restarting and level == 0  # after a pause: empty until refilled
         finished_before, _ = self.source.state()
         ask = max(0, want + hold - len(self.stream.held))
-        rows = self.source.read(ask) if ask else np.zeros((0, self.n + 2))
+        rows = self.synced.take(self.source.read(ask) if ask else np.zeros((0, self.n + 2)),
+                                self.source)
         # Final only when a read came back short after the producer had finished.
         final = finished_before is SourceState.FINISHED and 0 < ask and len(rows) < ask
         state, problem = self.source.state()
@@ -280,7 +287,8 @@ class MotionController:
     def _read_ahead(self, max_rows: int = 4096) -> None:
         """More held rows while re-timing: a ramp looks at the rows it will cross."""
         if len(self.stream.held) < max_rows:
-            rows = self.source.read(max_rows - len(self.stream.held))
+            rows = self.synced.take(self.source.read(max_rows - len(self.stream.held)),
+                                    self.source)
             if len(rows):
                 self.stream.held = np.vstack([self.stream.held, rows])
 
@@ -344,6 +352,8 @@ class MotionController:
                 self.stream.pulses.counts = counts  # these frames were never queued
                 self._write_failed(exc)
                 return
+            if len(pos) and (self.synced.pending or self.synced.written):  # M62: see there
+                self.synced.on_write(line, self.stream.sent)
         self.stream.sent += len(pos)
         self.sent_eos = self.sent_eos or end
         self.pausing = self.pausing or pause

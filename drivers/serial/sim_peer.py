@@ -16,10 +16,9 @@ from controller.config import MachineConfig
 from controller.errors import DriveError
 from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.homing import HomingPlan
-from drivers.io_peer import limit_tripped, record_outputs
+from drivers.io_peer import limit_tripped, record_outputs, workpiece_option
 from drivers.serial import protocol as p
 from drivers.sim.axes import SimAxes, plant_of
-from drivers.sim.card import workpiece_option
 from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
 from drivers.sim.switches import SWITCH_OPTIONS, SimSwitches
