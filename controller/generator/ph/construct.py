@@ -86,7 +86,14 @@ def block_curve(block: MotionBlock, feed_cap_mm_s: float,
     p0, p1 = block.start[:2], block.end[:2]
     if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
         return None
-    return BlockCurve(LineCurve(p0, p1), feed, line, False, tol)
+    # LineCurve(p0, p1) and BlockCurve(...) without the frozen setattr per field: every G1
+    # line of a program comes here.
+    curve = object.__new__(LineCurve)
+    curve.__dict__.update(p0=p0, p1=p1)
+    bc = object.__new__(BlockCurve)
+    bc.__dict__.update(curve=curve, feed_mm_s=feed, line=line, nurbs=False,
+                       blend_tolerance_mm=tol)
+    return bc
 
 
 def find_corners(curves: list[BlockCurve], kappa_th_per_mm: float) -> dict[int, list[CornerZone]]:
