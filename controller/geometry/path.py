@@ -112,12 +112,18 @@ def make_piece(kind: PieceKind, curve: Curve, u0: float, u1: float, s0_mm: float
     return Piece(kind, curve, u0, u1, s0_mm, float(s[1] - s[0]), feed_mm_s, line, corner)
 
 
-def chain(pieces: list[Piece]) -> tuple[Piece, ...]:
-    """Re-number the path offsets so the pieces follow each other."""
+def chain(pieces: list[Piece], own: list[bool] | None = None) -> tuple[Piece, ...]:
+    """Re-number the path offsets so the pieces follow each other. own[i]: piece i was made
+    for this chain alone (no cache or earlier path holds it), so it is moved in place instead
+    of copied (a G1 window has four pieces per joint)."""
     out: list[Piece] = []
     s0 = 0.0
-    for p in pieces:
-        out.append(_moved(p, s0))
+    for i, p in enumerate(pieces):
+        if own is not None and own[i]:
+            p.__dict__["s0_mm"] = s0
+            out.append(p)
+        else:
+            out.append(_moved(p, s0))
         s0 += p.length_mm
     return tuple(out)
 
