@@ -1,19 +1,19 @@
-"""Feed hold and feed override: time and distance to a standstill against the physical minimum
-at Amax, and the latency from a `feed` change to the new feed (docs/results.md gives them).
+"""Feed hold and feed override: time and distance until the tool is at rest against the physical
+minimum at Amax, and the latency from a `feed` change to the new feed (docs/results.md gives them).
 
 Runs the motion controller on the virtual sim card (the same loop `cncctl run` uses) with the
-planned reference of a program, asks for a hold at points spread over it (or an override
-step), and reads the reference rows actually sent to the card:
+planned reference of a program and asks for a hold at points spread over it (or an override
+step). The hold is measured on the tool: the servo model of each axis (eq. 27, the plant the
+card runs) driven by the step counters the card actually clocked, frames taken back excluded
+and the pre-compensation's lead included:
 
     python bench/hold_feed.py [--program nc_programs/butterfly.nc] [--points 10] [--markdown]
                               [--config xy_table_paper]
 
-With servo pre-compensation the rows read are the wanted ones (before the lead is added); the
-frames the loop adds at a standstill for the lead to die away hold the wanted point.
-
-The physical minimum from feed v is a stop at constant deceleration Amax: v / Amax seconds over
-v^2 / (2 Amax) mm. Ours adds the card FIFO already filled (frames queued cannot be recalled:
-the decel starts behind them), and a jerk-limited ramp whose length the contour check sets.
+The tool is at rest from the first period after which it moves less than REST_STEP_MM a period
+and stays within REST_BAND_MM of where the hold leaves it. The physical minimum from tool
+speed v is a stop at constant deceleration Amax: v / Amax seconds over v^2 / (2 Amax) mm. The
+contour column is the tool's largest distance from the planned path over the hold.
 """
 
 from __future__ import annotations
@@ -35,25 +35,47 @@ from controller.motion.loop import MotionController  # noqa: E402
 from controller.motion.pacing import VirtualPacer  # noqa: E402
 from controller.motion.source import ChunkSource  # noqa: E402
 from controller.motion.types import MotionProgress, MotionSettings, MotionState  # noqa: E402
+from controller.servo.model import filter_block  # noqa: E402
+from controller.servo.path_distance import path_distance  # noqa: E402
+from controller.servo.prediction import plant_servos, rest_state  # noqa: E402
 from drivers.sim.card import SimCard  # noqa: E402
 
 CFG = load_config("xy_table")
 T = CFG.sample_period_s
 AMAX = CFG.interpolator.max_accel_mm_s2
+REST_STEP_MM = 1e-3  # at rest: under 1 um a period ...
+REST_BAND_MM = 1e-3  # ... and staying within 1 um of where it stops
+# Within two pulses: the tool's float position driven by whole pulses wanders about its final
+# point by the quantisation (the frames rounded to 1 um, the final point a whole pulse), while
+# the pre-compensation's lead dies away pulse by pulse (a single pulse moves the model's tool
+# about 1 um in that period). This criterion ignores that wander; the one above does not.
+QUANT_BAND_MM = 2e-3
+HELD_S = 0.3  # the hold is resumed this long after the loop reports HELD
 
 
 def run(chunks: tuple, at_s: float, action: str, value: float = 0.0) -> dict:
-    """One run; the action at executed time at_s. Returns the rows sent and when it acted."""
+    """One run; the action at executed time at_s. Returns the rows sent (wanted path), the
+    step counters the card clocked each period, and when it acted."""
     card = SimCard(CFG, realtime=False)
     card.open()
     settings = MotionSettings.from_config(CFG, progress_every_s=T)
     pacer = VirtualPacer(settings.cycle_frames, T, card.advance)
     sent: list[tuple[int, np.ndarray]] = []
+    clocked: list[np.ndarray] = []
     info: dict = {"held_reports": 0}
+    axes = card._axes  # noqa: SLF001 (the bench reads the simulated table's counters)
+    step = axes.step
+
+    def clock(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        cmd, enc = step(frames)
+        clocked.append(cmd[:, :2].copy())
+        return cmd, enc
+    axes.step = clock  # type: ignore[method-assign]
 
     def progress(p: MotionProgress) -> None:
         if "asked_at" not in info and p.executed_s >= at_s:
             info["asked_at"] = int(round(p.executed_s / T))  # executed frames so far
+            info["asked_clock"] = card.frames_clocked
             info["queued"] = int(round(p.fifo_ms * 1e-3 / T))
             if action == "hold":
                 ctrl.request_hold()
@@ -61,7 +83,10 @@ def run(chunks: tuple, at_s: float, action: str, value: float = 0.0) -> dict:
                 ctrl.set_feed_override(value)
         if p.state is MotionState.HELD:
             info["held_reports"] += 1
-            if info["held_reports"] == 3:
+            if info["held_reports"] == 1:
+                info["held_clock"] = card.frames_clocked
+            if info["held_reports"] == round(HELD_S / T):
+                info["resume_clock"] = card.frames_clocked
                 ctrl.request_resume()
 
     ctrl = MotionController(CFG, card, ChunkSource(chunks), pacer, settings,
@@ -69,38 +94,64 @@ def run(chunks: tuple, at_s: float, action: str, value: float = 0.0) -> dict:
     send = ctrl._send
 
     def record(rows: np.ndarray, end: bool, pause: bool = False) -> None:
-        sent.append((ctrl.sent, rows[:, :2].copy()))
+        sent.append((ctrl.stream.sent, rows[:, :2].copy()))
         send(rows, end, pause)
     ctrl._send = record  # type: ignore[method-assign]
     ctrl.run()
     card.close()
     # The rows the card ran: frames taken back for a hold are replaced by later sends; frames
     # no send recorded (a pre-compensated standstill's settling) hold the row before them.
-    xy = np.full((ctrl.sent, 2), np.nan)
+    xy = np.full((ctrl.stream.sent, 2), np.nan)
     for start, rows in sent:
-        n = max(0, min(len(rows), ctrl.sent - start))
+        n = max(0, min(len(rows), ctrl.stream.sent - start))
         xy[start: start + n] = rows[:n]
     for k in np.flatnonzero(np.isnan(xy[:, 0])):
         xy[k] = xy[k - 1]
     info["xy"] = xy
-    info["recalled"] = ctrl.recalled_frames
+    info["cmd_mm"] = np.vstack(clocked) * np.array([a.pulse_mm for a in CFG.axes[:2]])
+    info["recalled"] = ctrl.stream.recalled_frames
     return info
+
+
+def tool_mm(cmd_mm: np.ndarray) -> np.ndarray:
+    """The servo model's tool position each period, from the step counters clocked (the card
+    starts at rest at the first)."""
+    v = np.diff(cmd_mm, axis=0, prepend=cmd_mm[:1]) / T
+    servos = plant_servos(CFG)
+    sx, sy = rest_state(servos)
+    err = np.column_stack([filter_block(servos[0], v[:, 0], sx)[0],
+                           filter_block(servos[1], v[:, 1], sy)[0]])
+    return cmd_mm - err
+
+
+def rest_after(tool: np.ndarray, k0: int, k1: int, step_mm: float = REST_STEP_MM,
+               band_mm: float = REST_BAND_MM) -> int:
+    """The first period in k0..k1 from which the tool moves less than step_mm a period and
+    stays within band_mm of where it is at k1."""
+    seg = tool[k0: k1 + 1]
+    step = np.linalg.norm(np.diff(seg, axis=0, prepend=seg[:1]), axis=1)
+    off = np.linalg.norm(seg - seg[-1], axis=1)
+    moving = np.flatnonzero((step >= step_mm) | (off > band_mm))
+    return k0 + (int(moving[-1]) + 1 if moving.size else 0)
 
 
 def speeds(xy: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.diff(xy, axis=0, prepend=xy[:1]), axis=1) / T
 
 
-def hold_figures(chunks: tuple, at_s: float) -> dict:
+def hold_figures(chunks: tuple, at_s: float, path_xy: np.ndarray) -> dict:
     info = run(chunks, at_s, "hold")
-    v = speeds(info["xy"])
-    k0 = info["asked_at"]
-    v0 = float(v[k0])
-    rest = k0 + int(np.flatnonzero(v[k0:] == 0.0)[0])
-    step = np.linalg.norm(np.diff(info["xy"], axis=0), axis=1)
-    dist = float(step[k0:rest].sum())
-    return {"at_s": at_s, "v0": v0, "t_s": (rest - k0) * T, "d_mm": dist,
+    tool = tool_mm(info["cmd_mm"])
+    k0, k1 = info["asked_clock"], info["resume_clock"]
+    rest = rest_after(tool, k0, k1)
+    within = rest_after(tool, k0, k1, QUANT_BAND_MM, QUANT_BAND_MM)
+    step = np.linalg.norm(np.diff(tool, axis=0), axis=1)
+    v0 = float(step[k0 - 1]) / T
+    near = path_distance(path_xy, tool[k0: k1 + 1]).distance_mm
+    return {"at_s": at_s, "v0": v0, "t_s": (rest - k0) * T, "t_band_s": (within - k0) * T,
+            "d_mm": float(step[k0:rest].sum()),
             "t_min_s": v0 / AMAX, "d_min_mm": v0 * v0 / (2 * AMAX),
+            "contour_um": float(near.max()) * 1e3,
             "fifo_ms": info["queued"] * T * 1e3, "recalled_ms": info["recalled"] * T * 1e3}
 
 
@@ -125,6 +176,15 @@ def feed_latency(chunks: tuple, at_s: float, percent: float) -> dict:
             "settled_ms": (reached - k0) * T * 1e3, "fifo_ms": info["queued"] * T * 1e3}
 
 
+def _spread(t_s: list[float]) -> str:
+    return (f"median {statistics.median(t_s) * 1e3:.1f} ms ({min(t_s) * 1e3:.0f}-"
+            f"{max(t_s) * 1e3:.0f})")
+
+
+def _ratios(r: list[float]) -> str:
+    return f"{statistics.median(r):.2f} x the minimum (worst {max(r):.2f} x)"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--program", default=str(REPO / "nc_programs/butterfly.nc"))
@@ -138,20 +198,26 @@ def main() -> None:
     chunks = tuple(generate_reference(read_program(args.program, CFG), CFG))
     total_s = sum(len(c) for c in chunks) * T
     times = np.linspace(0.1, total_s - 0.4, args.points)
-    holds = [hold_figures(chunks, float(t)) for t in times]
-    print(f"{Path(args.program).name}: feed hold at {args.points} points (virtual time, "
-          f"Amax {AMAX:g} mm/s^2, card FIFO high water {CFG.runtime.card_fifo_high_water_ms:g} "
-          "ms)\n")
-    head = ["at t (s)", "feed (mm/s)", "to standstill (ms)", "minimum (ms)", "distance (mm)",
-            "minimum (mm)", "card FIFO (ms)", "taken back (ms)"]
+    path_xy = np.vstack([c.pos_mm[:, :2] for c in chunks])
+    holds = [hold_figures(chunks, float(t), path_xy) for t in times]
+    print(f"{Path(args.program).name}: feed hold at {args.points} points, on the tool (virtual "
+          f"time, Amax {AMAX:g} mm/s^2, card FIFO high water "
+          f"{CFG.runtime.card_fifo_high_water_ms:g} ms)\n")
+    head = ["at t (s)", "tool speed (mm/s)", "tool at rest (ms)", "within 2 um (ms)",
+            "minimum (ms)",
+            "distance (mm)", "minimum (mm)", "contour (um)", "card FIFO (ms)",
+            "taken back (ms)"]
     print("| " + " | ".join(head) + " |\n|" + "---|" * len(head))
     for h in holds:
         print(f"| {h['at_s']:.2f} | {h['v0']:.1f} | {h['t_s'] * 1e3:.0f} | "
+              f"{h['t_band_s'] * 1e3:.0f} | "
               f"{h['t_min_s'] * 1e3:.1f} | {h['d_mm']:.2f} | {h['d_min_mm']:.3f} | "
-              f"{h['fifo_ms']:.0f} | {h['recalled_ms']:.0f} |")
+              f"{h['contour_um']:.1f} | {h['fifo_ms']:.0f} | {h['recalled_ms']:.0f} |")
     ratio_t = [h["t_s"] / h["t_min_s"] for h in holds if h["t_min_s"] > 0]
-    print(f"\nmedian time to standstill {statistics.median(h['t_s'] for h in holds) * 1e3:.0f}"
-          f" ms; median ratio to the minimum {statistics.median(ratio_t):.1f}")
+    band_t = [h["t_band_s"] / h["t_min_s"] for h in holds if h["t_min_s"] > 0]
+    print(f"\ntool at rest: {_spread([h['t_s'] for h in holds])}, {_ratios(ratio_t)}; "
+          f"within 2 um: {_spread([h['t_band_s'] for h in holds])}, {_ratios(band_t)}; "
+          f"contour worst {max(h['contour_um'] for h in holds):.1f} um")
     lat = [feed_latency(chunks, float(t), 30.0) for t in times[1:-1:2]]
     print("\nfeed 100 -> 30 %: latency from the request\n")
     print("| at t (s) | first change (ms) | within 1 % of 30 % (ms) | card FIFO (ms) |\n"

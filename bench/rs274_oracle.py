@@ -11,6 +11,11 @@ printed decimals: 0.05 um in mm, 1.27 um in inch programs). rs274 prints in the 
 (USE_LENGTH_UNITS); they are converted to mm. Zero-length traverses that rs274 prints (G28
 through the point where the tool stands, a `G0` with no axis words) are dropped, as we drop them.
 NURBS programs are not compared (rs274 prints NURBS_FEED, a different form of the same curve).
+A program that probes (G38.x) and differs is compared up to its first probe (not-compared when
+those moves are the same): rs274 standalone simulates the probe tripping 0.01 in (0.254 mm)
+short of its end point, our check takes it to the end, so positions read after it differ by
+design. A program with an `o<name> call` runs in rs274 with an INI whose
+[RS274NGC]SUBROUTINE_PATH is the program's folder, where our check finds `name.ngc`.
 
 Each file is one of: same (both accept, same moves), differ (both accept, the first move that
 differs is shown), rs274-only, ours-only (with our warning rule), both-refuse, not-compared. The
@@ -31,7 +36,7 @@ import tempfile
 from collections import Counter
 from dataclasses import dataclass, field
 
-from controller.blocks import ArcBlock, HelixBlock, LineBlock, NurbsBlock
+from controller.blocks import ArcBlock, HelixBlock, LineBlock, NurbsBlock, ProbeBlock
 from controller.config import MachineConfig, load_config
 from controller.errors import CncError
 from controller.interpreter.program import read_program
@@ -68,6 +73,7 @@ class Oracle:
     moves: list[Move] = field(default_factory=list)
     message: str = ""
     nurbs: bool = False
+    probe_at: int | None = None  # moves before the first probe (None: no probe)
 
 
 def tool_table(folder: str) -> str:
@@ -77,10 +83,29 @@ def tool_table(folder: str) -> str:
     return path
 
 
+def sub_ini(folder: str, program: str) -> str:
+    """An INI whose SUBROUTINE_PATH is the program's folder (our check looks there too)."""
+    path = os.path.join(folder, "sub.ini")
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(f"[RS274NGC]\nSUBROUTINE_PATH = {os.path.dirname(os.path.abspath(program))}\n")
+    return path
+
+
+def _calls_by_name(program: str) -> bool:
+    """Whether the program has an `o<name> call` (which may be of a subroutine file)."""
+    with open(program, encoding="utf-8", errors="replace") as f:
+        return _NAMED_CALL_RE.search(f.read()) is not None
+
+
+_NAMED_CALL_RE = re.compile(r"o\s*<[^>]*>\s*call", re.IGNORECASE)
+
+
 def run_rs274(rs274: str, program: str, folder: str) -> Oracle:
     """rs274's canonical calls for `program`, run in `folder` (no parameter file there)."""
     try:
-        proc = subprocess.run([rs274, "-g", "-t", tool_table(folder), os.path.abspath(program)],
+        ini = ["-i", sub_ini(folder, program)] if _calls_by_name(program) else []
+        proc = subprocess.run([rs274, "-g", "-t", tool_table(folder), *ini,
+                               os.path.abspath(program)],
                               cwd=folder, capture_output=True, text=True, errors="replace",
                               timeout=RS274_TIMEOUT_S, stdin=subprocess.DEVNULL, check=False)
     except subprocess.TimeoutExpired:
@@ -122,6 +147,8 @@ def parse_calls(text: str) -> Oracle:
             g92 = [float(a) for a in args.split(",")[:3]]
         elif name.startswith("NURBS"):
             oracle.nurbs = True
+        elif name == "STRAIGHT_PROBE" and oracle.probe_at is None:
+            oracle.probe_at = len(collapse(list(oracle.moves)))
         elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
             v = [float(a) for a in args.split(",")]
             kind = "G0" if name == "STRAIGHT_TRAVERSE" else "G1"
@@ -167,6 +194,8 @@ def run_ours(program: str, config: MachineConfig) -> Oracle:
     for block in blocks:
         if isinstance(block, NurbsBlock):
             ours.nurbs = True
+        elif isinstance(block, ProbeBlock) and ours.probe_at is None:
+            ours.probe_at = len(collapse(list(ours.moves)))
         elif isinstance(block, LineBlock):
             ours.moves.append(Move("G0" if block.rapid else "G1", tuple(block.end),
                                    block.feed_mm_s))
@@ -248,6 +277,8 @@ def compare(program: str, config: MachineConfig, rs274: str, folder: str) -> dic
             diff = first_difference(theirs.moves, ours.moves)
             row["status"] = "differ" if diff else "same"
             row["why"] = diff or f"{len(ours.moves)} moves"
+            if diff and (theirs.probe_at is not None or ours.probe_at is not None):
+                _compare_to_probe(row, theirs, ours)
     elif theirs.accepted:
         row["status"] = "rs274-only"
     elif ours.accepted:
@@ -255,6 +286,16 @@ def compare(program: str, config: MachineConfig, rs274: str, folder: str) -> dic
     else:
         row["status"] = "both-refuse"
     return row
+
+
+def _compare_to_probe(row: dict, theirs: Oracle, ours: Oracle) -> None:
+    """A program that probes and differs: the moves before its first probe (what follows
+    depends on where each side takes the probe to trip)."""
+    a = theirs.moves[:theirs.probe_at if theirs.probe_at is not None else len(theirs.moves)]
+    b = ours.moves[:ours.probe_at if ours.probe_at is not None else len(ours.moves)]
+    diff = first_difference(a, b)
+    row["status"] = "differ" if diff else "not-compared"
+    row["why"] = diff or f"probe: the {len(b)} moves before the first probe are the same"
 
 
 def programs(paths: list[str]) -> list[str]:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from importlib.metadata import EntryPoint, entry_points
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from importlib.metadata import EntryPoint
 
 # drivers/registry.py maps each built-in name to its class; the names live here so that the
 # config check (this base layer) knows them without importing any driver.
@@ -22,6 +25,10 @@ def allow_backend(name: str) -> None:
 
 def installed_backends() -> dict[str, EntryPoint]:
     """name -> entry point of every backend an installed package provides (first one wins)."""
+    # Imported here: importlib.metadata (email, zipfile, csv) costs every command ~30 ms of
+    # start-up, and only a backend that is not built in asks for it.
+    from importlib.metadata import entry_points
+
     found: dict[str, EntryPoint] = {}
     for ep in entry_points(group=ENTRY_POINT_GROUP):
         found.setdefault(ep.name, ep)

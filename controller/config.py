@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import importlib
 import os
 from dataclasses import dataclass, field, replace
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +12,7 @@ import yaml
 
 from controller.backends import BUILTIN_BACKENDS, backend_names
 from controller.errors import ConfigError
+from controller.gcode_config import GcodeConfig, read_gcode_section
 from controller.io_config import IoConfig, read_io
 from controller.service_config import ServiceConfig, read_service
 from controller.servo_poles import pole_problem
@@ -146,6 +147,7 @@ class MachineConfig:
     allow_unhomed: bool = False  # run programs before the axes with a homing sequence are homed
     tools: ToolsConfig = field(default_factory=ToolsConfig)  # tool table, M6 position
     io: IoConfig = field(default_factory=IoConfig)  # machine outputs -> backend outputs
+    gcode: GcodeConfig = field(default_factory=GcodeConfig)  # subroutine folders
 
     @property
     def axis_names(self) -> tuple[str, ...]:
@@ -299,6 +301,7 @@ def parse_config(data: Any, path: str) -> MachineConfig:
         tools=read_tools_section(top.section("tools", {}), tuple(a.name for a in axes),
                                  tuple(a.travel_mm for a in axes)),
         io=read_io(top.section("io", {})),
+        gcode=read_gcode_section(top.section("gcode", {})),
     )
     top.finish()
     _check_plan_sizes(cfg, path)
@@ -341,8 +344,11 @@ def _check_plan_sizes(cfg: MachineConfig, path: str) -> None:
 
 def builtin_config_path(name: str) -> Path | None:
     """The installed copy of a built-in config (`xy_table`, `xyz_mill`), if there is one."""
-    candidate = resources.files("controller.machine_configs").joinpath(f"{name}.yaml")
-    return Path(str(candidate)) if candidate.is_file() else None
+    # The package's folder, not importlib.resources: that one imports tempfile, shutil and
+    # the compressors (~20 ms of every command's start-up) for the zip installs phcnc has not.
+    package = importlib.import_module("controller.machine_configs")
+    candidate = Path(package.__file__).parent / f"{name}.yaml"  # type: ignore[arg-type]
+    return candidate if candidate.is_file() else None
 
 
 def resolve_config_path(explicit: str | None = None) -> Path:

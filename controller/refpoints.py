@@ -16,7 +16,8 @@ class RefChunk:
     final marks the last chunk of the program: its last row is the programmed end point.
     pause_after marks a program pause (M0): the machine waits at rest after the last row until
     the operator resumes. outputs (OutputChange) are set when the machine, at rest, has reached
-    the first row (controller/generator/output_marks.py).
+    the first row (controller/generator/output_marks.py). sync_outputs, on a chunk of no rows:
+    (line, changes), set without a stop at the first sample of that line that follows (M62).
     """
 
     t0_s: float
@@ -26,6 +27,7 @@ class RefChunk:
     final: bool = False
     pause_after: bool = False
     outputs: tuple = ()
+    sync_outputs: tuple = ()
 
     def __len__(self) -> int:
         return int(self.pos_mm.shape[0])

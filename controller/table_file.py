@@ -4,7 +4,6 @@ written atomically so that a crash leaves the old table or the new one, never ha
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable
 
 Error = Callable[[str, str], Exception]  # (file name, message) -> the caller's error
@@ -32,6 +31,8 @@ def write_atomic(name: str, text: str, prefix: str, what: str, error: Error,
                  mode: int | None = None) -> None:
     """Write text to name: a temporary file in the same folder (with mode, if given), fsync,
     os.replace, then fsync of the folder."""
+    import tempfile  # here: reading tables (every command's start-up) does not need it
+
     folder = os.path.dirname(os.path.abspath(name))
     tmp = None
     try:

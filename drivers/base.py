@@ -129,8 +129,8 @@ class Drive(ABC):
     def recall_frames(self, n: int, keep: int) -> int:
         """Take back the last n frames queued and not yet clocked (a feed hold then starts
         behind `keep` frames instead of the whole FIFO). All or nothing: returns n, or 0 when
-        fewer than n + keep are queued, one of them ends the stream, or the backend cannot
-        (a card-side FIFO: the serial card). The sequence numbers taken back are reused."""
+        fewer than n + keep are queued, one of them ends the stream, or the backend cannot.
+        The sequence numbers taken back are reused."""
         self._require_open()
         return self._recall_frames(n, keep) if n > 0 else 0
 

@@ -1,11 +1,16 @@
 """Machine I/O of the simulated hardware (the sim card and both peers): limit switch inputs a
-test trips through a file, and the outputs recorded to a file a test reads back."""
+test trips through a file, the outputs recorded to a file a test reads back, and the work a
+probe meets."""
 
 from __future__ import annotations
 
 import json
+import math
 import os
 from typing import Any
+
+from controller.errors import DriveError
+from controller.probe import Workpiece
 
 IO_OPTIONS = frozenset({"limit_input_file", "outputs_file"})
 
@@ -57,3 +62,20 @@ def switch_side(name: str, axes: tuple[str, ...]) -> tuple[int, int] | None:
     if len(head) == 2 and head[0] in axes and head[1] in "+-" and name.endswith("limit switch"):
         return axes.index(head[0]), 1 if head[1] == "+" else -1
     return None
+
+
+def workpiece_option(value: Any, who: str) -> Workpiece | None:
+    """probe_workpiece_mm: `x0,y0,z0,x1,y1,z1` (text or six numbers), the simulated work's box
+    in machine mm (the sim card's and the peers' probe input); a DriveError naming the option
+    otherwise."""
+    if value is None:
+        return None
+    parts = value.split(",") if isinstance(value, str) else value
+    try:
+        v = [float(p) for p in parts]
+    except (TypeError, ValueError):
+        v = []
+    if len(v) != 6 or not all(map(math.isfinite, v)) or any(v[i] > v[i + 3] for i in range(3)):
+        raise DriveError(f"{who} probe_workpiece_mm: {value!r} is not a box "
+                         "x0,y0,z0,x1,y1,z1 (mm, each min at most its max)")
+    return Workpiece((v[0], v[1], v[2]), (v[3], v[4], v[5]))

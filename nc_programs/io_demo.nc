@@ -1,4 +1,5 @@
-(io_demo.nc: machine I/O on the xyz_mill: a manual tool change, tool lengths and a probe)
+(io_demo.nc: machine I/O on the xyz_mill: spindle, coolant, outputs, a manual tool change,)
+(tool lengths and a probe)
 (tools: T1 and T2 must be in the tool table in force: cncctl tool set T1 Z... D...)
 (check: cncctl check nc_programs/io_demo.nc --config xyz_mill --tools TBL; run it on the)
 (sim card with --drive-option probe_workpiece_mm=-50,-50,-50,50,50,0: the top face at Z0)
@@ -8,6 +9,8 @@ T1 M6                     (to the change position, spindle off, wait for the ope
 G43                       (T1's length in force: it follows each change from here)
 M3 S8000
 M8
+M64 P0                    (digital output P0 on at once: the dust extraction)
+M68 E0 Q2.5               (analog output E0 at once: 2.5)
 G0 X10 Y10
 F300
 G38.2 Z-30                (probe down onto the work: #5063 holds the top face)
@@ -24,4 +27,5 @@ G0 X25 Y25
 G1 Z-2 F200
 G0 Z20
 M5
+M65 P0                    (P0 off)
 M2

@@ -29,7 +29,7 @@ from controller.generator.feed.planner import plan_feed
 from controller.generator.feed.shape import TransitionShape
 from controller.generator.helix_move import helix_move
 from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
-from controller.generator.output_marks import output_mark
+from controller.generator.output_marks import SyncMark, output_mark, with_synced
 from controller.generator.ph.construct import BlockCurve, block_curve
 from controller.generator.repeats import Repeats
 from controller.generator.replan import (
@@ -321,7 +321,10 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
     _window); the other algorithms stop between windows of MAX_RUN_BLOCKS."""
     queue = LookAhead(config, Algorithm(algorithm))
     vmax = config.interpolator.max_feed_mm_s
-    for block in blocks:
+    for block in with_synced(blocks):
+        if isinstance(block, SyncMark):  # M62/M63/M67: no stop, the mark goes ahead
+            yield PlannedStep(block.chunk(config, queue.next_t0_s))
+            continue
         if _is_contour_block(block):
             parts = contour_parts(block, vmax) if not isinstance(block, NurbsBlock) else \
                 iter(nurbs_parts(block, vmax, config.interpolator.kappa_threshold_per_mm))

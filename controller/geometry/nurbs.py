@@ -5,7 +5,6 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
-from functools import cached_property
 from math import comb, factorial
 
 import numpy as np
@@ -17,7 +16,7 @@ from controller.geometry.curves import (
     curvature_derivative_from_derivatives,
     curvature_from_derivatives,
 )
-from controller.numeric import clamp
+from controller.numeric import cached_property, clamp
 
 
 def _derivative_points(knots: np.ndarray, pts: np.ndarray, p: int) -> np.ndarray:

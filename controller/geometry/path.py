@@ -91,23 +91,39 @@ class Path:
         return p.curve.evaluate(np.array([p.u1]), 0)[0, 0]
 
 
+def new_piece(kind: PieceKind, curve: Curve, u0: float, u1: float, s0_mm: float,
+              length_mm: float, feed_mm_s: float, line: int, corner: int = -1) -> Piece:
+    """Piece(...) with its fields set as they are, without the frozen dataclass's setattr per
+    field (half the cost; a G1 program makes four pieces per joint)."""
+    p = object.__new__(Piece)
+    p.__dict__.update(kind=kind, curve=curve, u0=u0, u1=u1, s0_mm=s0_mm, length_mm=length_mm,
+                      feed_mm_s=feed_mm_s, line=line, corner=corner)
+    return p
+
+
 def make_piece(kind: PieceKind, curve: Curve, u0: float, u1: float, s0_mm: float,
                feed_mm_s: float, line: int, corner: int = -1) -> Piece:
     """A piece with its length measured on the curve."""
     if isinstance(curve, ConstantSpeedCurve):  # s = u * length: s_of_u's numbers, in Python
         length = curve.length_mm
-        return Piece(kind, curve, u0, u1, s0_mm, u1 * length - u0 * length, feed_mm_s, line,
-                     corner)
+        return new_piece(kind, curve, u0, u1, s0_mm, u1 * length - u0 * length, feed_mm_s,
+                         line, corner)
     s = curve.s_of_u(np.array([u0, u1]))
     return Piece(kind, curve, u0, u1, s0_mm, float(s[1] - s[0]), feed_mm_s, line, corner)
 
 
-def chain(pieces: list[Piece]) -> tuple[Piece, ...]:
-    """Re-number the path offsets so the pieces follow each other."""
+def chain(pieces: list[Piece], own: list[bool] | None = None) -> tuple[Piece, ...]:
+    """Re-number the path offsets so the pieces follow each other. own[i]: piece i was made
+    for this chain alone (no cache or earlier path holds it), so it is moved in place instead
+    of copied (a G1 window has four pieces per joint)."""
     out: list[Piece] = []
     s0 = 0.0
-    for p in pieces:
-        out.append(_moved(p, s0))
+    for i, p in enumerate(pieces):
+        if own is not None and own[i]:
+            p.__dict__["s0_mm"] = s0
+            out.append(p)
+        else:
+            out.append(_moved(p, s0))
         s0 += p.length_mm
     return tuple(out)
 

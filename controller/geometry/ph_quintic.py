@@ -5,13 +5,14 @@ from __future__ import annotations
 import cmath
 import math
 from dataclasses import dataclass
-from functools import cached_property, lru_cache
+from functools import lru_cache
 from itertools import pairwise
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from controller.geometry.curves import curvature_derivative_from_derivatives
+from controller.numeric import cached_property
 
 _BINOM5 = np.array([1.0, 5.0, 10.0, 10.0, 5.0, 1.0])
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(64)

@@ -52,10 +52,11 @@ G_UNSUPPORTED: dict[int, str] = {
 
 M_GROUP: dict[int, str] = {
     0: "stopping", 1: "stopping", 2: "stopping", 30: "stopping",
-    6: "tool change",
+    6: "tool change", 61: "tool change",
     3: "spindle", 4: "spindle", 5: "spindle",
     7: "coolant", 8: "coolant", 9: "coolant",
     48: "override", 49: "override",
+    70: "modal state", 71: "modal state", 72: "modal state", 73: "modal state",
     62: "digital output", 63: "digital output", 64: "digital output", 65: "digital output",
     67: "analog output", 68: "analog output",
 }

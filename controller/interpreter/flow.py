@@ -1,4 +1,4 @@
-"""O-word control flow as LinuxCNC runs it: subroutines in the file, if, while, do, repeat.
+"""O-word control flow as LinuxCNC runs it: subroutines (in the program or a file), loops, if.
 
 The program's lines are read one at a time; from the first O-word line on they are also kept
 (`LineCursor`), since every jump lands on or after an O-word line. A program without O-words is
@@ -9,6 +9,7 @@ loop's line, found by the check before any motion.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -20,6 +21,10 @@ from controller.interpreter.params import ParamError, Parameters
 MAX_LOOP_PASSES = 100_000  # one loop's passes; CAM loops (pecks, passes, holes) stay far below
 MAX_TOTAL_PASSES = 1_000_000  # all loops and calls of a program together
 MAX_CALL_DEPTH = 64
+# The lines of a subroutine file (`o<name> call` of `name.ngc`) are numbered from
+# k * EXTERNAL_LINE_BASE (k = 1, 2, ...), after any line of the program itself.
+EXTERNAL_LINE_BASE = 1_000_000_000
+MAX_SUB_FILE_BYTES = 1 << 20
 _BRANCHES = frozenset(("ELSEIF", "ELSE", "ENDIF"))
 _LOOP_END = {"WHILE": "ENDWHILE", "REPEAT": "ENDREPEAT", "DO": "WHILE"}
 
@@ -33,13 +38,18 @@ class LineCursor:
         self.first_kept = 0
         self.read = 0  # lines read from the file so far
         self.next_line = 1  # the number of the line the next iteration returns
+        self.files: list[tuple[str, list[str]]] = []  # subroutine files: path, lines
 
     def __iter__(self) -> Iterator[str]:
         """The lines in the order they run (a generator: cheaper per line than __next__)."""
         raw_lines = self._raw
         while True:
             n = self.next_line
-            if n <= self.read:
+            if n >= EXTERNAL_LINE_BASE:
+                raw = self.line(n)
+                if raw is None:
+                    return
+            elif n <= self.read:
                 raw = self.kept[n - self.first_kept]  # type: ignore[index]
             else:
                 raw = next(raw_lines, None)
@@ -59,6 +69,10 @@ class LineCursor:
 
     def line(self, n: int) -> str | None:
         """Raw line n (n >= the first kept line); None after the end of the file."""
+        if n >= EXTERNAL_LINE_BASE:
+            k, i = divmod(n, EXTERNAL_LINE_BASE)
+            lines = self.files[k - 1][1]
+            return lines[i - 1] if 1 <= i <= len(lines) else None
         while self.read < n:
             try:
                 raw = next(self._raw)
@@ -70,6 +84,18 @@ class LineCursor:
 
     def jump(self, n: int) -> None:
         self.next_line = n
+
+    def add_file(self, path: str, lines: list[str]) -> int:
+        """A subroutine file's lines; returns the number its first line has here."""
+        self.files.append((path, lines))
+        return len(self.files) * EXTERNAL_LINE_BASE + 1
+
+    def locate(self, path: str, n: int) -> tuple[str, int]:
+        """The file and line that line number n is: the program's or a subroutine file's."""
+        if n < EXTERNAL_LINE_BASE:
+            return path, n
+        k, i = divmod(n, EXTERNAL_LINE_BASE)
+        return self.files[k - 1][0], i
 
 
 @dataclass(slots=True)
@@ -91,8 +117,11 @@ class _Frame:
 class Flow:
     """Runs O-word lines: moves the cursor, opens and closes subroutine scopes."""
 
-    def __init__(self, path: str, cursor: LineCursor, params: Parameters) -> None:
+    def __init__(self, path: str, cursor: LineCursor, params: Parameters,
+                 sub_folders: tuple[str, ...] = ()) -> None:
         self.path = path
+        # where `o<name> call` finds name.ngc: the program's folder, then the config's
+        self.sub_folders = (os.path.dirname(os.path.abspath(path)), *sub_folders)
         self.cursor = cursor
         self.params = params
         self.subs: dict[str, int] = {}  # label -> line of its `sub`
@@ -187,8 +216,7 @@ class Flow:
             try:
                 start, _ = self._find(ow, lineno, {"SUB"})
             except NcError:
-                raise self._error(ow, lineno, f"no subroutine O{ow.label} sub in the "
-                                              f"program") from None
+                start = self._sub_file(ow, lineno)
             self.subs[ow.label] = start
         if len(self.frames) > MAX_CALL_DEPTH:
             raise self._error(ow, lineno, f"subroutine calls nested deeper than "
@@ -203,6 +231,38 @@ class Flow:
             raise self._error(ow, lineno, str(exc)) from None
         self.frames.append(_Frame(ow.label, lineno + 1, lineno))
         self.cursor.jump(start + 1)
+
+    def _sub_file(self, ow: OWord, lineno: int) -> int:
+        """`o<name> call` of a subroutine not in the program: the `o<name> sub` of `name.ngc`
+        in the program's folder or a folder of the config's gcode.subroutine_path (LinuxCNC
+        looks in its SUBROUTINE_PATH folders the same way)."""
+        missing = f"no subroutine O{ow.label} sub in the program"
+        if not ow.label.startswith("<"):
+            raise self._error(ow, lineno, missing)
+        if "/" in ow.label or "\\" in ow.label or ow.label.startswith("<."):
+            raise self._error(ow, lineno, f"{missing}; a file name without folders is looked "
+                                          "up (a name with '/', '\\' or a leading '.' is not)")
+        name = ow.label[1:-1] + ".ngc"
+        found = [p for p in (os.path.join(d, name) for d in self.sub_folders) if os.path.isfile(p)]
+        if not found:
+            raise self._error(ow, lineno, f"{missing} nor a file {name} in "
+                                          f"{', '.join(self.sub_folders)}")
+        sub_path = found[0]
+        try:
+            with open(sub_path, "rb") as f:
+                data = f.read(MAX_SUB_FILE_BYTES + 1)
+        except OSError as exc:
+            raise self._error(ow, lineno, f"cannot read {sub_path}: {exc.strerror}") from None
+        if len(data) > MAX_SUB_FILE_BYTES:
+            raise self._error(ow, lineno, f"subroutine file {sub_path} is larger than "
+                                          f"{MAX_SUB_FILE_BYTES >> 20} MiB")
+        lines = data.decode("utf-8-sig", errors="replace").splitlines()
+        first = self.cursor.add_file(sub_path, lines)
+        for n in range(first, first + len(lines)):
+            head = peek_oword(lines[n - first])
+            if head is not None and head[0] == ow.label and head[1] == "SUB":
+                return n
+        raise self._error(ow, lineno, f"{sub_path} has no O{ow.label} sub")
 
     def _endsub(self, ow: OWord, lineno: int) -> None:
         frame = self.frames[-1]

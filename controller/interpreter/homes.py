@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from controller.interpreter.modal import Modal
 from controller.interpreter.moves import Moves
-from controller.interpreter.params import G28_HOME, G30_HOME, ParamError, Parameters
+from controller.interpreter.params import G28_HOME, G30_HOME, Parameters
 
 HOME_CODES = frozenset((280, 281, 300, 301))
 _AXES = "XYZ"
@@ -37,7 +37,4 @@ class HomePositions:
         self.moves.line_to(end, True, lineno, code)  # type: ignore[arg-type]
 
     def _stored(self, number: int) -> float:
-        try:
-            return self.params.get(number)
-        except ParamError:
-            return 0.0
+        return self.params.get(number) if self.params.is_set(number) else 0.0

@@ -11,7 +11,7 @@ DIGITAL_SYNC, DIGITAL_NOW = (62, 63), (64, 65)  # on, off: with the next move / 
 ANALOG_SYNC, ANALOG_NOW = 67, 68
 IO_M_CODES = frozenset((3, 4, 5, 7, 8, 9, 62, 63, 64, 65, 67, 68))
 M_LETTERS = {62: frozenset("P"), 63: frozenset("P"), 64: frozenset("P"), 65: frozenset("P"),
-             67: frozenset("EQ"), 68: frozenset("EQ")}
+             67: frozenset("EQ"), 68: frozenset("EQ"), 61: frozenset("Q")}  # M61 Q: tool.py
 _DIRECTIONS = {3: "cw", 4: "ccw", 5: "off"}
 
 
@@ -25,12 +25,14 @@ class ProgramOutputs:
         self.rpm = 0.0
         self.coolant = False  # mist or flood on
         self.values: dict[str, object] = {}  # every output the program has set, as set
+        self.synced: list[OutputChange] = []  # the line's M62/M63/M67: with the next move
 
     def line_block(self, ms: list[int], vals: dict[str, float], rpm: float | None,
                    position: Point3, source: Source) -> OutputBlock | None:
         """The line's OutputBlock (None when it sets no output). rpm: the S in force (None
         under G96, where S is a surface speed)."""
         changes: list[OutputChange] = []
+        self.synced = []
         wait = self._spindle(ms, vals, rpm, changes)
         for m in ms:
             if m in (7, 8, 9):
@@ -41,16 +43,24 @@ class ProgramOutputs:
                 changes += [OutputChange("coolant_mist", False),
                             OutputChange("coolant_flood", False)]
             elif m in DIGITAL_SYNC + DIGITAL_NOW:
-                changes.append(OutputChange(f"digital_{self._digital(vals, m)}",
-                                            m in (62, 64)))
+                to = self.synced if m in DIGITAL_SYNC else changes
+                to.append(OutputChange(f"digital_{self._digital(vals, m)}", m in (62, 64)))
             elif m in (ANALOG_SYNC, ANALOG_NOW):
                 index, value = self._analog(vals, m)
-                changes.append(OutputChange(f"analog_{index}", value))
+                to = self.synced if m == ANALOG_SYNC else changes
+                to.append(OutputChange(f"analog_{index}", value))
+        self.values.update((ch.name, ch.value) for ch in self.synced)
         if not changes:
             return None
         self.values.update((ch.name, ch.value) for ch in changes)
         return OutputBlock(tuple(changes), position,
                            self.io.spindle.spin_up_s if wait else 0.0, source)
+
+    def synced_block(self, position: Point3, source: Source) -> OutputBlock | None:
+        """The line's M62/M63/M67 changes (after line_block): set with the next move."""
+        if not self.synced:
+            return None
+        return OutputBlock(tuple(self.synced), position, 0.0, source, synced=True)
 
     def spindle_off(self, position: Point3, source: Source) -> OutputBlock | None:
         """M6 (a manual tool change): the spindle stopped first (None: it is)."""

@@ -8,9 +8,10 @@ the current NURBS block (at most MAX_CONTROL_POINTS points) is held.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 from typing import TextIO
 
-from controller.blocks import NcBlock, NurbsBlock
+from controller.blocks import NcBlock, NurbsBlock, Source
 from controller.config import MachineConfig, load_config
 from controller.errors import NcError
 from controller.geometry.nurbs import Nurbs
@@ -23,7 +24,7 @@ from controller.interpreter.codes import (
     g_name,
     m_refusal,
 )
-from controller.interpreter.flow import Flow, LineCursor
+from controller.interpreter.flow import EXTERNAL_LINE_BASE, Flow, LineCursor
 from controller.interpreter.lexer import CLEAN_RE, MAX_LINE_CHARS, WORD_RE, Line, lex_line
 from controller.interpreter.line_state import LineState
 from controller.interpreter.owords import NO_KEYWORD, OWord
@@ -87,7 +88,13 @@ def _open_and_run(interp: Interpreter, from_line: int | None) -> Iterator[NcBloc
     except OSError as exc:
         raise NcError(path, 0, 0, "", f"cannot open program: {exc.strerror or exc}") from exc
     with handle:
-        yield from interp.run(handle, from_line)
+        try:
+            yield from interp.run(handle, from_line)
+        except NcError as exc:
+            if exc.line < EXTERNAL_LINE_BASE or interp.cursor is None:
+                raise
+            sub_path, line = interp.cursor.locate(path, exc.line)  # in a subroutine file
+            raise NcError(sub_path, line, exc.col, exc.word, exc.message) from None
 
 
 class Interpreter:
@@ -101,6 +108,7 @@ class Interpreter:
         self.state = InterpState(path, config, start_mm, offsets, track)
         self.params = self.state.params
         self.percent_seen = False
+        self.cursor: LineCursor | None = None  # the lines, once run() opens them
         self.ended_by_percent = False
         self.words_seen = False
 
@@ -113,11 +121,12 @@ class Interpreter:
             raise NcError(self.path, first, 0, "",
                           f"cannot run from line {first}: lines are numbered from 1")
         emitting = from_line is None
-        cursor = LineCursor(_raw_lines(handle, self.path))
-        flow = Flow(self.path, cursor, self.params)
+        cursor = self.cursor = LineCursor(_raw_lines(handle, self.path))
+        self.state.locate = lambda n: cursor.locate(self.path, n)
+        flow = Flow(self.path, cursor, self.params, self.state.config.gcode.subroutine_path)
         for raw in cursor:
             lineno = cursor.next_line - 1
-            if not emitting and lineno >= first:
+            if not emitting and first <= lineno < EXTERNAL_LINE_BASE:
                 emitting = self._start_here(first)
             text = raw.upper()
             # The hot path (almost every line of a CAM program): plain ASCII words, no comment.
@@ -127,6 +136,8 @@ class Interpreter:
                     self._execute_plain(words, text, lineno)
             else:
                 line = lex_line(raw, self.path, lineno, self.params)
+                if self.params.unset_reads:
+                    self._warn_unset(lineno)
                 if line is None:
                     continue
                 if line == "%":
@@ -135,14 +146,17 @@ class Interpreter:
                     continue
                 if isinstance(line, OWord):
                     self.words_seen = True
+                    self.state.contexts.return_line = lineno  # an M73 return's blocks
                     flow.run(line, lineno, raw)
+                    if self.params.unset_reads:
+                        self._warn_unset(lineno)
                     continue
                 self._execute(line, lineno)  # type: ignore[arg-type]
             if not emitting:
                 emitting = self.state.at_line is not None
             if out:
                 if emitting:
-                    yield from out
+                    yield from (out if lineno < EXTERNAL_LINE_BASE else self._located(out))
                 out.clear()
             if self.state.ended or self.state.probing.stop_reading:
                 break  # M2/M30, or a probe whose result decides the rest (a run)
@@ -160,6 +174,23 @@ class Interpreter:
                                                    f"program ends at line {lineno}")
         yield from out
         out.clear()
+
+    def _located(self, blocks: list[NcBlock]) -> list[NcBlock]:
+        """Blocks of a subroutine file's lines, with that file and its line numbers."""
+        located = []
+        for block in blocks:
+            src = block.source
+            path, first = self.cursor.locate(self.path, src.first_line)  # type: ignore[union-attr]
+            last = first + src.last_line - src.first_line
+            located.append(replace(block, source=Source(path, first, last)))  # type: ignore[type-var]
+        return located
+
+    def _warn_unset(self, lineno: int) -> None:
+        """Numbered parameters the line read before any setting: 0, as LinuxCNC reads them."""
+        for number in dict.fromkeys(self.params.unset_reads):
+            self.state.warn_word(lineno, f"#{number}", f"parameter #{number} is not set: read "
+                                 "as 0 (LinuxCNC's rule for a numbered parameter)")
+        self.params.unset_reads.clear()
 
     def _start_here(self, line: int) -> bool:
         """Run from `line`: the state here starts the run, unless a NURBS block is open (G5.2:

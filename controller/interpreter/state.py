@@ -18,10 +18,12 @@ from controller.interpreter.codes import G_GROUP, M_GROUP, WordError, g_name
 from controller.interpreter.homes import HOME_CODES, HomePositions
 from controller.interpreter.line_state import LineState
 from controller.interpreter.modal import Modal
+from controller.interpreter.modal_save import MODAL_SAVE_CODES, ModalContexts
 from controller.interpreter.moves import MAX_BLOCK_S, Moves
 from controller.interpreter.outputs import M_LETTERS, ProgramOutputs
 from controller.interpreter.params import Parameters
 from controller.interpreter.probing import PROBE_CODE10, Probing
+from controller.interpreter.system_params import SystemParams
 from controller.interpreter.tool_length import ToolState
 from controller.interpreter.work_offsets import AXIS_CODES, WorkOffsets
 from controller.offsets import OffsetTable, ProgramOffsets
@@ -74,6 +76,9 @@ class InterpState:
                                None if track is None else track.probes)
         self.track = track
         self.params = Parameters()
+        self.params.system = SystemParams(self)
+        self.contexts = ModalContexts(self)  # M70-M73
+        self.params.on_return = self.contexts.returned
         self.cycles = CannedCycles(self.modal, self.moves, path)
         self.homes = HomePositions(self.modal, self.moves, self.params)
         self.spindle_rpm = 0.0
@@ -85,6 +90,7 @@ class InterpState:
         self.ended = False
         self.mark_pending: int | None = None  # run from this line once the NURBS block ends
         self.at_line: LineState | None = None  # the state where the run from line starts
+        self.locate = lambda n: (path, n)  # line number -> (file, line): subroutine files
 
     # ---- one line ---------------------------------------------------------------------------
     def execute(self, gs: list[int], ms: list[int], vals: dict[str, float], lineno: int) -> None:
@@ -181,14 +187,22 @@ class InterpState:
         self.modal.motion = code
         self.cycles.run(code, vals, lineno, new)
 
-    def warn(self, lineno: int, message: str) -> None:
+    def warn(self, lineno: int, message: str, prefix: str | None = None) -> None:
         """Note something accepted that LinuxCNC refuses (the first MAX_WARNINGS, no repeats)."""
         if self.track is None:
             return
         warnings = self.track.warnings
-        text = f"line {lineno}: {message}"
+        path, line = self.locate(lineno)
+        if prefix is None:
+            prefix = f"line {line}" if path == self.path else f"{path}:{line}"
+        text = f"{prefix}: {message}"
         if len(warnings) < MAX_WARNINGS and text not in warnings:
             warnings.append(text)
+
+    def warn_word(self, lineno: int, word: str, message: str) -> None:
+        """Warn about a word accepted beyond LinuxCNC, naming the file, line, word and rule."""
+        path, line = self.locate(lineno)
+        self.warn(lineno, f"{word}: {message}", prefix=f"{path}:{line}")
 
     def _src(self, lineno: int) -> Source:
         return Source(self.path, lineno, lineno)
@@ -280,10 +294,12 @@ class InterpState:
         if "S" in vals:
             if vals["S"] < 0:
                 raise WordError("S", "negative spindle speed")
-            self.spindle_rpm = vals["S"]
+            self.spindle_rpm = self._clamped_rpm(vals["S"], lineno)
         if "T" in vals:
             self.tools.select(vals["T"])
-        if "tool change" in mgroups:
+        if mgroups.get("tool change") == 61:
+            self.tools.set_loaded(vals.get("Q"))
+        elif "tool change" in mgroups:
             stop = self.outputs.spindle_off(self.modal.pos, self._src(lineno))
             if stop is not None:  # M6 stops the spindle (an output), then the change
                 self.out.append(stop)
@@ -294,14 +310,31 @@ class InterpState:
             self.spindle_on = spindle != 5
             self.spindle_code = spindle
         for m in ms:
+            if m in MODAL_SAVE_CODES:  # after the spindle, before coolant (LinuxCNC's order)
+                self.contexts.run(m, lineno)
+        for m in ms:
             if m in (48, 49):
                 self._override(m == 48, lineno)
             if m in (7, 8, 9):
                 self.coolant = () if m == 9 else tuple(sorted({*self.coolant, f"M{m}"}))
         block = self.outputs.line_block(ms, vals, self._rpm(), self.modal.pos,
                                         self._src(lineno))
-        if block is not None:  # set at rest before the line's move (M62: with that move)
+        if block is not None:  # set at rest before the line's move
             self.out.append(block)
+        synced = self.outputs.synced_block(self.modal.pos, self._src(lineno))
+        if synced is not None:  # M62/M63/M67: with the next move (this line's, if it has one)
+            self.out.append(synced)
+
+    def _clamped_rpm(self, rpm: float, lineno: int) -> float:
+        """S above io.spindle.max_rpm runs at that maximum, as grbl clamps S to its $30 (under
+        G96, S is a surface speed and is not clamped)."""
+        top = self.config.io.spindle.max_rpm
+        if self.css or rpm <= top:
+            return rpm
+        self.warn_word(lineno, f"S{rpm:g}", f"above the spindle's {top:g} rpm "
+                                            f"(io.spindle.max_rpm): clamped to {top:g} rpm "
+                                            "(grbl's rule: S is clamped to its maximum)")
+        return top
 
     def _override(self, enabled: bool, lineno: int) -> None:
         """M48/M49 (LinuxCNC): feed override on/off from this line; the stretches with it off

@@ -45,6 +45,20 @@ class ToolState:
             raise WordError("T", f"T{number} is not in the tool table (`cncctl tool list`)")
         self.selected = number
 
+    def set_loaded(self, value: float | None) -> None:
+        """M61 Q: the tool in the spindle is Q, without a change (LinuxCNC); like M6, a G43
+        that follows the loaded tool puts its length in force."""
+        if value is None:
+            raise WordError("M61", "M61 needs Q (the tool number)")
+        if value < 0 or value != int(value):
+            raise WordError("Q", "M61 Q must be a non-negative integer")
+        number = int(value)
+        if self.table is not None and number and self.table.get(number) is None:
+            raise WordError("Q", f"T{number} is not in the tool table (`cncctl tool list`)")
+        self.loaded = number
+        if self.follows_loaded:
+            self._put_length(self._length_of(number, "Q"), "M61")
+
     def change(self, lineno: int) -> None:
         """M6 (the spindle already stopped, an OutputBlock): go to the change position, pause
         for the operator, then the new tool is loaded."""

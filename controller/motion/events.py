@@ -1,10 +1,13 @@
 """A job's event stream: one dict per thing that happened at a point of the program (an output
-changed; tool changes and probe results are further kinds), with its motion time and line."""
+changed; tool changes and probe results are further kinds), with its motion time and line,
+built by controller/io_events.py as every event line is."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from typing import Any
+
+from controller.io_events import io_event
 
 EventFn = Callable[[dict[str, Any]], None]
 MAX_KEPT = 10_000  # events kept for the result; a longer job's earlier ones were reported live
@@ -20,7 +23,7 @@ class JobEvents:
         self.count = 0
 
     def emit(self, kind: str, t_s: float, line: int, **what: Any) -> dict[str, Any]:
-        event = {"event": kind, "t_s": round(float(t_s), 6), "line": int(line), **what}
+        event = io_event(kind, t_s, line, **what)  # the one shape of every event line
         self.count += 1
         if len(self.kept) < MAX_KEPT:
             self.kept.append(event)

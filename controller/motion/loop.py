@@ -24,7 +24,7 @@ from controller.motion.model_watch import ModelWatch
 from controller.motion.outputs import OutputRunner
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter, counts_of
-from controller.motion.recall import SendState, Sent
+from controller.motion.recall import HOLD_KEEP_MS, SendState, Sent
 from controller.motion.requests import OperatorRequests
 from controller.motion.result import RunChecks, RunFigures, build_result
 from controller.motion.retime import Retimer
@@ -36,6 +36,7 @@ from controller.motion.source import (
     row_lines,
 )
 from controller.motion.stopping import amax_stop_distances_mm, stop_along_path, with_lead_settled
+from controller.motion.sync_outputs import SyncOutputs
 from controller.motion.types import (
     MotionProgress,
     MotionResult,
@@ -69,6 +70,7 @@ class MotionController:
         self.config, self.drive, self.source, self.pacer = config, drive, source, pacer
         self.events = JobEvents(on_event)  # output changes (and other kinds) as they happen
         self.outputs = OutputRunner(drive, self.events)
+        self.synced = SyncOutputs(drive, self.outputs, config.sample_period_s)  # M62/M63/M67
         self.settings = settings or MotionSettings.from_config(config)
         self.on_progress = on_progress
         self.watch = watch  # external health check (dead processes): message -> stop
@@ -78,6 +80,7 @@ class MotionController:
         self.retimer = Retimer(config)
         self.requests = OperatorRequests()
         self.work_origin_mm: tuple[float, ...] = ()  # for the progress reports' work position
+        self.keep_outputs_at_abort = False  # a probe's trip: its abort ends a stretch, not the job
 
     def _frames(self, ms: float) -> int:
         return max(1, math.ceil(ms * 1e-3 / self.period_s - 1e-9))
@@ -88,7 +91,8 @@ class MotionController:
         while self.state is not MotionState.FINISHED:
             self._wait()
             self._cycle()
-        if self.outcome not in (Outcome.DONE, None):
+        if self.outcome not in (Outcome.DONE, None) and not (
+                self.outcome is Outcome.ABORTED and self.keep_outputs_at_abort):
             self._outputs_safe()  # abort, e-stop, fault: spindle, coolant, outputs safe
         self._disable_drives()  # after an e-stop's stop: category 1
         return self._result()
@@ -170,7 +174,8 @@ class MotionController:
                 and not self.pausing and not self.holding and not self.restarting
                 and self.pending_tail is None and self.retimer.identity and not r.hold
                 and not r.resume and r.abort_message is None and r.estop_message is None
-                and self.estop_reason is None)
+                and self.estop_reason is None and not self.synced.pending
+                and not self.synced.written)  # M62's outputs: set and reported per cycle
 
     def _fault_rows(self, fb: Feedback) -> int | None:
         """Rows of a virtual-time block read before a fault a cycle would have acted on."""
@@ -189,13 +194,15 @@ class MotionController:
             self.position_known = False
             self._begin_stop(Outcome.FAULT, bad.message)
         self._account(fb)
+        if (problem := self.synced.due(self.figures.executed, self.stream.sent)) is not None:
+            self._begin_stop(Outcome.FAULT, problem)
         if status.halted:
             self.figures.underruns += int(CardStatus.UNDERRUN in status)
             self._finish(Outcome.FAULT, self.drive.fault_message())
             return
         self._supervise(fb)
         self._check_estop(level)
-        self._operator_requests(level)
+        level = self._operator_requests(level)
         if self.pending_tail is not None:
             self._send_tail(level)  # a stream's last frames, the lead settling: nothing first
         elif self.pausing and self.outcome is None:
@@ -248,9 +255,10 @@ class MotionController:
         if self.requests.abort_message is not None:
             self._begin_stop(Outcome.ABORTED, self.requests.abort_message)
 
-    def _operator_requests(self, level: int) -> None:
+    def _operator_requests(self, level: int) -> int:
         """Hold and override become the re-timer's target rate (resume: see _pause_step); a
-        slower one first takes back what the card has queued beyond its low-water mark."""
+        slower one first takes back what the card has queued beyond HOLD_KEEP_MS. Returns the
+        FIFO level after it (the refill that follows fills the card again at once)."""
         before = self.retimer.wanted
         if self.requests.hold and not self.holding:
             self.holding = True
@@ -262,8 +270,9 @@ class MotionController:
         rate = 0.0 if self.holding else override
         if rate < before and self.state is MotionState.RUNNING and not self.pausing \
                 and self.outcome is None:
-            self.stream.take_back(self.drive, level, self._frames(self.settings.low_water_ms))
+            level -= self.stream.take_back(self.drive, level, self._frames(HOLD_KEEP_MS))
         self.retimer.set_target(rate)
+        return level
 
     # -- streaming ------------------------------------------------------------------------
     def _refill(self, level: int) -> None:
@@ -284,7 +293,8 @@ class MotionController:
             return  # a block at a time: the FIFO holds more than high water less a block
         finished_before, _ = self.source.state()
         ask = max(0, want + hold - len(self.stream.held))
-        rows = self.source.read(ask) if ask else np.zeros((0, self.n + 2))
+        rows = self.synced.take(self.source.read(ask) if ask else np.zeros((0, self.n + 2)),
+                                self.source)
         # Final only when a read came back short after the producer had finished.
         final = finished_before is SourceState.FINISHED and 0 < ask and len(rows) < ask
         state, problem = self.source.state()
@@ -342,7 +352,8 @@ class MotionController:
     def _read_ahead(self, max_rows: int = 4096) -> None:
         """More held rows while re-timing: a ramp looks at the rows it will cross."""
         if len(self.stream.held) < max_rows:
-            rows = self.source.read(max_rows - len(self.stream.held))
+            rows = self.synced.take(self.source.read(max_rows - len(self.stream.held)),
+                                    self.source)
             if len(rows):
                 self.stream.held = np.vstack([self.stream.held, rows])
 
@@ -406,6 +417,8 @@ class MotionController:
                 self.stream.pulses.counts = counts  # these frames were never queued
                 self._write_failed(exc)
                 return
+            if len(pos) and (self.synced.pending or self.synced.written):  # M62: see there
+                self.synced.on_write(line, self.stream.sent)
         self.stream.sent += len(pos)
         self.sent_eos = self.sent_eos or end
         self.pausing = self.pausing or pause

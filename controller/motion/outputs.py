@@ -36,6 +36,10 @@ class OutputRunner:
         self._report(changed, t_s, line, safe=True)
         return None
 
+    def report(self, changes: list[OutputChange], t_s: float, line: int) -> None:
+        """Changes the drive made itself (M62's, as it clocked their frame)."""
+        self._report(changes, t_s, line)
+
     def _report(self, changed: list[OutputChange], t_s: float, line: int,
                 safe: bool = False) -> None:
         for change in changed:

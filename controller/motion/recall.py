@@ -14,6 +14,10 @@ from controller.motion.pulses import PulseCounter
 from controller.motion.retime import Retimer
 from drivers.base import Drive
 
+# A hold or a lower override keeps this much queued when it takes frames back: the card runs
+# it while the loop plans the ramp (about a millisecond: the servo model's check) and writes
+# it, so the ramp starts this soon after the request, not behind the low-water mark (20 ms).
+HOLD_KEEP_MS = 5.0
 JOURNAL_ENTRIES = 512  # sends remembered; more than a FIFO's worth at two frames a cycle
 RETIMER_FIELDS = ("rate", "target", "wanted", "ramp", "frac", "back", "recent", "rows_passed",
                   "cap_at", "cap_goal", "cap_wanted")
@@ -110,14 +114,15 @@ class SendState:
                     self.pulses.counts, self.hist.count,
                     None if self.precomp is None else self.precomp.state())
 
-    def take_back(self, drive: Drive, level: int, keep_frames: int) -> None:
+    def take_back(self, drive: Drive, level: int, keep_frames: int) -> int:
         """A hold, a lower override or an e-stop: take back the frames queued beyond
         keep_frames (where the drive can), undoing their sends, so the new ramp starts there
-        instead of behind the whole FIFO. The ramp is planned from the state restored."""
+        instead of behind the whole FIFO. The ramp is planned from the state restored.
+        Returns the frames taken back (0: none, nothing changed)."""
         undo = self.journal.newest_within(level - keep_frames)
         total = sum(e.frames for e in undo)
         if not undo or drive.recall_frames(total, keep_frames) != total:
-            return
+            return 0
         oldest = undo[-1]
         restore_retimer(self.retimer, oldest.retimer)
         self.prev_mm, self.last_mm = oldest.prev_mm, oldest.last_mm
@@ -129,3 +134,4 @@ class SendState:
         self.held = np.vstack([e.consumed for e in reversed(undo)] + [self.held])
         self.journal.drop(len(undo))
         self.recalled_frames += total
+        return total

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import MachineConfig
+from controller.motion.hold_ramp import PathRamp, hold_distances_mm, hold_steps
 from controller.servo.model import filter_block
 from controller.servo.prediction import (
     SETTLE_S,
@@ -16,6 +17,7 @@ from controller.servo.prediction import (
     rest_state,
 )
 from controller.servo.true_distance import distance_from_reference_mm
+from controller.transition_shape import TransitionShape
 
 ACCEL_MARGIN = 0.98  # first guess of a ramp: this share of Amax for the rate change alone
 MIN_RAMP_S = 0.01
@@ -28,6 +30,11 @@ HORIZON_ROWS = 600  # above 100 %: rows looked at ahead for what would break a l
 RATE_STEP = 0.05  # above 100 %: the scale goes up in steps this big (no ramp per row)
 CAP_EVERY_ROWS = 20  # ... looked at again after this many rows (the horizon is 600)
 CONTOUR_SHARE = 0.9  # above 100 %: the plan's error times rate^2 kept within this of the limit
+HOLD_MEMORY = 96  # outputs that start the model of a hold's check (its slowest mode, 11 ms,
+#                  has died away to 0.02 % in them)
+HOLD_TRIES = 5  # a hold's ramp: at Amax, then (if the model check fails) longer; a bound
+HOLD_MARGIN = 1.1  # ... by the error's ratio to the limit and this margin
+HOLD_GROWTH_MIN, HOLD_GROWTH_MAX = 1.5, 4.0  # ... at least and at most this much a try
 
 
 def smoothstep5(u: np.ndarray) -> np.ndarray:
@@ -85,9 +92,10 @@ class Retimer:
     rate is a quintic ramp, lengthened until the tangential acceleration of the re-timed
     points, rate^2 a + rate' v, stays within Amax on the rows it will cross, and until the
     servo model's distance of the tool from the points sent stays within the contour limit
-    (the hold's own standstill and its settling included), or no worse than the plan's own
-    there. At rate 1 with no ramp the rows pass through unchanged: a run without hold or
-    override is the plan.
+    (a standstill's settling included), or no worse than the plan's own there. A ramp to
+    rest (a hold, 0 %) is the transition shape at Amax by arc length instead (_hold_ramp,
+    motion/hold_ramp.py). At rate 1 with no ramp the rows pass through unchanged: a run
+    without hold or override is the plan.
     """
 
     def __init__(self, config: MachineConfig) -> None:
@@ -106,7 +114,8 @@ class Retimer:
         self.cap_at: int | None = None  # when the rows ahead were last looked at
         self.cap_goal = 1.0
         self.cap_wanted = 1.0
-        self.ramp: Ramp | None = None
+        self.shape = TransitionShape(config.interpolator.ramp_share)
+        self.ramp: Ramp | PathRamp | None = None
         self.frac = 0.0  # position between the last row passed and the first held row
         self.back = np.zeros((0, self.n_axes + 2))  # the two last rows passed (interpolation)
 
@@ -207,12 +216,15 @@ class Retimer:
                     self.rate = 0.0
 
     # -- planning -------------------------------------------------------------------------
-    def _plan_ramp(self, held: np.ndarray) -> Ramp | None:
-        """The shortest quintic ramp to the target that keeps Amax and the contour limit."""
+    def _plan_ramp(self, held: np.ndarray) -> Ramp | PathRamp | None:
+        """The ramp to the target: to rest, the hold's (_hold_ramp); otherwise the shortest
+        quintic ramp that keeps Amax and the contour limit."""
         rate0, rate1 = self.rate, self.target
         if rate0 == rate1:
             return None
         base = np.vstack([self.back, held]) if len(self.back) else held
+        if rate1 == 0.0 and len(base) >= 2:
+            return self._hold_ramp(base)
         v_max = float(np.max(np.abs(base[:, self.n_axes]))) if len(base) else 0.0
         guess_s = 15.0 * abs(rate1 - rate0) * v_max / (8.0 * ACCEL_MARGIN * self.accel_mm_s2)
         ramp_s = max(MIN_RAMP_S, guess_s)
@@ -224,6 +236,38 @@ class Retimer:
             if ramp_s >= MAX_RAMP_S or self._acceptable(base, ramp, plan_mm):
                 return ramp
             ramp_s *= RAMP_GROWTH
+
+    def _hold_ramp(self, base: np.ndarray) -> PathRamp:
+        """To rest from the path speed now: the transition shape at Amax along the rows by arc
+        length (so the plan's own acceleration there does not add to it), checked once on the
+        servo model (the tool within the contour limit, or no worse than the plan's own there,
+        through its standstill and settling). Only if that fails (without pre-compensation
+        a stop at Amax leaves the path by about twice the limit), longer by the ratio of the
+        error to the limit, at most HOLD_TRIES times in all; the last is kept whatever it
+        gives."""
+        tau0 = max(0.0, len(self.back) - 1 + self.frac)
+        feed = float(np.interp(tau0, np.arange(len(base)), np.abs(base[:, self.n_axes])))
+        pos = base[:, : self.n_axes]
+        plan_mm: float | None = None
+        stretch = 1.0
+        for _ in range(HOLD_TRIES):
+            dist = hold_distances_mm(self.rate * feed, self.accel_mm_s2, self.period_s,
+                                     self.shape, stretch)
+            # Ends on a sample that does not move: the feed sent there (rate x the row's) is 0.
+            ramp = PathRamp(np.append(hold_steps(pos, tau0, dist, max(1.0, self.rate)), 0.0))
+            worst_mm = self._worst_distance_mm(base, ramp, HOLD_MEMORY)
+            if worst_mm <= self.limit_mm:
+                break
+            if plan_mm is None:  # only now: what the plan itself gives there
+                plan_mm = self._worst_distance_mm(base, Ramp(self.rate, self.rate, 1),
+                                                  HOLD_MEMORY)
+            if worst_mm <= plan_mm:
+                break
+            # The error a ramp adds goes about as its deceleration, 1 / its length.
+            # Short ramps (a few servo time constants) gain less: at least HOLD_GROWTH_MIN.
+            stretch *= min(HOLD_GROWTH_MAX,
+                           max(HOLD_GROWTH_MIN, HOLD_MARGIN * worst_mm / self.limit_mm))
+        return ramp
 
     def _land(self, ramp: Ramp) -> Ramp:
         """The same ramp back to rate 1 stretched (by less than 2 / (1 - rate0) samples) so
@@ -288,7 +332,7 @@ class Retimer:
                                filter_block(self.servos[1], v[:, 1], sy)[0]])
         return distance_from_reference_mm(xy, xy - err)[i0:]
 
-    def _path_points(self, base: np.ndarray, ramp: Ramp, extra: int) -> np.ndarray:
+    def _path_points(self, base: np.ndarray, ramp: Ramp | PathRamp, extra: int) -> np.ndarray:
         """The points the ramp would send (all axes), then `extra` more at its final rate, a
         standstill staying where it is; the point sent before them first when known."""
         rates = ramp.rates(ramp.n + extra)
@@ -308,16 +352,18 @@ class Retimer:
             return False
         return self._worst_distance_mm(base, ramp) <= max(self.limit_mm, plan_mm)
 
-    def _worst_distance_mm(self, base: np.ndarray, ramp: Ramp) -> float:
+    def _worst_distance_mm(self, base: np.ndarray, ramp: Ramp | PathRamp,
+                           memory: int = SERVO_MEMORY) -> float:
         """The servo model's largest distance of the tool from the points sent, over the ramp
-        and a settling time after it, starting from the recent outputs (their state)."""
+        and a settling time after it, starting from the last `memory` outputs (their state)."""
         if len(base) < 2:
             return 0.0
         new = self._path_points(base, ramp, self.settle)[1:, :2]
-        xy = np.vstack([self.recent, new]) if len(self.recent) else new
+        recent = self.recent[-memory:]
+        xy = np.vstack([recent, new]) if len(recent) else new
         v = np.diff(xy, axis=0, prepend=xy[:1]) / self.period_s
         sx, sy = rest_state(self.servos)
         err = np.column_stack([filter_block(self.servos[0], v[:, 0], sx)[0],
                                filter_block(self.servos[1], v[:, 1], sy)[0]])
         dist = distance_from_reference_mm(xy, xy - err)
-        return float(dist[len(self.recent):].max(initial=0.0))
+        return float(dist[len(recent):].max(initial=0.0))

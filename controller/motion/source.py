@@ -27,14 +27,17 @@ class RefSource(Protocol):
     def total_rows(self) -> int | None: ...
 
     # next_outputs() -> tuple | None, optional: the OutputChanges of the next output mark read
-    # (in the order of the marks); a source without it has none.
+    # (in the order of the marks); a source without it has none. next_sync_outputs() likewise
+    # for the marks of M62/M63/M67 (set as the card clocks the marked row).
 
     # primed() -> bool, optional (a source without it is always primed): the buffer ahead of
     # the motion loop is full, or the producer has finished or failed. A job starts moving only
     # then, so that a loaded PC's generator starts with the whole buffer as its head start.
 
 
-PAUSE_MARK, OUTPUT_MARK = 0.5, 0.25  # a marked row's line is -(line + mark)
+# A marked row's line is -(line + mark): a pause after it, outputs set at rest there, or
+# outputs set as the card clocks it (M62/M63/M67, with the move; the loop takes that one off).
+PAUSE_MARK, OUTPUT_MARK, SYNC_MARK = 0.5, 0.25, 0.125
 
 
 def chunk_rows(chunk: RefChunk) -> np.ndarray:
@@ -51,8 +54,18 @@ def chunk_rows(chunk: RefChunk) -> np.ndarray:
 
 def pause_index(rows: np.ndarray) -> int | None:
     """The first row after which the program pauses or sets outputs, if any."""
-    marked = np.flatnonzero(rows[:, -1] < 0.0)
+    marked = np.flatnonzero((rows[:, -1] < 0.0) & ~_is_mark(rows[:, -1], SYNC_MARK))
     return int(marked[0]) if marked.size else None
+
+
+def sync_marked(rows: np.ndarray) -> np.ndarray:
+    """The indices of the rows marked to set outputs as they are clocked (M62)."""
+    return np.flatnonzero(_is_mark(rows[:, -1], SYNC_MARK)) if len(rows) else np.zeros(0, int)
+
+
+def _is_mark(value: np.ndarray, mark: float) -> np.ndarray:
+    neg = -value
+    return (value < 0.0) & (np.abs(neg - np.floor(neg) - mark) < 1e-6)
 
 
 def is_output_mark(value: float) -> bool:
@@ -64,6 +77,32 @@ def row_lines(rows: np.ndarray) -> np.ndarray:
     """The NC line of each row, marks removed."""
     line = rows[:, -1]
     return np.where(line < 0.0, np.floor(-line), line)
+
+
+class SyncMarks:
+    """The producer's side of M62: a chunk of no rows names a line (RefChunk.sync_outputs); the
+    first row of that line in the chunks after it gets the mark, and its changes are handed
+    on before those rows (the motion loop takes them in that order)."""
+
+    def __init__(self) -> None:
+        self.waiting: list[tuple[int, tuple]] = []
+
+    def rows(self, chunk: RefChunk) -> tuple[np.ndarray, list[tuple]]:
+        """The chunk's ring rows with their marks, and the changes of the marks set in them."""
+        if chunk.sync_outputs:
+            self.waiting.append(chunk.sync_outputs)
+        rows = chunk_rows(chunk)
+        marked: list[tuple] = []
+        while self.waiting and len(rows):
+            line, changes = self.waiting[0]
+            hit = np.flatnonzero(chunk.line == line)
+            if not hit.size:
+                break
+            k = int(hit[0])
+            rows[k, -1] = -abs(float(chunk.line[k])) - SYNC_MARK
+            marked.append(changes)
+            self.waiting.pop(0)
+        return rows, marked
 
 
 class ChunkSource:
@@ -83,6 +122,12 @@ class ChunkSource:
         self._fail = fail_after_rows
         self._error = ""
         self._outputs: list[tuple] = []
+        self._sync_outputs: list[tuple] = []
+        self._marks = SyncMarks()
+
+    def next_sync_outputs(self) -> tuple | None:
+        """The changes of the next M62 mark read (in stream order)."""
+        return self._sync_outputs.pop(0) if self._sync_outputs else None
 
     def next_outputs(self) -> tuple | None:
         """The changes of the next output mark (in stream order), None when not yet read."""
@@ -106,7 +151,8 @@ class ChunkSource:
         except Exception as exc:  # noqa: BLE001  (a producer failure becomes FAILED, reported)
             self._error = f"reference generator failed: {exc}"
             return
-        rows = chunk_rows(chunk)
+        rows, synced = self._marks.rows(chunk)
+        self._sync_outputs += synced
         if chunk.outputs:
             self._outputs.append(chunk.outputs)
         self._pending = rows if not len(self._pending) else np.vstack([self._pending, rows])

@@ -15,13 +15,15 @@ from dataclasses import replace
 from typing import Any
 
 from controller.config import MachineConfig
-from controller.io_events import io_event
+from controller.io_events import T_DECIMALS, io_event
 from controller.motion.loop import ESTOP_KEEP_FRAMES
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
 from controller.probe import ProbeResult, ProbeResults
 from controller.runtime.current_run import CurrentRun
 from controller.runtime.processes import Runtime, RuntimeOptions
 from drivers.base import Drive
+from drivers.errors import DriveError
+from drivers.probe_latch import ProbeLatch
 
 TRIPPED_BY_PROBE = "the probe tripped"
 
@@ -67,9 +69,29 @@ class ProbeWatch:
             self.line, self.tripped = line, True
             self.trip_mm = self._encoder_mm(ctrl)
             _take_back(ctrl)
+            ctrl.keep_outputs_at_abort = True  # spindle, coolant, outputs go on after it
             ctrl.request_abort(f"{TRIPPED_BY_PROBE} at line {line}")
         else:
+            if self.line is None:
+                self._arm(ctrl, line, code, toward)
             self.line = line
+
+    def _arm(self, ctrl: Any, line: int, code: str, toward: bool) -> None:
+        """A drive that latches the edge (CANopen's touch probe) is armed as its G38 move
+        starts: an edge before it (a move that brushes the work) is not the probe's."""
+        if isinstance(self.drive, ProbeLatch):
+            try:
+                self.drive.arm_probe(toward)
+            except DriveError as exc:
+                self._fail(ctrl, f"line {line}: {code}: arming the probe failed: {exc}")
+
+    def latched_trip_mm(self) -> tuple[float, float, float] | None:
+        """The trip point the drives latched (after the stretch, at rest), None from a drive
+        without a latch or one that latched nothing (then the encoders' at the trip stands)."""
+        if not self.tripped or not isinstance(self.drive, ProbeLatch):
+            return None
+        pulses = self.drive.probe_latch_pulses()
+        return None if pulses is None else self._xyz_mm(pulses)
 
     def _fail(self, ctrl: Any, message: str) -> None:
         self.error = message
@@ -78,10 +100,12 @@ class ProbeWatch:
     def _encoder_mm(self, ctrl: Any) -> tuple[float, float, float]:
         """Where the encoders were when the trip was seen (machine mm, Z of the start on a
         table without Z)."""
+        return self._xyz_mm(ctrl.figures.last_enc)
+
+    def _xyz_mm(self, pulses: Any) -> tuple[float, float, float]:
         xyz = list(self.start_mm)
-        enc = ctrl.figures.last_enc
         for i, axis in enumerate(self.config.axes):
-            xyz["xyz".index(axis.name)] = float(enc[i]) * axis.pulse_mm
+            xyz["xyz".index(axis.name)] = float(pulses[i]) * axis.pulse_mm
         return xyz[0], xyz[1], xyz[2]
 
 
@@ -107,7 +131,8 @@ class ProbeRun(CurrentRun):
         self.on_event = on_event
         self.clock = _RunClock(options.on_progress)  # one time line over the stretches
         self.options = replace(options, on_progress=self.clock.progress
-                               if options.on_progress else None)
+                               if options.on_progress else None,
+                               on_event=self.clock.event(options.on_event))
         super().__init__()
         self.override_pct = 100.0
 
@@ -142,7 +167,8 @@ class ProbeRun(CurrentRun):
                 return result
             stop = self.drive.commanded_xyz_mm()
             line, code = watch.line, self.lines[watch.line]
-            probe = ProbeResult(line, watch.tripped, watch.trip_mm or stop, stop)
+            trip = watch.latched_trip_mm() or watch.trip_mm or stop
+            probe = ProbeResult(line, watch.tripped, trip, stop)
             results.by_line[line] = probe
             self.on_event(io_event("probe", t_s, line, code=code, **{
                 k: v for k, v in probe.describe().items() if k != "line"}))
@@ -167,6 +193,17 @@ class _RunClock:
     def progress(self, p: MotionProgress) -> None:
         if self.inner is not None:
             self.inner(replace(p, elapsed_s=p.elapsed_s + self.before_s))
+
+    def event(self, inner: Callable[[dict[str, Any]], None] | None
+              ) -> Callable[[dict[str, Any]], None] | None:
+        """The motion loop's events (output changes) timed on the run's line."""
+        if inner is None:
+            return None
+
+        def on_event(e: dict[str, Any]) -> None:
+            t_s = e.get("t_s")
+            inner(e if t_s is None else e | {"t_s": round(t_s + self.before_s, T_DECIMALS)})
+        return on_event
 
     def stretch_done(self, runtime: Runtime) -> float:
         """The run's time at the end of this stretch."""

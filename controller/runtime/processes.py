@@ -70,6 +70,7 @@ class _Messages:
         self.rss_kb: dict[str, int] = {}
         self.sched: dict[str, str] = {}  # what each producer runs at ("nice -10")
         self.outputs: list[tuple] = []  # the changes of each output mark, in stream order
+        self.sync_outputs: list[tuple] = []  # ... of each M62 mark (set as it is clocked)
 
     def drain(self, wait_s: float = 0.0, until: Callable[[], bool] | None = None) -> None:
         """Take the messages already sent; wait up to wait_s for more, unless until() holds
@@ -82,8 +83,8 @@ class _Messages:
                     timeout=0.0 if done else max(0.0, deadline - time.monotonic()))
             except (queue.Empty, OSError, ValueError):
                 return
-            if kind == "outputs":
-                self.outputs.append(value)
+            if kind in ("outputs", "sync_outputs"):
+                getattr(self, kind).append(value)
                 continue
             {"error": self.errors, "sched": self.sched}.get(kind, self.rss_kb)[stage] = value
 
@@ -128,6 +129,12 @@ class RingSource:
         messages = self.messages
         messages.drain(MESSAGE_WAIT_S, until=lambda: bool(messages.outputs))
         return messages.outputs.pop(0) if messages.outputs else None
+
+    def next_sync_outputs(self) -> tuple | None:
+        """The next M62 mark's changes: sent before its rows, as next_outputs's."""
+        messages = self.messages
+        messages.drain(MESSAGE_WAIT_S, until=lambda: bool(messages.sync_outputs))
+        return messages.sync_outputs.pop(0) if messages.sync_outputs else None
 
     def primed(self) -> bool:
         """The ring is full (the generator waits on it), or there is no more to wait for."""

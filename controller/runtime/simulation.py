@@ -71,6 +71,8 @@ def simulate_stream(blocks: Iterable[NcBlock], config: MachineConfig, algorithm:
         if step.run is not None and on_run is not None:
             on_run(step.run)
         c = step.chunk
+        if not len(c):  # a mark of outputs set with the next move (M62): no samples
+            continue
         for b in stream.push(c.pos_mm, c.feed_mm_s, c.line, step.rapid, step.phi_rad):
             for sink in sinks:
                 sink(b)

@@ -15,7 +15,7 @@ from controller.config import MachineConfig
 from controller.interpreter.fifo import FAILED, drain_fifo, feed_fifo
 from controller.motion.realtime import producer_nice
 from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
-from controller.motion.source import chunk_rows
+from controller.motion.source import SyncMarks
 from controller.refpoints import RefChunk
 
 BlocksFn = Callable[[str, MachineConfig], Iterable[Any]]
@@ -155,10 +155,14 @@ def generator_main(config: MachineConfig, generate_fn: GenerateFn, nc_fifo: Queu
     """Process 2: NC blocks -> reference points into the shared-memory ring."""
     parent = _child_setup(parent_pid, info, "generator")
     try:
+        marks = SyncMarks()
         for chunk in generate_fn(drain_fifo(nc_fifo, lambda: _should_stop(ring, parent)), config):
             if chunk.outputs:  # before its rows: in the motion process when they are
                 info.put(("outputs", "generator", chunk.outputs))
-            if not ring.write(chunk_rows(chunk)) or os.getppid() != parent:
+            rows, synced = marks.rows(chunk)
+            for changes in synced:  # M62's, likewise before the rows that carry its mark
+                info.put(("sync_outputs", "generator", changes))
+            if len(rows) and not ring.write(rows) or os.getppid() != parent:
                 return
         ring.set_flag(FLAG_FINAL)
     except Exception as exc:  # noqa: BLE001  (reported on the queue, flagged in the ring)

@@ -24,11 +24,12 @@ from drivers.errors import (
     UnderrunError,
 )
 from drivers.port_lock import device_key
+from drivers.probe_latch import ProbeLatch
 
 CLOSE_CONFIRM_S = 0.2  # wait this long for the drives to confirm the shutdown at close
 
 
-class CanopenDrive(Drive):
+class CanopenDrive(Drive, ProbeLatch):
     """One BaseNode402 per axis; the host keeps the frame FIFO and clocks it out by SYNC.
 
     Each sample period T the cycle thread pops one frame (the sim card's rule: an empty FIFO
@@ -52,6 +53,7 @@ class CanopenDrive(Drive):
         self._last_rtt_ms = np.zeros(0)
         self._io_written: OutputImage | None = None  # what the io_node holds, as written
         self._io_written_link: Link | None = None  # ... over this link (a new link: unknown)
+        self._probe_toward = True  # the edge the touch probes were last armed for
 
     # -- open / close ---------------------------------------------------------------------
     def _lock_key(self) -> str:
@@ -289,6 +291,28 @@ class CanopenDrive(Drive):
         last = self._io_written if self._io_written_link is self._link else None
         machine_io.write_outputs(self._nodes, self.axes, self.o, image, last)
         self._io_written, self._io_written_link = image, self._link  # this link's
+
+    def _probe_input(self) -> bool | None:
+        """Statusword bit 15 (the probe input's level, in every TPDO1); None unless the
+        option touch_probe says a probe is wired."""
+        link = self._link
+        if not self.o.touch_probe or link is None:
+            return None
+        with link.lock:
+            return any(sw & c.SW_PROBE_INPUT for sw in link.statusword)
+
+    def arm_probe(self, toward: bool) -> None:
+        self._check_comm()
+        machine_io.arm_touch_probe(self._nodes, self.axes, toward)
+        self._probe_toward = toward
+
+    def probe_latch_pulses(self) -> np.ndarray | None:
+        link = self._check_comm()
+        counts = machine_io.touch_probe_latch(self._nodes, self.axes, self._probe_toward)
+        if counts is None:
+            return None
+        with link.lock:
+            return np.array([link.pulses(i, n) for i, n in enumerate(counts)], dtype=np.int64)
 
     # -- bench and probe ------------------------------------------------------------------
     def link_stats(self) -> dict[str, float | int]:

@@ -128,3 +128,19 @@ DI_NEGATIVE_LIMIT, DI_POSITIVE_LIMIT = 0x1, 0x2
 DIGITAL_OUTPUTS = 0x60FE  # sub 1: physical outputs, sub 2: bit mask (outputs enabled)
 ANALOG_OUTPUTS = 0x2400  # sub 1-4: REAL32, channels 0-3
 SW_INTERNAL_LIMIT = 0x0800  # statusword bit 11: internal limit active (a limit switch)
+
+# Touch probe (CiA 402 60B8h-60BBh), G38 (docs/canopen.md, "Probing"): the function word arms
+# probe 1 for its first edge, the drive latches its own position actual at that edge.
+TOUCH_PROBE_FUNCTION = 0x60B8
+TOUCH_PROBE_STATUS = 0x60B9
+TOUCH_PROBE_POSITIVE = 0x60BA  # touch probe 1 positive edge position, counts
+TOUCH_PROBE_NEGATIVE = 0x60BB  # touch probe 1 negative edge position, counts
+TPF_ENABLE = 0x0001  # bit 0: probe 1 on; bit 1 clear: first event only; bits 2-3 clear: its input
+TPF_POSITIVE_EDGE = 0x0010  # bit 4: latch at the positive edge (contact made)
+TPF_NEGATIVE_EDGE = 0x0020  # bit 5: latch at the negative edge (contact lost)
+TPS_ENABLED = 0x0001  # 60B9 bit 0: probe 1 is on
+TPS_POSITIVE_STORED = 0x0002  # bit 1: a positive edge position is stored (60BA)
+TPS_NEGATIVE_STORED = 0x0004  # bit 2: a negative edge position is stored (60BB)
+# Manufacturer-specific bit 15: the probe input's level (in contact). Mapped as the e-stop's
+# bit 14 is, it rides in TPDO1, so the host sees contact every T without an SDO.
+SW_PROBE_INPUT = 0x8000

@@ -100,7 +100,7 @@ class Link:
         return self.base_counts + np.rint((self.cmd - self.base_pulses) * self.scale).astype(
             np.int64)
 
-    def _pulses(self, i: int, counts: int) -> int:
+    def pulses(self, i: int, counts: int) -> int:
         return int(self.base_pulses[i] + round((counts - self.base_counts[i]) / self.scale[i]))
 
     # -- latching -------------------------------------------------------------------------
@@ -243,7 +243,7 @@ class Link:
 
     def _on_tpdo(self, i: int, sw: int, counts: int, now_s: float) -> None:
         self.statusword[i], self.counts[i] = sw, counts
-        self.enc[i] = self._pulses(i, counts)
+        self.enc[i] = self.pulses(i, counts)
         self.last_tpdo_cycle[i] = self.cycle_no
         if self.pending[i]:
             k = self.pending[i].popleft()

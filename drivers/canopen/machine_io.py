@@ -1,5 +1,6 @@
 """The canopen backend's machine I/O: outputs written by SDO to the io_node drive (0x60FE digital
-outputs, 0x2400 analog outputs), limit switches read from the drives' 0x60FD."""
+outputs, 0x2400 analog outputs), limit switches read from the drives' 0x60FD, and the touch
+probe (0x60B8 armed, 0x60B9 and 0x60BA/0x60BB read) on every drive."""
 
 from __future__ import annotations
 
@@ -47,3 +48,28 @@ def limit_input(link: Any, nodes: list[Any], axes: tuple[str, ...]) -> str | Non
         return f"{axes[i].upper()} limit switch (which side unknown: {exc})"
     direction = 1 if inputs & c.DI_POSITIVE_LIMIT else -1
     return switch_name(axes[i], direction)
+
+
+def arm_touch_probe(nodes: list[Any], axes: tuple[str, ...], toward: bool) -> None:
+    """0x60B8 on every drive: probe 1 on, first event, at the positive edge (toward) or the
+    negative; writing it clears what a drive had stored."""
+    edge = c.TPF_POSITIVE_EDGE if toward else c.TPF_NEGATIVE_EDGE
+    for node, axis in zip(nodes, axes, strict=True):
+        bringup.sdo_write(node, axis, c.TOUCH_PROBE_FUNCTION, None, c.TPF_ENABLE | edge,
+                          "touch probe function")
+
+
+def touch_probe_latch(nodes: list[Any], axes: tuple[str, ...], toward: bool) -> list[int] | None:
+    """Each drive's latched position (counts) at the armed edge, None if one stored none
+    (0x60B9); every probe is then switched off (0x60B8 = 0)."""
+    stored = c.TPS_POSITIVE_STORED if toward else c.TPS_NEGATIVE_STORED
+    index = c.TOUCH_PROBE_POSITIVE if toward else c.TOUCH_PROBE_NEGATIVE
+    counts: list[int] | None = []
+    for node, axis in zip(nodes, axes, strict=True):
+        status = bringup.sdo_read(node, axis, c.TOUCH_PROBE_STATUS, None, "touch probe status")
+        if counts is not None and status & stored:
+            counts.append(bringup.sdo_read(node, axis, index, None, "touch probe position"))
+        else:
+            counts = None
+        bringup.sdo_write(node, axis, c.TOUCH_PROBE_FUNCTION, None, 0, "touch probe function")
+    return counts

@@ -29,6 +29,7 @@ class CanopenOptions:
     sdo_timeout_s: float
     home_offset_sign: int = 1  # -1: a drive whose home point reads -0x607C (docs/canopen.md)
     io_node: int = 1  # the drive whose outputs (0x60FE, 0x2400) are the machine's outputs
+    touch_probe: bool = False  # a probe wired to every drive's touch probe input (G38)
 
 
 DEFAULTS: dict[str, Any] = {
@@ -37,6 +38,7 @@ DEFAULTS: dict[str, Any] = {
     "master_heartbeat_ms": 50, "drive_heartbeat_ms": 50, "heartbeat_timeout_ms": 300,
     "ferror_window_mm": 1.0, "ferror_timeout_ms": 10, "tpdo_timeout_cycles": 100,
     "fifo_frames": 256, "sdo_timeout_s": 0.3, "home_offset_sign": 1, "io_node": None,
+    "touch_probe": False,
 }
 # realtime: make_drive passes it; the bus has its own clock, so virtual time is refused.
 OPTIONS = frozenset(DEFAULTS) | {"realtime"}
@@ -111,7 +113,13 @@ def parse_options(config: MachineConfig, options: dict[str, Any]) -> CanopenOpti
         tpdo_timeout_cycles=_int("tpdo_timeout_cycles", o["tpdo_timeout_cycles"], 2, 100_000),
         fifo_frames=_int("fifo_frames", o["fifo_frames"], 16, 1_000_000),
         sdo_timeout_s=_float("sdo_timeout_s", o["sdo_timeout_s"]), home_offset_sign=sign,
-        io_node=io_node)
+        io_node=io_node, touch_probe=_bool("touch_probe", o["touch_probe"]))
+
+
+def _bool(key: str, value: Any) -> bool:
+    if not isinstance(value, bool) and value not in ("true", "false"):
+        raise DriveError(f"canopen option {key}: {value!r} is not true or false")
+    return value in (True, "true")
 
 
 def drive_layout(config: MachineConfig) -> CanopenOptions:

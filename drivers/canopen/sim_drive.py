@@ -6,7 +6,6 @@ import os
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import canopen
@@ -20,27 +19,21 @@ from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.canopen import cia402 as c
 from drivers.canopen.options import drive_layout
 from drivers.canopen.sim_homing import SimHoming402
+from drivers.canopen.sim_inject import (
+    SDO_ABORT_VALUE_RANGE,
+    Injections,
+    injections,
+    opt_float,
+    opt_int,
+)
 from drivers.canopen.sim_io import SimIo402
+from drivers.canopen.sim_probe import PROBE_OPTIONS
 from drivers.io_peer import IO_OPTIONS
 from drivers.sim.axes import plant_of
 from drivers.sim.switches import SWITCH_OPTIONS, SimSwitches
 
-SDO_ABORT_VALUE_RANGE = 0x06090030  # "value range of parameter exceeded"
 LAG_RAMP_SYNCS = 20  # injected lag ramps in over this many cycles (as drivers/sim/axes.py)
 WATCHDOG_PERIOD_S = 0.01
-
-
-@dataclass
-class Injections:
-    """Fault injection for one axis; times count SYNC cycles since the first enable."""
-
-    fault_after_s: float | None = None
-    fault_code: int = c.EMCY_OVERCURRENT
-    lag_mm: float = 0.0
-    lag_after_s: float = 0.0
-    silent_after_s: float | None = None
-    sdo_abort_index: int | None = None
-    estop_input_file: str | None = None  # the e-stop input is open while this file exists
 
 
 class SimAxis402:
@@ -89,7 +82,8 @@ class SimAxis402:
                 0x6062: self.ref, 0x60F4: self.ref - self.position,
                 c.DIGITAL_INPUTS: self.io.digital_inputs(self.index)}
         with self.lock:
-            return live.get(index)
+            value = live.get(index)
+            return value if value is not None else self.io.probe.read(self.index, index)
 
     def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
         if self.silent:
@@ -114,6 +108,8 @@ class SimAxis402:
                 self.abort_option = int(value)
             elif self.io.write(index, subindex, value):
                 pass  # an output: recorded by SimIo402
+            elif self.io.probe.write(self.index, index, int(value)):
+                pass  # the touch probe armed (or switched off)
             elif index == c.CONSUMER_HEARTBEAT and subindex == 1:
                 self.consumer_id, self.consumer_ms = (int(value) >> 16) & 0x7F, int(value) & 0xFFFF
             else:
@@ -195,10 +191,12 @@ class SimAxis402:
         self.network.unsubscribe(self.node.sdo.rx_cobid)
 
     # -- one SYNC -------------------------------------------------------------------------
-    def on_sync(self) -> None:
+    def step(self) -> bool:
+        """The SYNC's step (latched RPDO1, state, servo model, following error); False: this
+        drive answers no TPDO1 (silent, or not OPERATIONAL)."""
         with self.lock:
             if self.silent or self.node.nmt.state != "OPERATIONAL":
-                return
+                return False
             if self.latched is not None:
                 cw, self.target = self.latched
                 self.latched = None
@@ -208,7 +206,7 @@ class SimAxis402:
                 self.syncs_enabled += 1
             self._injections()
             if self.silent:
-                return
+                return False
             homing = enabled and self.mode == c.MODE_HOMING and self.homing.running
             if enabled and self.mode == c.MODE_CSP:
                 new_ref = self.target
@@ -228,9 +226,13 @@ class SimAxis402:
             over = abs(self.ref - self.position) > self.window and enabled
             self.ferror_syncs = self.ferror_syncs + 1 if over else 0
             trip = self.ferror_syncs * self.period_s * 1e3 > self.timeout_ms
-            data = c.PDO1.pack(self.statusword, self.position)
         if trip:
             self.fault(c.EMCY_FOLLOWING_ERROR)
+        return True
+
+    def send_tpdo(self) -> None:
+        """TPDO1 (statusword, position actual) as they stand after the SYNC's step."""
+        with self.lock:
             data = c.PDO1.pack(self.statusword, self.position)
         self.network.send_message(self.tpdo_cob, data)
         self.tpdos_sent += 1
@@ -272,7 +274,8 @@ class SimDriveSet:
     default). Options (strict): drive_fault_after_s, drive_fault_code, lag_mm, lag_after_s,
     silent_after_s, sdo_abort_index, fault_axis (x); times count from the first enable;
     estop_input_file (every drive's e-stop input is open while that file exists);
-    limit_input_file, outputs_file (machine I/O: drivers/canopen/sim_io.py).
+    limit_input_file, outputs_file (machine I/O: drivers/canopen/sim_io.py), probe_workpiece_mm
+    (the touch probe's work: drivers/canopen/sim_probe.py).
     Homing (mode 6): true_start_mm, home_switch_mm (default: at the home offset the master
     writes; null: no switch), index_pitch_mm (drivers/sim/switches.py) and search_limit_mm
     (default: the travel + 10 %: then statusword bit 13). Each axis's loop: plant_x, plant_y,
@@ -281,7 +284,7 @@ class SimDriveSet:
     OPTIONS = frozenset({"drive_fault_after_s", "drive_fault_code", "lag_mm", "lag_after_s",
                          "silent_after_s", "sdo_abort_index", "fault_axis", "true_start_mm",
                          "home_switch_mm", "index_pitch_mm", "search_limit_mm",
-                         "estop_input_file"}) | PLANT_OPTIONS | IO_OPTIONS
+                         "estop_input_file"}) | PLANT_OPTIONS | IO_OPTIONS | PROBE_OPTIONS
 
     def __init__(self, config: MachineConfig, options: dict[str, Any] | None = None,
                  channel: str = "cncsim", interface: str = "virtual",
@@ -306,12 +309,12 @@ class SimDriveSet:
         self.switches = SimSwitches(len(names), {k: v for k, v in options.items()
                                                  if k in SWITCH_OPTIONS}, np.zeros(len(names)),
                                     "simulated drive")
-        search_limit_mm = _opt_float(options, "search_limit_mm")
+        search_limit_mm = opt_float(options, "search_limit_mm")
         self.io = SimIo402(options, names)
         for i, (axis, node_id, cpm) in enumerate(zip(plant.axes, layout.node_ids,
                                                      layout.counts_per_mm, strict=True)):
-            inject = _injections(options) if axis.name == fault_axis else Injections(
-                sdo_abort_index=_opt_int(options, "sdo_abort_index"))
+            inject = injections(options) if axis.name == fault_axis else Injections(
+                sdo_abort_index=opt_int(options, "sdo_abort_index"))
             inject.estop_input_file = options.get("estop_input_file")
             homing = SimHoming402(axis, i, cpm, config.sample_period_s, self.switches,
                                   search_limit_mm)
@@ -336,10 +339,15 @@ class SimDriveSet:
         self.on_sync()
 
     def on_sync(self) -> None:
-        """One SYNC: every drive applies its latched RPDO, steps, answers its TPDO1."""
+        """One SYNC: every drive applies its latched RPDO and steps, the probe input (wired to
+        every drive) is looked at where the table now is, then each answers its TPDO1."""
         self.syncs += 1
-        for axis in self.axes:
-            axis.on_sync()
+        stepped = [axis.step() for axis in self.axes]
+        self.io.probe.observe([a.actual_mm for a in self.axes], [a.counts_per_mm for a in
+                                                                  self.axes])
+        for axis, answers in zip(self.axes, stepped, strict=True):
+            if answers:
+                axis.send_tpdo()
 
     def _on_master_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
         self.master_seen_s = time.monotonic()
@@ -382,32 +390,3 @@ class SimDriveSet:
         for axis in self.axes:
             axis.node.nmt.stop_heartbeat()
         self.network.disconnect()
-
-
-def _opt_int(options: dict[str, Any], key: str) -> int | None:
-    value = options.get(key)
-    if value is None:
-        return None
-    try:
-        return int(value, 0) if isinstance(value, str) else int(value)
-    except ValueError as exc:
-        raise DriveError(f"simulated drive option {key}: {value!r} is not an integer") from exc
-
-
-def _opt_float(options: dict[str, Any], key: str) -> float | None:
-    value = options.get(key)
-    try:
-        return None if value is None else float(value)
-    except (TypeError, ValueError) as exc:
-        raise DriveError(f"simulated drive option {key}: {value!r} is not a number") from exc
-
-
-def _injections(options: dict[str, Any]) -> Injections:
-    return Injections(
-        fault_after_s=_opt_float(options, "drive_fault_after_s"),
-        fault_code=_opt_int(options, "drive_fault_code") or c.EMCY_OVERCURRENT,
-        lag_mm=_opt_float(options, "lag_mm") or 0.0,
-        lag_after_s=_opt_float(options, "lag_after_s") or 0.0,
-        silent_after_s=_opt_float(options, "silent_after_s"),
-        sdo_abort_index=_opt_int(options, "sdo_abort_index"))
-

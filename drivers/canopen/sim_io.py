@@ -1,12 +1,13 @@
 """Machine I/O of the simulated CiA 402 drives: limit switches (0x60FD and statusword bit 11)
-from limit_input_file, and the digital (0x60FE) and analog (0x2400) outputs, recorded to
-outputs_file so a test reads back what the drives hold."""
+from limit_input_file, the digital (0x60FE) and analog (0x2400) outputs, recorded to
+outputs_file so a test reads back what the drives hold, and the touch probe (sim_probe.py)."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from drivers.canopen import cia402 as c
+from drivers.canopen.sim_probe import SimTouchProbe402
 from drivers.io_peer import limit_tripped, record_outputs
 
 
@@ -20,6 +21,7 @@ class SimIo402:
         self.bits = 0
         self.mask = 0
         self.analog = [0.0] * 4
+        self.probe = SimTouchProbe402(options, axes)
 
     def digital_inputs(self, axis: int) -> int:
         """0x60FD of axis `axis`'s drive."""
@@ -29,7 +31,8 @@ class SimIo402:
         return c.DI_POSITIVE_LIMIT if tripped[1] > 0 else c.DI_NEGATIVE_LIMIT
 
     def statusword_bits(self, axis: int) -> int:
-        return c.SW_INTERNAL_LIMIT if self.digital_inputs(axis) else 0
+        limit = c.SW_INTERNAL_LIMIT if self.digital_inputs(axis) else 0
+        return limit | self.probe.statusword_bits()
 
     def write(self, index: int, subindex: int, value: Any) -> bool:
         """An SDO write of an output object (False: not one of them)."""

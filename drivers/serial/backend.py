@@ -15,7 +15,7 @@ from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, LostCommunicationError
 from drivers.io_peer import switch_name
 from drivers.port_lock import device_key
-from drivers.serial import homing
+from drivers.serial import homing, take_back
 from drivers.serial import protocol as p
 
 _BITS = ((p.ST_UNDERRUN, CardStatus.UNDERRUN), (p.ST_BAD_FRAME, CardStatus.BAD_FRAME),
@@ -294,6 +294,9 @@ class SerialCard(Drive):
             self._written += n
             self._stream_open = not end_of_stream and (bool(n) or self._stream_open)
         self._write(data)
+
+    def _recall_frames(self, n: int, keep: int) -> int:
+        return take_back.recall(self, n, keep)
 
     def _estimate_level(self) -> int:
         with self._cond:

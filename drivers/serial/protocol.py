@@ -22,6 +22,7 @@ T_END = 0x12  # end of stream after the samples already sent (no new sample)
 T_HOME = 0x13  # run the homing sequence of the axes in a mask (answered with a status frame)
 T_DISABLE = 0x14  # e-stop: discard the FIFO, amplifiers off until a RESET (answered by status)
 T_OUTPUTS = 0x15  # set the digital outputs and analog channels now (answered by status)
+T_RECALL = 0x16  # take back the queued samples from a seq on, if `keep` stay (answered by status)
 T_STATUS = 0x80  # card -> host status report
 
 FLAG_END_OF_STREAM = 0x01  # sample flag: the last frame of a program
@@ -65,6 +66,8 @@ _SAMPLE_FIXED = 3  # seq u16, flags u8
 _CONTROL_LEN = 2  # token u16
 _OUTPUTS_FMT = f"<HH{N_ANALOG}f"  # token, digital bits, analog channels (float32)
 _OUTPUTS_LEN = struct.calcsize(_OUTPUTS_FMT)  # 20 bytes
+_RECALL_FMT = "<HHH"  # token, the first seq taken back, samples that must stay queued
+_RECALL_LEN = struct.calcsize(_RECALL_FMT)  # 6 bytes
 _STATUS_FMT = "<HHHBBHHH"
 _STATUS_FIXED = struct.calcsize(_STATUS_FMT)  # 14 bytes, then the axes, then the io word
 _STATUS_TAIL = 2  # io, uint16 (limit switches of 3 axes fill its first byte)
@@ -157,6 +160,16 @@ class Outputs:
     analog: tuple[float, ...] = (0.0,) * N_ANALOG
 
 
+@dataclass(frozen=True)
+class Recall:
+    """Take back the samples queued from `first_seq` through the last received, all or none:
+    refused when one of them has executed, ends the stream, or fewer than `keep` would stay."""
+
+    token: int
+    first_seq: int
+    keep: int
+
+
 def limit_bits(axis: int, direction: int) -> int:
     """The io bit of axis `axis`'s limit switch on the side `direction` (+1, -1)."""
     return (IO_LIMIT_POS if direction > 0 else IO_LIMIT_NEG) << (2 * axis)
@@ -171,7 +184,7 @@ def limit_of(io: int, n_axes: int) -> tuple[int, int] | None:
     return None
 
 
-Frame = Sample | Reset | StatusRequest | End | Status | Home | Disable | Outputs
+Frame = Sample | Reset | StatusRequest | End | Status | Home | Disable | Outputs | Recall
 _CONTROL = {T_RESET: Reset, T_STATUS_REQUEST: StatusRequest, T_END: End, T_DISABLE: Disable}
 
 
@@ -245,6 +258,13 @@ def encode_outputs(token: int, bits: int, analog: tuple[float, ...] | list[float
     return _wrap(HOST_SYNC, T_OUTPUTS, payload)
 
 
+def encode_recall(token: int, first_seq: int, keep: int) -> bytes:
+    if not 0 <= keep < SEQ_MOD:
+        raise ProtocolError(f"recall: keep {keep} out of range")
+    payload = struct.pack(_RECALL_FMT, token % SEQ_MOD, first_seq % SEQ_MOD, keep)
+    return _wrap(HOST_SYNC, T_RECALL, payload)
+
+
 def encode_status(s: Status) -> bytes:
     n = len(s.commanded)
     _check_axes(n)
@@ -274,6 +294,8 @@ def encode(frame: Frame) -> bytes:
         return encode_home(frame.token, frame.mask, frame.axes)
     if isinstance(frame, Outputs):
         return encode_outputs(frame.token, frame.bits, frame.analog)
+    if isinstance(frame, Recall):
+        return encode_recall(frame.token, frame.first_seq, frame.keep)
     return encode_status(frame)
 
 
@@ -291,6 +313,8 @@ def _plausible(sync: int, ftype: int, length: int) -> bool:
             return any(length == _HOME_FIXED + n * _HOME_AXIS for n in AXES_ALLOWED)
         if ftype == T_OUTPUTS:
             return length == _OUTPUTS_LEN
+        if ftype == T_RECALL:
+            return length == _RECALL_LEN
         return ftype in _CONTROL and length == _CONTROL_LEN
     return ftype == T_STATUS and any(length == _STATUS_FIXED + n * _STATUS_AXIS + _STATUS_TAIL
                                      for n in AXES_ALLOWED)
@@ -309,6 +333,8 @@ def decode_payload(ftype: int, payload: bytes) -> Frame:
     if ftype == T_OUTPUTS:
         token, bits, *analog = struct.unpack(_OUTPUTS_FMT, payload)
         return Outputs(token, bits, tuple(analog))
+    if ftype == T_RECALL:
+        return Recall(*struct.unpack(_RECALL_FMT, payload))
     if ftype == T_HOME:
         token, mask = struct.unpack_from("<HB", payload)
         n = (len(payload) - _HOME_FIXED) // _HOME_AXIS

@@ -16,10 +16,9 @@ from controller.config import MachineConfig
 from controller.errors import DriveError
 from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.homing import HomingPlan
-from drivers.io_peer import limit_tripped, record_outputs
+from drivers.io_peer import limit_tripped, record_outputs, workpiece_option
 from drivers.serial import protocol as p
 from drivers.sim.axes import SimAxes, plant_of
-from drivers.sim.card import workpiece_option
 from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
 from drivers.sim.switches import SWITCH_OPTIONS, SimSwitches
@@ -166,6 +165,9 @@ class PeerCard:
         elif isinstance(frame, p.End):
             if not self.fifo.mark_end():
                 self.streaming = False
+        elif isinstance(frame, p.Recall):
+            self._recall(frame)
+            self.send_status(frame.token)
 
     def _sample(self, s: p.Sample) -> None:
         self.samples_rx += 1
@@ -187,6 +189,16 @@ class PeerCard:
         self.rx_seq = s.seq
         self.expect_seq = (s.seq + 1) % p.SEQ_MOD
         self.streaming = True
+
+    def _recall(self, r: p.Recall) -> None:
+        """Take back the samples from r.first_seq through the last received, all or none
+        (docs/serial-protocol.md, RECALL); the reply's rx_seq says which happened."""
+        if self.latched & p.ST_LATCHED or self.disabled or self.expect_seq is None:
+            return
+        n = (self.rx_seq - r.first_seq + 1) % p.SEQ_MOD
+        if 0 < n <= len(self.fifo) and self.fifo.recall(n, r.keep) == n:
+            self.rx_seq = (r.first_seq - 1) % p.SEQ_MOD
+            self.expect_seq = r.first_seq % p.SEQ_MOD
 
     # -- homing -----------------------------------------------------------------------------
     def _home(self, h: p.Home) -> None:

@@ -25,6 +25,9 @@ class BlockClock:
             if card._homing_run is not None:
                 card._clock(n_frames)
                 return n_frames
+            if card.frame_outputs.waiting:  # M62's outputs are set as their frame is clocked:
+                card._clock(step)  # their effects (a file, events) cannot be taken back
+                return step
             snap = self._snapshot()
             card._clock(n_frames)
             rows = cut(self._block_feedback(card._trace[snap[1] :]))

@@ -5,18 +5,26 @@ from __future__ import annotations
 import os
 import threading
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from controller.blocks import OutputChange
 from controller.config import MachineConfig
 from controller.outputs import OutputImage
-from controller.probe import Workpiece
 from controller.servo.plant_option import PLANT_OPTIONS
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, HomingError, LostCommunicationError
+from drivers.frame_outputs import FrameOutputQueue, FrameOutputs
 from drivers.homing import plan_for
-from drivers.io_peer import IO_OPTIONS, limit_tripped, record_outputs, switch_name
+from drivers.io_peer import (
+    IO_OPTIONS,
+    limit_tripped,
+    record_outputs,
+    switch_name,
+    workpiece_option,
+)
 from drivers.sim.axes import SimAxes, plant_of
 from drivers.sim.block_clock import BlockClock
 from drivers.sim.fifo import FrameFifo
@@ -26,7 +34,7 @@ from drivers.sim.switches import SimSwitches, timeout_message
 REST_AFTER_S = 2.0  # idle this long, the Table II servo has settled (poles of ~100/s and up)
 
 
-class SimCard(BlockClock, Drive):
+class SimCard(BlockClock, Drive, FrameOutputs):
     """Frames are clocked one per sample period T, in wall-clock time or virtual time.
 
     Options: realtime (bool, default True), fifo_frames (256), max_pulses_per_frame (127,
@@ -74,6 +82,7 @@ class SimCard(BlockClock, Drive):
         self._messages: list[str] = []
         self._streaming = False  # frames since the last end-of-stream (an empty FIFO is an error)
         self._written = 0  # frames accepted since open (sequence numbers)
+        self.frame_outputs = FrameOutputQueue()  # M62's, each set as its frame is clocked
         self._discarded = np.zeros(self.n_axes, dtype=np.int64)
         self._trace: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._comm_ok = True
@@ -111,6 +120,7 @@ class SimCard(BlockClock, Drive):
         with self._lock:
             got = self._fifo.recall(n, keep) if not self._status.halted else 0
             self._written -= got
+            self.frame_outputs.taken_back(self._written)
             return got
 
     def _send_frames(self, frames: np.ndarray, end_of_stream: bool) -> None:
@@ -170,6 +180,7 @@ class SimCard(BlockClock, Drive):
         self._check_comm()
         with self._lock:
             self._discarded += self._fifo.clear()
+            self.frame_outputs.waiting.clear()
             self._status = CardStatus.OK
             self._messages = []
             self._streaming = False
@@ -181,6 +192,7 @@ class SimCard(BlockClock, Drive):
         self._check_comm()
         with self._lock:
             self._discarded += self._fifo.clear()
+            self.frame_outputs.waiting.clear()
             self._streaming = False
 
     def _estop_input(self) -> bool:
@@ -328,7 +340,12 @@ class SimCard(BlockClock, Drive):
         cmd, enc = self._axes.step(np.concatenate([frames, idle]))
         if len(frames):
             self._trace.append((seq, cmd[: len(frames)], enc[: len(frames)]))
+            self.frame_outputs.due(int(seq[-1]), self.set_outputs)
         self.frames_clocked += n
+
+    def schedule_outputs(self, changes: Sequence[OutputChange], frames_back: int) -> None:
+        with self._lock:
+            self.frame_outputs.waiting.append((self._written - 1 - frames_back, changes))
 
     def _latch(self, flag: CardStatus, message: str) -> None:
         with self._lock:
@@ -399,20 +416,3 @@ def _option(options: dict[str, Any], key: str, default: float, lo: float, hi: fl
     if not lo <= number <= hi:
         raise DriveError(f"sim: drive option {key}: {value!r} is not in [{lo:g}, {hi:g}]")
     return number
-
-
-def workpiece_option(value: Any, who: str) -> Workpiece | None:
-    """probe_workpiece_mm: `x0,y0,z0,x1,y1,z1` (text or six numbers), the simulated work's box
-    in machine mm (the sim card's and the peers' probe input); a DriveError naming the option
-    otherwise."""
-    if value is None:
-        return None
-    parts = value.split(",") if isinstance(value, str) else value
-    try:
-        v = [float(p) for p in parts]
-    except (TypeError, ValueError):
-        v = []
-    if len(v) != 6 or not all(np.isfinite(v)) or any(v[i] > v[i + 3] for i in range(3)):
-        raise DriveError(f"{who} probe_workpiece_mm: {value!r} is not a box "
-                         "x0,y0,z0,x1,y1,z1 (mm, each min at most its max)")
-    return Workpiece((v[0], v[1], v[2]), (v[3], v[4], v[5]))

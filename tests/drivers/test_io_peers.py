@@ -166,3 +166,29 @@ def test_an_input_stops_the_job_names_itself_and_leaves_the_outputs_safe(
     assert wait_file(record, lambda got: got["bits"] == 0)["analog"] == [0.0] * 4
     assert [(n, v) for _, n, v, safe in outputs_of(events) if safe] == [
         ("spindle", "off"), ("coolant_flood", False), ("digital_1", False)]
+
+
+@pytest.mark.parametrize("backend", ["serial", "canopen"])
+def test_m62_goes_with_the_next_move_on_the_peers_without_a_stop(tmp_path: Path,
+                                                                 backend: str) -> None:
+    """The host sets it once the move's first frame is fed back as run (the peers have no
+    output timed with a frame): the job blends through it as if it were not there."""
+    config = config_with_io(tmp_path, backend)
+    record = tmp_path / "outputs.json"
+    # back to X0 Y0 at the end: the plain program starts where this one did
+    synced = "G21 G90 G64 F1200\nG1 X10\nM62 P0\nG1 X20 Y5\nG1 X30\nG0 X0 Y0\nM2\n"
+    seen: list[dict[str, Any] | None] = []
+
+    def during(event: dict[str, Any]) -> None:
+        if event["event"] == "output":
+            seen.append(read_outputs(str(record)))  # reported once the peer holds it
+    with peer(backend, config, f"outputs_file={record}") as port:
+        code, events, err = run(backend, config, port, synced, tmp_path, during)
+        assert code == 0, (err, events[-1])
+        code, plain, err = run(backend, config, port, synced.replace("M62 P0\n", ""),
+                               tmp_path)
+        assert code == 0, err
+    assert outputs_of(events) == [(4, "digital_0", True, False)]
+    assert seen == [{"bits": 1 << 4, "analog": [0.0] * 4}]
+    # no stop at it: planned as the program without it
+    assert events[-1]["planned_time_s"] == plain[-1]["planned_time_s"]

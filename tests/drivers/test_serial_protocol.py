@@ -23,6 +23,7 @@ TRANSCRIPT: list[tuple[p.Frame, str]] = [
     (p.StatusRequest(1), "a5 11 02 0100 7d28"),
     (p.End(2), "a5 12 02 0200 f2e6"),
     (p.Disable(4), "a5 14 02 0400 cd6b"),
+    (p.Recall(6, 0x0120, 20), "a5 16 06 0600 2001 1400 8229"),
     (STATUS, "5a 80 28 0300 6400 0001 81 00 0000 0302 0201"
              " e2aaffff f5aaffff c6ff c7ff e30a0000 e60a0000 0100 0000 0000 19f1"),
     (p.Outputs(5, 0x0031, (1000.0, 2.5, 0.0, -1.0)),

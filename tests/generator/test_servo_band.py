@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from controller.config import ConfigError, ServoBand, load_config, parse_config
@@ -128,6 +128,7 @@ def test_a_band_prediction_is_each_plants_residual_on_the_compensated_frames() -
 
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 10_000), cut=st.integers(50, 800), exact=st.sampled_from([0.0, 2e-3]))
+@example(seed=3929, cut=278, exact=0.0)
 def test_band_states_continue_a_window_and_the_worst_is_each_plants_max(
         seed: int, cut: int, exact: float) -> None:
     cfg = parse_config(banded(), "band.yaml")
@@ -141,9 +142,12 @@ def test_band_states_continue_a_window_and_the_worst_is_each_plants_max(
     nominal = predict(xy[cut:], phi[cut:], xy[cut - 1], servos[0], T,
                       state_after(xy[:cut], np.zeros(2), servos[0], T))
     assert np.array_equal(nominal.ex_mm, rest[0].ex_mm)
-    # ... and each plant as one pass would, to the filters' round-off (as precompensation's)
+    # ... and each plant as one pass would, to the filters' round-off. A mismatched plant's
+    # residual filter has six poles near 0.93: in the block form's companion states (1e6 times
+    # the output) that round-off reaches 9 nm against an exact recursion (seed 3929, cut 278),
+    # so 30 nm: a thousandth of the contour limit.
     for w, r in zip(whole, rest, strict=True):
-        assert np.allclose(w.ex_mm[cut:len(xy)], r.ex_mm[:len(xy) - cut], atol=1e-5, rtol=0.0)
+        assert np.allclose(w.ex_mm[cut:len(xy)], r.ex_mm[:len(xy) - cut], atol=3e-5, rtol=0.0)
     history = xy[max(0, cut - 41):cut]
     worst = worst_true_error_mm(xy[cut:], rest, exact, history_xy=history)
     each = np.max([true_error_mm(xy[cut:], p, exact, history_xy=history) for p in rest], axis=0)

@@ -88,7 +88,6 @@ def test_run_from_line_sets_again_what_the_lines_before_set(tmp_path: Path) -> N
                     "(mapped: E0-E0)"),
     ("M68 E0\n", "1:1: error: M68 needs Q (the value)"),
     ("M68 E0 Q12\n", "1:8: error: M68 E0 Q12 is outside [0, 10] (io.analog[0])"),
-    ("M3 S30000\n", "1:4: error: S30000 is above the spindle's 24000 rpm (io.spindle.max_rpm)"),
     ("G0 X1 E2\n", "1:7: error: E word with no M67 or M68 on the line (nor exponents: write "
                    "1e3 as 1000)"),
     ("M62 P0 M63\n", "1:8: error: M63 and M62 are both in the digital output modal group"),

@@ -156,8 +156,10 @@ def test_configured_safe_values_are_what_a_stop_leaves(tmp_path: Path) -> None:
 @pytest.mark.parametrize("hold_at_s", [0.9, 0.98, 1.0, 1.02, 1.04, 1.06, 1.1, 1.2])
 def test_a_feed_hold_at_an_output_mark_sets_it_once_and_resumes(tmp_path: Path,
                                                                 hold_at_s: float) -> None:
-    """Hold asked as the machine nears, reaches or leaves the mark (the move to X10 takes
-    about 1.05 s): the output is set once, in its place, and the job goes on after resume."""
+    """Hold asked as the machine nears, reaches or leaves the M62's place (the move to X10
+    takes about 1.05 s; M62 P0 goes with the first frame of line 4, frames a hold may take
+    back and send again) and the M64's mark: each output is set once, in its place, and the
+    job goes on after resume."""
     config = mill(tmp_path, spin_up_s=0.0)
     prog = tmp_path / "prog.nc"
     prog.write_text("G21 G90\nG1 X10 F600\nM62 P0\nG1 X20\nM64 P1\nM2\n")
@@ -179,8 +181,9 @@ def test_a_feed_hold_at_an_output_mark_sets_it_once_and_resumes(tmp_path: Path,
     result = runtime.run()
     assert result.outcome is Outcome.DONE, result.message
     assert asked == ["hold", "resume"]
-    assert changes(events) == [(3, "digital_0", True), (5, "digital_1", True)]
+    assert changes(events) == [(4, "digital_0", True), (5, "digital_1", True)]
     assert card.output_image.bits == (1 << BIT["p0"]) | (1 << BIT["p1"])
+    ((seq, _),) = card.frame_outputs.clocked  # the card set P0 once, at one frame
     assert result.final_position_mm["x"] == pytest.approx(20.0, abs=0.002)
 
 

@@ -17,7 +17,7 @@ def test_io_demo_checks_with_its_tools_and_names_a_missing_one(tmp_path: Path) -
     tools.write_text("T1 P1 Z5 D6 ;6 mm end mill\n")
     missing = subprocess.run([*CNCCTL, "check", str(DEMO), "--config", MILL, "--tools",
                               str(tools)], capture_output=True, text=True, timeout=60)
-    assert missing.returncode == 2 and ":21:" in missing.stderr
+    assert missing.returncode == 2 and ":24:" in missing.stderr
     assert "T2 is not in the tool table" in missing.stderr
     tools.write_text("T1 P1 Z5 D6 ;6 mm end mill\nT2 P2 Z12 D3 ;3 mm drill\n")
     done = subprocess.run([*CNCCTL, "check", str(DEMO), "--config", MILL, "--tools",
@@ -52,11 +52,16 @@ def test_io_demo_runs_on_the_sim_card_with_its_tool_changes_and_probe(tmp_path: 
             proc.kill()
             proc.wait()
     outputs = [(e["line"], e["name"], e["value"]) for e in events if e["event"] == "output"]
+    output_t_s = [e["t_s"] for e in events if e["event"] == "output"]
     events = [e for e in events if e["event"] != "output"]
     kinds = [(e["event"], e.get("line")) for e in events]
-    assert kinds == [("start", None), ("tool", 7), ("probe", 13), ("tool", 21), ("done", 26)]
+    assert kinds == [("start", None), ("tool", 8), ("probe", 16), ("tool", 24), ("done", 30)]
     names = {name for _, name, _ in outputs}
-    assert {"spindle", "coolant_flood"} <= names, outputs
+    assert {"spindle", "coolant_flood", "digital_0", "analog_0"} <= names, outputs
+    # the probe's trip ends a stretch, not the job: nothing goes safe there, and the outputs
+    # of the stretches after it are timed on the run's one time line
+    assert [(line, v) for line, n, v in outputs if n == "digital_0"] == [(12, True), (30, False)]
+    assert output_t_s == sorted(output_t_s)
     assert [v for _, n, v in outputs if n == "spindle"][-1] == "off"  # stopped by the end
     tool1, probe, tool2 = events[1], events[2], events[3]
     assert (tool1["tool"], tool1["length_mm"], tool2["tool"], tool2["length_mm"]) == (1, 0, 2, 12)

@@ -31,9 +31,10 @@ def test_run_relays_output_events_and_status_shows_them_until_the_estop(tmp_path
         events = [json.loads(line) for line in done.stdout.splitlines()]
         outputs = [(e["line"], e["name"], e["value"]) for e in events
                    if e["event"] == "output"]
+        # M62 and M67 go with the next move: at its first sample, line 6
         assert outputs == [(2, "spindle_rpm", 1000.0), (2, "spindle", "cw"),
-                           (3, "coolant_flood", True), (4, "digital_0", True),
-                           (5, "analog_0", 4.0)]
+                           (3, "coolant_flood", True), (6, "digital_0", True),
+                           (6, "analog_0", 4.0)]
         assert events[-1]["event"] == "done"
         assert d.status()["outputs"] == {
             "spindle": "cw", "spindle_rpm": 1000.0, "coolant_mist": False,

@@ -11,6 +11,13 @@ from controller.generator.feed.shape import QUINTIC, TransitionShape
 from controller.numeric import clamp
 
 CHUNK_SAMPLES = 16  # check-sample intervals per chunk of the coarse pass over transitions
+# The coarse pass first bounds runs of SUPER_CHUNKS chunks, then the chunks of the runs that
+# may exceed SUPER_SHARE * tol (a G1 walk keeps 1 chunk in 600: 2.7 million chunk bounds for
+# 10k lines became a sixteenth). A run under that bound holds no chunk above tol/4: the margin,
+# an eighth of tol, is ~1e3 times the round-off of a chunk's positions and speeds against its
+# run's, so the chunks kept, and with them every check, are the same as chunk by chunk.
+SUPER_CHUNKS = 16
+SUPER_SHARE = 0.125
 
 
 @dataclass(frozen=True, eq=False)
@@ -166,10 +173,9 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     ch = _Chunks.build(n, dur, s0, vs, ve, curve, tol, shape)
     # Dense samples only in the chunks that may hold an excess above tol/4 (the very samples a
     # full pass takes there, so the worst points found are the same).
-    c = np.flatnonzero(ch.keep)
-    cnt = ch.j1[c] - ch.j0[c] + ~ch.keep_next[c]  # a chunk's last sample unless the next has it
-    k = np.repeat(ch.k[c], cnt)
-    j = np.repeat(ch.j0[c], cnt) + np.arange(len(k)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    cnt = ch.j1 - ch.j0 + ~ch.keep_next  # a chunk's last sample unless the next has it
+    k = np.repeat(ch.k, cnt)
+    j = np.repeat(ch.j0, cnt) + np.arange(len(k)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
     tau = j / (n[k] - 1.0)
     s = s0[k] + shaped_distance(tau, dur[k], vs[k], ve[k], shape)
     v = shaped_speed(tau, vs[k], ve[k], shape)
@@ -178,7 +184,7 @@ def _transition_excess(ph: PhaseArrays, lengths: np.ndarray, mask: np.ndarray,
     # the interpolated tau; only those in kept chunks (elsewhere v - vlim <= tol/4 there too).
     g = _grid_inside(curve, s0, s0 + lengths[mask])
     gk = clamp(np.searchsorted(s0, curve.s_mm[g], side="right") - 1, 0, len(s0) - 1)
-    in_kept = ch.keep[ch.chunk_of(curve.s_mm[g], gk)]
+    in_kept = ch.kept_at(curve.s_mm[g], gk)
     g, gk = g[in_kept], gk[in_kept]
     tg = _seed_tau(curve.s_mm[g], gk, k, s, tau)
     for _ in range(3):
@@ -209,47 +215,91 @@ def _seed_tau(x: np.ndarray, gk: np.ndarray, k: np.ndarray, s: np.ndarray,
     return np.minimum(np.maximum(t, tau[first]), tau[last])
 
 
+def _bounds(kb: np.ndarray, cb: np.ndarray, n: np.ndarray, dur: np.ndarray, s0: np.ndarray,
+            vs: np.ndarray, ve: np.ndarray,
+            shape: TransitionShape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sample index, position and speed of chunk boundary cb of transition kb (each boundary
+    by the same operations wherever it is computed, so the same bits)."""
+    jb = np.minimum(cb * CHUNK_SAMPLES, n[kb] - 1)
+    tau = jb / (n[kb] - 1.0)
+    sb = s0[kb] + shaped_distance(tau, dur[kb], vs[kb], ve[kb], shape)
+    return jb, sb, shaped_speed(tau, vs[kb], ve[kb], shape)
+
+
+def _runs(count: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For groups of count[i] + 1 boundaries laid end to end: each boundary's group, its index
+    in the group, and the boundaries that start an interval (all but each group's last)."""
+    group = np.repeat(np.arange(len(count)), count + 1)
+    first = np.cumsum(count + 1) - (count + 1)
+    local = np.arange(len(group)) - first[group]
+    last = np.zeros(len(group), bool)
+    last[first + count] = True
+    return group, local, np.flatnonzero(~last)
+
+
 @dataclass(frozen=True, eq=False)
 class _Chunks:
-    """Runs of CHUNK_SAMPLES check-sample intervals per transition, and whether each may hold an
-    excess above tol/4: a transition is monotone, so on a chunk v <= its larger end speed, and
-    vlim >= its minimum over the chunk's span."""
+    """The kept runs of CHUNK_SAMPLES check-sample intervals per transition: those that may hold
+    an excess above tol/4 (a transition is monotone, so on a chunk v <= its larger end speed,
+    and vlim >= its minimum over the chunk's span). Runs of SUPER_CHUNKS chunks (supers) are
+    bounded first; only the chunks of supers that may exceed SUPER_SHARE * tol are bounded."""
 
-    k: np.ndarray  # transition of each chunk
-    j0: np.ndarray  # first and last sample index of the chunk
+    k: np.ndarray  # per kept chunk: its transition, first and last sample index
+    j0: np.ndarray
     j1: np.ndarray
-    first: np.ndarray  # per transition: its first chunk
-    start_s: np.ndarray  # where each chunk starts (mm)
-    keep: np.ndarray
     keep_next: np.ndarray  # the next chunk of the same transition is kept
+    sup_first: np.ndarray  # per transition: its first super, and how many it has
+    sup_count: np.ndarray
+    sup_start_s: np.ndarray  # per super: where it starts (mm), and its first bounded chunk
+    sup_fine: np.ndarray  # (-1: its chunks were not bounded, none is kept)
+    sup_chunks: np.ndarray  # per super: how many chunks it has
+    fine_start_s: np.ndarray  # per bounded chunk: where it starts, whether it is kept
+    fine_keep: np.ndarray
 
     @classmethod
     def build(cls, n: np.ndarray, dur: np.ndarray, s0: np.ndarray, vs: np.ndarray,
               ve: np.ndarray, curve: LimitCurve, tol: float,
               shape: TransitionShape = QUINTIC) -> _Chunks:
         m = (n - 2) // CHUNK_SAMPLES + 1  # chunks per transition (n >= 2 samples)
-        first = np.cumsum(m) - m
-        # Chunk boundaries: m + 1 per transition, the last at sample n - 1.
-        kb = np.repeat(np.arange(len(n)), m + 1)
-        cb = np.arange(len(kb)) - np.repeat(first + np.arange(len(n)), m + 1)
-        jb = np.minimum(cb * CHUNK_SAMPLES, n[kb] - 1)
-        tau = jb / (n[kb] - 1.0)
-        sb = s0[kb] + shaped_distance(tau, dur[kb], vs[kb], ve[kb], shape)
-        vb = shaped_speed(tau, vs[kb], ve[kb], shape)
-        last = np.zeros(len(kb), bool)
-        last[np.cumsum(m + 1) - 1] = True
-        i0 = np.flatnonzero(~last)  # a chunk runs from boundary i0 to i0 + 1
+        first = np.cumsum(m) - m  # per transition: the global index of its first chunk
+        ms = (m - 1) // SUPER_CHUNKS + 1  # supers per transition
+        kb, sl, i0 = _runs(ms)
+        _, sb, vb = _bounds(kb, np.minimum(sl * SUPER_CHUNKS, m[kb]), n, dur, s0, vs, ve, shape)
         vmax = np.maximum(vb[i0], vb[i0 + 1])
-        keep = vmax - curve.chained_min(sb, i0) > 0.25 * tol
-        k = kb[i0]
-        keep_next = np.append(keep[1:], False) & (np.append(k[1:], -1) == k)
-        return cls(k, jb[i0], jb[i0 + 1], first, sb[i0], keep, keep_next)
+        sup_keep = vmax - curve.chained_min(sb, i0) > SUPER_SHARE * tol
+        ks, c_lo = kb[i0], sl[i0] * SUPER_CHUNKS  # per super: transition, first chunk
+        sup_chunks = np.minimum(c_lo + SUPER_CHUNKS, m[ks]) - c_lo
+        todo = np.flatnonzero(sup_keep)
+        # The chunks of the supers kept, bounded as chunk by chunk.
+        grp, local, f0 = _runs(sup_chunks[todo])
+        fk, fc = ks[todo][grp], c_lo[todo][grp] + local
+        jb, fsb, fvb = _bounds(fk, fc, n, dur, s0, vs, ve, shape)
+        keep = np.maximum(fvb[f0], fvb[f0 + 1]) - curve.chained_min(fsb, f0) > 0.25 * tol
+        sup_fine = np.full(len(ks), -1)
+        sup_fine[todo] = np.cumsum(sup_chunks[todo]) - sup_chunks[todo]
+        kept = f0[keep]
+        gid = first[fk[kept]] + fc[kept]  # global chunk index of each kept chunk
+        nxt = np.searchsorted(gid, gid + 1)
+        keep_next = (nxt < len(gid)) & (gid[np.minimum(nxt, len(gid) - 1)] == gid + 1) \
+            & (fc[kept] + 1 < m[fk[kept]])
+        return cls(fk[kept], jb[kept], jb[kept + 1], keep_next, np.cumsum(ms) - ms, ms,
+                   sb[i0], sup_fine, sup_chunks, fsb[f0], keep)
 
-    def chunk_of(self, s_mm: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """The chunk of transition k holding s (the later one at a shared boundary)."""
-        c = np.searchsorted(self.start_s, s_mm, side="right") - 1
-        n_chunks = np.diff(np.append(self.first, len(self.k)))
-        return clamp(c, self.first[k], self.first[k] + n_chunks[k] - 1)
+    def kept_at(self, s_mm: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """Whether the chunk of transition k holding s (the later one at a shared boundary) is
+        kept: its super by the supers' starts, then the chunk by its super's chunk starts (the
+        same chunk as a search over every chunk's start)."""
+        sup = clamp(np.searchsorted(self.sup_start_s, s_mm, side="right") - 1,
+                    self.sup_first[k], self.sup_first[k] + self.sup_count[k] - 1)
+        lo = self.sup_fine[sup]
+        out = np.zeros(len(s_mm), bool)
+        bounded = np.flatnonzero(lo >= 0)
+        if bounded.size:
+            lo_b = lo[bounded]
+            c = clamp(np.searchsorted(self.fine_start_s, s_mm[bounded], side="right") - 1,
+                      lo_b, lo_b + self.sup_chunks[sup[bounded]] - 1)
+            out[bounded] = self.fine_keep[c]
+        return out
 
 
 def _sample_counts(dur: np.ndarray, vs: np.ndarray, ve: np.ndarray, length: np.ndarray,

@@ -192,13 +192,15 @@ def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.nda
     pieces = path.pieces
     counts = [max(math.ceil(p.length_mm / spacing), 8) + 1 for p in pieces]
     keys = [(p.curve, p.u0, p.u1, n) for p, n in zip(pieces, counts, strict=True)]
-    missing = [i for i, key in enumerate(keys) if key not in cache]
+    # One look-up per key where it hits (hashing a key hashes its curve's fields).
+    rows = [cache.get(key) for key in keys]
+    missing = [i for i, row in enumerate(rows) if row is None]
     for kind, batch in ((PieceKind.LINE, _line_samples), (PieceKind.PH, _ph_samples)):
         batch([(pieces[i], counts[i]) for i in missing if pieces[i].kind == kind], cache)
     for i in missing:
         if keys[i] not in cache:
             cache[keys[i]] = _piece_samples(pieces[i], counts[i])
-    rows = [cache[key] for key in keys]
+        rows[i] = cache[keys[i]]
     counts = [len(r[0]) for r in rows]  # a NURBS piece sampled by knot span has its own count
     # Each piece's samples moved to where it starts on the path, all at once (p.s0_mm + s).
     s = np.repeat([p.s0_mm for p in pieces], counts) + np.concatenate([r[0] for r in rows])

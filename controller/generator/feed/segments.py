@@ -135,27 +135,34 @@ class SegmentWindows:
         n_up = len(k)
         rows = np.concatenate((k, k + len(self.a)))
         level = np.concatenate((up, down))
-        if level.ndim == 2:
-            rows = rows[:, None]  # per-segment values broadcast over the levels
         e, nohit = self._ends[rows], self._nohit[rows]
-        near, vn, vf, kbig, none = (e[..., i] for i in range(5))
+        per_row = level.shape[1] if level.ndim == 2 else 1
+        # Only levels above vlim at the near end are searched (elsewhere the answer is the near
+        # end itself): 4 in 10 on a G1 walk. Each searched level takes the operations it took
+        # among all of them, so the same bits.
+        below = (e[:, 1:2] < level) if level.ndim == 2 else e[:, 1] < level
+        x = np.repeat(e[:, 0], per_row).reshape(level.shape)
+        sel = np.flatnonzero(below)
+        r = sel // per_row  # the row (segment and direction) of each searched level
+        n_sel_up = int(np.searchsorted(r, n_up))  # rows: searches from the start first
+        lev = level.ravel()[sel]
+        kbig = e[r, 3]
         # g: the first (last) slot where the running max reaches level, b (a) when no sample
         # inside does; p: the slot before it (toward near).
-        g = np.empty(level.shape, np.intp)
-        lq = _on_key_grid(level)
-        g[:n_up] = np.searchsorted(self.fkey, lq[:n_up] + kbig[:n_up], side="left")
-        g[n_up:] = np.searchsorted(self.bkey, kbig[n_up:] - lq[n_up:], side="right") - 1
+        g = np.empty(len(sel), np.intp)
+        lq = _on_key_grid(lev)
+        g[:n_sel_up] = np.searchsorted(self.fkey, lq[:n_sel_up] + kbig[:n_sel_up], side="left")
+        g[n_sel_up:] = np.searchsorted(self.bkey, kbig[n_sel_up:] - lq[n_sel_up:],
+                                       side="right") - 1
         p = g.copy()
-        p[:n_up] -= 1
-        p[n_up:] += 1
+        p[:n_sel_up] -= 1
+        p[n_sel_up:] += 1
         p_v, q_v = v[p], v[g]
         dv = q_v - p_v
-        frac = np.minimum(np.maximum((level - p_v) / np.where(dv != 0.0, dv, 1.0), 0.0), 1.0)
+        frac = np.minimum(np.maximum((lev - p_v) / np.where(dv != 0.0, dv, 1.0), 0.0), 1.0)
         p_s = s[p]
-        x = p_s + frac * (s[g] - p_s)
-        below = vn < level
-        x = np.where(below, x, near)
-        x = np.where(below & (g == nohit) & (vf < level), none, x)
+        found = p_s + frac * (s[g] - p_s)
+        x.ravel()[sel] = np.where((g == nohit[r]) & (e[r, 2] < lev), e[r, 4], found)
         return x[:n_up], x[n_up:]
 
 

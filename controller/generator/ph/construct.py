@@ -86,7 +86,14 @@ def block_curve(block: MotionBlock, feed_cap_mm_s: float,
     p0, p1 = block.start[:2], block.end[:2]
     if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
         return None
-    return BlockCurve(LineCurve(p0, p1), feed, line, False, tol)
+    # LineCurve(p0, p1) and BlockCurve(...) without the frozen setattr per field: every G1
+    # line of a program comes here.
+    curve = object.__new__(LineCurve)
+    curve.__dict__.update(p0=p0, p1=p1)
+    bc = object.__new__(BlockCurve)
+    bc.__dict__.update(curve=curve, feed_mm_s=feed, line=line, nurbs=False,
+                       blend_tolerance_mm=tol)
+    return bc
 
 
 def find_corners(curves: list[BlockCurve], kappa_th_per_mm: float) -> dict[int, list[CornerZone]]:
@@ -231,6 +238,9 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
     """
     cache = {} if cache is None else cache
     pieces: list[Piece] = list(prefix)
+    # Per piece: made here for this path alone (chain may move it in place): the lines and arcs
+    # and the G1 blends, not the prefix, the NURBS parts or blends a cache may hand out again.
+    own = [False] * len(pieces)
     corner_base = max((p.corner for p in prefix), default=-1) + 1  # keep corner ids distinct
     infos: list[CornerInfo] = []
     stops: list[int] = []
@@ -241,12 +251,15 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
             ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph,
                                     corner_base + len(infos), cache)
             infos += inf
+            mine = False
         else:
             kind = PieceKind.ARC if isinstance(bc.curve, ArcCurve) else PieceKind.LINE
             ps = [make_piece(kind, bc.curve, 0.0, 1.0, 0.0, bc.feed_mm_s, bc.line)]
+            mine = True
         row = None if joints is None or not pieces else joints.row.get(i)
         line_row = None if row is None or not applies(pieces[-1], ps[0], joints, row) \
             else (joints, row)
+        first_own = mine
         if pieces and _joint_angle_rad(pieces[-1], ps[0], line_row) > SMOOTH_JOINT_RAD:
             tol = curves[i - 1].blend_tolerance_mm if i > 0 else prefix_tolerance_mm
             blended = _blend(pieces[-1], ps[0], tol, blend_cache, repeats, line_row) \
@@ -254,12 +267,17 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
             if blended is None:
                 stops.append(len(pieces))
             else:
+                made = line_row is not None  # blend_lines' pieces are new; a cache's are not
                 pieces[-1] = blended[0]
+                own[-1] = made
                 pieces.append(blended[1])
+                own.append(made)
                 ps[0] = blended[2]
+                first_own = made
                 blends += 1
         pieces += ps
-    chained = chain(pieces)
+        own += [first_own] + [mine] * (len(ps) - 1)
+    chained = chain(pieces, own)
     stop_s = tuple(chained[k].s0_mm for k in stops)
     ph = tuple(p for p in chained if p.kind == PieceKind.PH)
     return Geometry(Path(chained, stop_s), tuple(infos), ph, blends)

@@ -16,7 +16,7 @@ import numpy as np
 from controller.generator.ph.blend import MAX_BLEND_ANGLE_RAD, MAX_SHARE, MIN_CUT_MM
 from controller.generator.ph.unit_blend import unit_blends
 from controller.geometry.curves import LineCurve
-from controller.geometry.path import Piece, PieceKind
+from controller.geometry.path import Piece, PieceKind, new_piece
 from controller.geometry.ph_quintic import PhQuintic
 
 _SAFETY = 1.0 - 1e-9  # c D rounds: stay a hair inside the tolerance
@@ -73,12 +73,13 @@ def blend_lines(a: Piece, b: Piece, tolerance_mm: float, joints: LineJoints,
     p0 = complex(x0 + u_a * (x1 - x0), y0 + u_a * (y1 - y0))
     w0, w1, w2 = joints.w_unit[row]
     root = math.sqrt(cut)
-    ph = PhQuintic(p0, w0 * root, w1 * root, w2 * root)
-    return (Piece(a.kind, a.curve, a.u0, u_a, 0.0, u_a * la - a.u0 * la, a.feed_mm_s, a.line,
-                  a.corner),
-            Piece(PieceKind.PH, ph, 0.0, 1.0, 0.0, ph.length_mm, b.feed_mm_s, b.line),
-            Piece(b.kind, b.curve, u_b, b.u1, 0.0, b.u1 * lb - u_b * lb, b.feed_mm_s, b.line,
-                  b.corner))
+    ph = object.__new__(PhQuintic)  # PhQuintic(p0, ...) without the frozen setattr per field
+    ph.__dict__.update(p0=p0, w0=w0 * root, w1=w1 * root, w2=w2 * root)
+    return (new_piece(a.kind, a.curve, a.u0, u_a, 0.0, u_a * la - a.u0 * la, a.feed_mm_s,
+                      a.line, a.corner),
+            new_piece(PieceKind.PH, ph, 0.0, 1.0, 0.0, ph.length_mm, b.feed_mm_s, b.line),
+            new_piece(b.kind, b.curve, u_b, b.u1, 0.0, b.u1 * lb - u_b * lb, b.feed_mm_s,
+                      b.line, b.corner))
 
 
 def applies(a: Piece, b: Piece, joints: LineJoints, row: int) -> bool:

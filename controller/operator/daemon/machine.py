@@ -20,6 +20,7 @@ from typing import Any
 
 from controller.config import MachineConfig
 from controller.errors import CncError, NcError
+from controller.motion.loop import LIMIT_INPUT
 from controller.motion.realtime import realtime_threads
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
 from controller.operator.check_cmd import refuse_probes
@@ -321,15 +322,27 @@ class Machine:
 
     def _estop_input_loop(self) -> None:
         """The drive's e-stop input, between jobs too (a job's motion loop reads it each
-        cycle and stops at once): tripped, it e-stops as `cncctl estop` does."""
+        cycle and stops at once): tripped, it e-stops as `cncctl estop` does. A limit switch
+        that opens while idle latches FAULT naming it (jobs and jogs: their motion loop's)."""
+        limit: str | None = None  # the switch open at the last look
         while True:
             time.sleep(ESTOP_INPUT_POLL_S)
             try:
                 tripped = self.drive.estop_input()
+                limit, was = self.drive.limit_input(), limit
             except CncError:
                 continue
             if tripped and self.state is not State.ESTOP:
                 self.estop(ESTOP_INPUT)
+            elif limit is not None and limit != was:  # opened (one it stands on is known)
+                self._limit_at_rest(limit)
+
+    def _limit_at_rest(self, limit: str) -> None:  # not while homing: it uses the switches
+        with self._lock:
+            if self.state is State.IDLE and self.job is None and self.identify_run is None:
+                self.fault = f"{LIMIT_INPUT.format(limit)} (machine at rest)"
+                self._set_state(State.FAULT)
+                self.log.log(ERR, f"fault: {self.fault}")
 
     def reset(self) -> None:
         with self._lock:

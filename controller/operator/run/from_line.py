@@ -15,7 +15,7 @@ from controller.config import MachineConfig
 from controller.interpreter.program import position_at_line
 from controller.motion.types import MotionResult, Outcome
 from controller.offsets import OffsetTable
-from controller.operator.check_cmd import check_program
+from controller.operator.daemon.check_process import check_in_child
 from controller.operator.run.keys import enter_to_go
 from controller.runtime.current_run import CurrentRun
 from controller.runtime.processes import Runtime, RuntimeOptions, build_drive, open_drive
@@ -93,9 +93,9 @@ def run_from_line(args: argparse.Namespace, config: MachineConfig, offsets: Offs
         if getattr(args, "home", False):
             _home_all(drive, config, seq)
         start = drive.commanded_xyz_mm()
-        if args.from_line is None:
-            check_program(args.program, config, start_mm=start, offsets=offsets,
-                          summary=False)
+        if args.from_line is None:  # in a child: the drive's threads keep the interpreter
+            check_in_child(args.program, config, offsets, start, None,  # lock (heartbeats)
+                           lambda: False, lambda: None)
             return _run(seq, args.program, config, replace(
                 options, drive=drive, keep_drive_open=True, start_mm=start))
         at = position_at_line(args.program, config, args.from_line, start, offsets)

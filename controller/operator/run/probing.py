@@ -11,7 +11,8 @@ from typing import Any
 from controller.config import MachineConfig
 from controller.motion.types import MotionResult
 from controller.offsets import OffsetTable
-from controller.operator.check_cmd import check_program, refuse_probes
+from controller.operator.check_cmd import refuse_probes
+from controller.operator.daemon.check_process import check_in_child
 from controller.runtime.probe_run import ProbeRun
 from controller.runtime.processes import RuntimeOptions, build_drive, open_drive
 
@@ -30,10 +31,13 @@ def run_probing(args: argparse.Namespace, config: MachineConfig, offsets: Offset
     try:
         if drive.probe_input() is None:
             refuse_probes(args.program, lines, f"the {config.drive.backend} drive has no probe "
-                          "input (the sim card's: drive option probe_workpiece_mm)")
-        # checked again from where the drive stands, as every run on a kept-open drive is
-        check_program(args.program, config, start_mm=drive.commanded_xyz_mm(), offsets=offsets,
-                      summary=False)
+                          "input (drive option probe_workpiece_mm on the sim card, touch_probe "
+                          "on canopen)")
+        # checked again from where the drive stands, as every run on a kept-open drive is; in
+        # a child, as cncd does: in this process the check held the interpreter lock for
+        # seconds and the CANopen SYNC thread's heartbeats stopped (the drives faulted)
+        check_in_child(args.program, config, offsets, drive.commanded_xyz_mm(), None,
+                       lambda: False, lambda: None)
         run = ProbeRun(args.program, config, replace(options, offsets=offsets), drive, lines,
                        on_event)
         seq.current = run  # the keys' requests go to the stretch now running

@@ -114,7 +114,7 @@ def _follow(client: DaemonClient, view: Any, keys: KeyControl) -> int:
             return EXIT_REJECTED
         if kind == "start":
             view.event("start", **{k: v for k, v in event.items() if k != "event"})
-        elif kind in EVENT_KINDS:  # tool changes, probe results (controller/io_events.py)
+        elif kind in EVENT_KINDS:  # outputs, tool changes, probes (controller/io_events.py)
             view.event(kind, **{k: v for k, v in event.items() if k != "event"})
         elif kind == "progress":
             p = progress_from_event(event)
