@@ -24,8 +24,9 @@ def tight(config: MachineConfig) -> MachineConfig:
     return replace(config, axes=axes)
 
 
-def run(config: MachineConfig, blocks: bool, estop_at_s: float | None = None) -> tuple[
-        MotionResult, np.ndarray, list[int]]:
+def run(
+    config: MachineConfig, blocks: bool, estop_at_s: float | None = None
+) -> tuple[MotionResult, np.ndarray, list[int]]:
     """A run of the circle; the frames executed; the frames each clocking of the card ran
     (an e-stop asked: the frames executed when it was asked, last)."""
     card = virtual_card(config)
@@ -40,8 +41,9 @@ def run(config: MachineConfig, blocks: bool, estop_at_s: float | None = None) ->
         clocked.append(card.advance_until(n, cut, step))  # type: ignore[arg-type]
         return clocked[-1]
 
-    pacer = VirtualPacer(2, config.sample_period_s, advance,
-                         advance_until=advance_until if blocks else None)
+    pacer = VirtualPacer(
+        2, config.sample_period_s, advance, advance_until=advance_until if blocks else None
+    )
     ctrl: MotionController
 
     asked: list[int] = []
@@ -55,15 +57,17 @@ def run(config: MachineConfig, blocks: bool, estop_at_s: float | None = None) ->
             ctrl.request_estop("e-stop by operator")
 
     settings = MotionSettings.from_config(config, progress_every_s=0.002)
-    ctrl = MotionController(config, card, ChunkSource(list(circle_chunks())), pacer, settings,
-                            on_progress=progress)
+    ctrl = MotionController(
+        config, card, ChunkSource(list(circle_chunks())), pacer, settings, on_progress=progress
+    )
     result = ctrl.run()
     result.extra["stopping_at"] = stopping[0] if stopping else None
     return result, rec.commanded(), clocked + asked
 
 
-def same_stop(cycles: MotionResult, frames_c: np.ndarray, blocks: MotionResult,
-              frames_b: np.ndarray) -> None:
+def same_stop(
+    cycles: MotionResult, frames_c: np.ndarray, blocks: MotionResult, frames_b: np.ndarray
+) -> None:
     """The stop began at the same frame, and every frame up to it is the same. The stop is
     queued behind the frames in the card (no take-back for a fault), and a block run's FIFO
     holds up to a block less: it ends that much sooner along the same path."""
@@ -88,8 +92,7 @@ def test_a_run_in_blocks_is_the_run_cycle_by_cycle(name: str) -> None:
     assert blocks.settling_time_s == cycles.settling_time_s
     assert blocks.time_to_first_motion_s == pytest.approx(cycles.time_to_first_motion_s)
     for key in ("max", "rms", "mean"):
-        assert blocks.contour_error_um[key] == pytest.approx(cycles.contour_error_um[key],
-                                                             abs=1e-6)
+        assert blocks.contour_error_um[key] == pytest.approx(cycles.contour_error_um[key], abs=1e-6)
 
 
 def test_a_following_error_inside_a_block_stops_from_its_own_cycle() -> None:
