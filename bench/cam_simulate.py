@@ -3,36 +3,38 @@ acceleration held, failures, time-outs, motion time and CPU, per source of the c
 
     python bench/cam_simulate.py [--corpus DIR] [--linuxcnc [DIR]] [--config xyz_mill]
                                  [--workers 1] [--timeout 900] [--only TEXT ...]
-                                 [--markdown] [--json FILE]
+                                 [--markdown] [--json FILE] [--log FILE [--reuse]]
 
-The corpus is a folder of CAM programs, one subfolder per source (CAMotics, pcb2gcode, ...),
-by default `corpus/cam` beside the clone's parent folder; absent, the bench says so and exits
-0. `--linuxcnc` adds the LinuxCNC `nc_files` programs (default: `corpus/linuxcnc` beside it)
-as one more source. Each program is checked (`cncctl check --json`); each accepted one is
-simulated (`cncctl simulate --json`), every command a process of its own with a time-out.
+The corpus: one subfolder per source (CAMotics, pcb2gcode, ...), by default `corpus/cam` beside
+the clone's folder; absent, the bench says so and exits 0. `--linuxcnc` adds LinuxCNC's
+`nc_files` (default: `corpus/linuxcnc` beside it). Each program is checked (`cncctl check`),
+each accepted one simulated (`cncctl simulate --json`), shortest first, each command a process
+of its own. `--log FILE` appends each outcome as it ends; `--reuse` skips those FILE has.
 
-Per program: accepted (check exits 0), simulated (simulate exits 0 or 1 with its figures),
-within the limit (exit 0: the tool's true distance from the path under the config's contour
-error limit), feed held (the reference's largest speed at most the larger of the feed and
-rapid limits), acceleration held (its largest tangential acceleration at most Amax), both
-with REL_TOL; CPU is the simulate process's user + system time (os.wait4), planning CPU the
-generator's alone (simulate's own figure). A failure is any other exit, with the first line
-of its message; a time-out is killed.
+Per program: simulated (exit 0 or 1 with figures), within the limit (exit 0: the tool's true
+distance from the path within the contour error limit), feed held (the largest speed of the
+reference at most the feed or rapid limit), acceleration held (its largest tangential
+acceleration at most Amax), both to REL_TOL; CPU is simulate's user + system time (wait4),
+planning CPU the generator's alone (simulate's figure). A failure is any other exit, with its
+message's first line; a time-out is killed (`--timeout` CPU s, or ten times that of real time).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
+import resource
 import signal
 import subprocess
 import sys
 import tempfile
 import time
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
+from typing import IO
 
 REPO = Path(__file__).resolve().parents[1]
 CORPUS = REPO.parent / "shared" / "corpus" / "cam"
@@ -40,6 +42,7 @@ EXTS = (".nc", ".ngc", ".gcode", ".tap", ".cnc")
 REL_TOL = 1e-3  # finite differences of a 1 ms reference: a limit held to 0.1 %
 CHECK_TIMEOUT_S = 120.0
 POLL_S = 0.05
+WALL_FACTOR = 10.0  # a shared machine: the real-time limit is 10 times the CPU time limit
 MIN_LINES = 200  # below, start-up dominates the CPU per line
 
 
@@ -83,32 +86,35 @@ class Limits:
 
 
 def run_cmd(argv: list[str], timeout_s: float) -> Proc:
-    """Run argv with its output in files; wait4 for its CPU; kill it by pid after timeout_s."""
+    """Run argv with its output in files; wait4 for its CPU. It may use timeout_s of CPU time
+    (RLIMIT_CPU: the machine's load does not count) and WALL_FACTOR times that in real time;
+    beyond either it is killed, by its pid."""
     with tempfile.TemporaryFile() as fo, tempfile.TemporaryFile() as fe:
         t0 = time.monotonic()
         p = subprocess.Popen(argv, stdout=fo, stderr=fe, stdin=subprocess.DEVNULL)
-        rc, cpu_s = _wait(p.pid, t0 + timeout_s)
+        cpu_limit = math.ceil(timeout_s)
+        resource.prlimit(p.pid, resource.RLIMIT_CPU, (cpu_limit, cpu_limit + 5))
+        rc, cpu_s = _wait(p.pid, t0 + WALL_FACTOR * timeout_s)
         wall_s = time.monotonic() - t0
         p.returncode = -1  # reaped here: Popen must not wait for it again
-        fo.seek(0)
-        fe.seek(0)
-        return Proc(
-            rc,
-            fo.read().decode(errors="replace"),
-            fe.read().decode(errors="replace"),
-            cpu_s,
-            wall_s,
-        )
+        out, err = (_text(f) for f in (fo, fe))
+        return Proc(rc, out, err, cpu_s, wall_s)
+
+
+def _text(f: IO[bytes]) -> str:
+    f.seek(0)
+    return f.read().decode(errors="replace")
 
 
 def _wait(pid: int, deadline: float) -> tuple[int | None, float]:
-    """(exit code or None when killed at the deadline, user + system CPU seconds)."""
+    """(exit code, None when killed: at the deadline or by RLIMIT_CPU; its CPU seconds)."""
     killed = False
     while True:
         got, status, usage = os.wait4(pid, 0 if killed else os.WNOHANG)
         if got == pid:
             cpu_s = usage.ru_utime + usage.ru_stime
-            return (None if killed else os.waitstatus_to_exitcode(status)), cpu_s
+            rc = os.waitstatus_to_exitcode(status)
+            return (None if killed or rc == -signal.SIGXCPU else rc), cpu_s
         if time.monotonic() > deadline:
             os.kill(pid, signal.SIGKILL)
             killed = True
@@ -162,7 +168,8 @@ def _why(p: Proc) -> str:
 def _figures(o: Outcome, s: Proc, limits: Limits) -> None:
     """Outcome of a simulate run from its exit code and JSON."""
     if s.rc is None:
-        o.status, o.message = "timeout", f"killed after {s.wall_s:.0f} s"
+        o.status = "timeout"
+        o.message = f"killed after {s.cpu_s:.1f} s CPU, {s.wall_s:.0f} s"
         return
     if s.rc not in (0, 1):
         o.status, o.message = "failed", _why(s)
@@ -256,53 +263,25 @@ def _problem(o: Outcome) -> str:
 
 
 def _fold(total: SourceRow, row: SourceRow) -> None:
-    for name in (
-        "files",
-        "accepted",
-        "simulated",
-        "within_limit",
-        "limits_held",
-        "failures",
-        "timeouts",
-        "motion_time_s",
-        "cpu_s",
-        "planning_cpu_s",
-    ):
-        setattr(total, name, getattr(total, name) + getattr(row, name))
+    for f in fields(SourceRow):
+        if f.name not in ("source", "max_error_um", "problems"):
+            setattr(total, f.name, getattr(total, f.name) + getattr(row, f.name))
     total.max_error_um = max(total.max_error_um, row.max_error_um)
     total.problems += row.problems
 
 
-HEAD = (
-    "source",
-    "files",
-    "accepted",
-    "simulated",
-    "within limit",
-    "limits held",
-    "max error um",
-    "failures",
-    "time-outs",
-    "motion s",
-    "CPU s",
-    "planning CPU s",
+HEAD = tuple(
+    "source|files|accepted|simulated|within limit|limits held|max error um|failures|time-outs"
+    "|motion s|CPU s|planning CPU s".split("|")
 )
 
 
 def cells(r: SourceRow) -> list[str]:
-    return [
-        r.source,
-        str(r.files),
-        str(r.accepted),
-        str(r.simulated),
-        str(r.within_limit),
-        str(r.limits_held),
-        f"{r.max_error_um:.1f}",
-        str(r.failures),
-        str(r.timeouts),
-        f"{r.motion_time_s:.0f}",
-        f"{r.cpu_s:.0f}",
-        f"{r.planning_cpu_s:.0f}",
+    counts = (r.files, r.accepted, r.simulated, r.within_limit, r.limits_held)
+    ends = (r.failures, r.timeouts)
+    times = (r.motion_time_s, r.cpu_s, r.planning_cpu_s)
+    return [r.source, *map(str, counts), f"{r.max_error_um:.1f}", *map(str, ends)] + [
+        f"{t:.0f}" for t in times
     ]
 
 
@@ -351,10 +330,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     ap.add_argument("--config", default="xyz_mill")
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--timeout", type=float, default=900.0, help="per simulate, seconds")
+    ap.add_argument("--timeout", type=float, default=900.0, help="CPU s per simulate")
     ap.add_argument("--only", nargs="*", default=[], help="programs whose path has TEXT")
     ap.add_argument("--markdown", action="store_true")
     ap.add_argument("--json", type=Path, help="write every program's outcome and the table")
+    ap.add_argument("--log", type=Path, help="append each program's outcome as it ends")
+    ap.add_argument("--reuse", action="store_true", help="take the outcomes --log has")
     return ap.parse_args(argv)
 
 
@@ -375,15 +356,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"skipped: no corpus at {args.corpus} (--corpus DIR)")
         return 0
     chosen = select(args)
-    limits = config_limits(args.config)
-    with ThreadPoolExecutor(max_workers=max(1, args.workers)) as pool:
-        jobs = [
-            pool.submit(one, s, p, root, args.config, args.timeout, limits) for s, p, root in chosen
-        ]
-        outcomes = [_progress(j.result(), k, len(jobs)) for k, j in enumerate(jobs)]
+    done = reused(args.log, {str(p) for _, p, _ in chosen}) if args.reuse else {}
+    todo = [c for c in chosen if str(c[1]) not in done]
+    outcomes = list(done.values()) + run_all(todo, args)
     print(
         f"cncctl simulate --config {args.config}, {len(outcomes)} programs, "
-        f"time-out {args.timeout:g} s, {args.workers} worker(s)"
+        f"time-out {args.timeout:g} s CPU, {args.workers} worker(s)"
     )
     print(report(outcomes, args.markdown))
     if args.json:
@@ -393,6 +371,40 @@ def main(argv: list[str] | None = None) -> int:
             encoding="utf-8",
         )
     return 0
+
+
+def run_all(todo: list[tuple[str, Path, Path]], args: argparse.Namespace) -> list[Outcome]:
+    """Every program, shortest first (a failure shows early), each logged as it ends."""
+    limits = config_limits(args.config)
+    todo = sorted(todo, key=lambda c: c[1].stat().st_size)
+    outcomes = []
+    with ThreadPoolExecutor(max_workers=max(1, args.workers)) as pool:
+        jobs = [
+            pool.submit(one, s, p, root, args.config, args.timeout, limits) for s, p, root in todo
+        ]
+        for k, job in enumerate(as_completed(jobs)):
+            outcomes.append(_progress(job.result(), k, len(jobs)))
+            _log(args.log, todo[jobs.index(job)][1], outcomes[-1])
+    return outcomes
+
+
+def _log(log: Path | None, path: Path, o: Outcome) -> None:
+    if log is not None:
+        with log.open("a", encoding="utf-8") as f:
+            f.write(json.dumps({"path": str(path), **asdict(o)}) + "\n")
+
+
+def reused(log: Path | None, paths: set[str]) -> dict[str, Outcome]:
+    """The outcomes --log FILE holds for these paths (the last one of each): --reuse."""
+    if log is None or not log.exists():
+        return {}
+    out = {}
+    for line in log.read_text(encoding="utf-8").splitlines():
+        row = json.loads(line)
+        path = row.pop("path")
+        if path in paths:
+            out[path] = Outcome(**row)
+    return out
 
 
 def _progress(o: Outcome, k: int, n: int) -> Outcome:
