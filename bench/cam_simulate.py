@@ -1,9 +1,8 @@
 """Every CAM program `cncctl check` accepts, simulated: within the contour limit, feed and
 acceleration held, failures, time-outs, motion time and CPU, per source of the corpus.
 
-    python bench/cam_simulate.py [--corpus DIR] [--linuxcnc [DIR]] [--config xyz_mill]
-                                 [--workers 1] [--timeout 900] [--only TEXT ...]
-                                 [--markdown] [--json FILE] [--log FILE [--reuse]]
+    python bench/cam_simulate.py [--corpus DIR] [--linuxcnc [DIR]] [--config xyz_mill] [--workers 1]
+        [--timeout 900] [--only TEXT ...] [--markdown] [--json FILE] [--log FILE [--reuse]]
 
 The corpus: one subfolder per source (CAMotics, pcb2gcode, ...), by default `corpus/cam` beside
 the clone's folder; absent, the bench says so and exits 0. `--linuxcnc` adds LinuxCNC's
