@@ -42,7 +42,7 @@ REL_TOL = 1e-3  # finite differences of a 1 ms reference: a limit held to 0.1 %
 CHECK_TIMEOUT_S = 120.0
 POLL_S = 0.05
 WALL_FACTOR = 10.0  # a shared machine: the real-time limit is 10 times the CPU time limit
-MIN_LINES = 200  # below, start-up dominates the CPU per line
+MIN_BLOCKS = 200  # below, start-up dominates the CPU per block
 
 
 @dataclass
@@ -62,7 +62,10 @@ class Outcome:
     planning_cpu_s: float = 0.0
     cpu_s: float = 0.0
     wall_s: float = 0.0
-    lines: int = 0
+    blocks: int = 0  # the NC blocks check reads (moves, dwells, outputs)
+
+
+KEYS = {f.name for f in fields(Outcome)}
 
 
 @dataclass
@@ -76,12 +79,7 @@ class Proc:
     wall_s: float
 
 
-@dataclass
-class Limits:
-    """The config's limits the figures are held to."""
-
-    feed_mm_s: float
-    accel_mm_s2: float
+Limits = tuple[float, float]  # the feed (mm/s) and acceleration (mm/s^2) held to
 
 
 def run_cmd(argv: list[str], timeout_s: float) -> Proc:
@@ -147,13 +145,13 @@ def one(
 ) -> Outcome:
     """Check, then simulate if accepted."""
     o = Outcome(source, str(path.relative_to(root)))
-    o.lines = sum(1 for _ in path.open("rb"))
     c = check(path, config)
     if c.rc == 2:
         return o
     if c.rc != 0:
         o.status, o.message = "check_failed", _why(c)
         return o
+    o.blocks = sum(json.loads(c.out)["blocks"].values())
     s = simulate(path, config, timeout_s)
     o.cpu_s, o.wall_s = s.cpu_s, s.wall_s
     _figures(o, s, limits)
@@ -182,8 +180,8 @@ def _figures(o: Outcome, s: Proc, limits: Limits) -> None:
     o.true_error_um = r["contour_error_true_um"]["max"]
     o.max_feed_mm_s, o.max_accel_mm_s2 = r["max_feed_mm_s"], r["max_tangential_accel_mm_s2"]
     o.planning_cpu_s = r["planning_cpu_s"]
-    o.feed_held = o.max_feed_mm_s <= limits.feed_mm_s * (1 + REL_TOL)
-    o.accel_held = o.max_accel_mm_s2 <= limits.accel_mm_s2 * (1 + REL_TOL)
+    o.feed_held = o.max_feed_mm_s <= limits[0] * (1 + REL_TOL)
+    o.accel_held = o.max_accel_mm_s2 <= limits[1] * (1 + REL_TOL)
     o.status = "ok" if s.rc == 0 else "over_limit"
     if s.rc == 1:
         o.message = first_line(s.err)
@@ -193,7 +191,7 @@ def config_limits(config: str) -> Limits:
     from controller.config import load_config
 
     ip = load_config(config).interpolator
-    return Limits(max(ip.max_feed_mm_s, ip.rapid_feed_mm_s), ip.max_accel_mm_s2)
+    return max(ip.max_feed_mm_s, ip.rapid_feed_mm_s), ip.max_accel_mm_s2
 
 
 def programs(root: Path, source: str | None) -> list[tuple[str, Path]]:
@@ -297,12 +295,13 @@ def markdown_table(rows: list[SourceRow]) -> str:
 
 
 def slowest(outcomes: list[Outcome], n: int = 5) -> list[str]:
-    """The n programs with the most CPU per line, the figure that shows a slow plan."""
-    timed = [o for o in outcomes if o.cpu_s > 0 and o.lines >= MIN_LINES]
-    timed.sort(key=lambda o: o.cpu_s / max(o.lines, 1), reverse=True)
+    """The n programs with the most planning CPU per block, the figure of a slow plan."""
+    timed = [o for o in outcomes if o.cpu_s > 0 and o.blocks >= MIN_BLOCKS]
+    timed.sort(key=lambda o: o.planning_cpu_s / o.blocks, reverse=True)
     return [
-        f"{o.program}: {o.cpu_s:.1f} s CPU for {o.lines} lines "
-        f"({1e3 * o.cpu_s / max(o.lines, 1):.1f} ms/line), motion {o.motion_time_s:.0f} s"
+        f"{o.program}: {o.blocks} blocks, planning {o.planning_cpu_s:.1f} s CPU "
+        f"({1e3 * o.planning_cpu_s / o.blocks:.2f} ms/block), all {o.cpu_s:.1f} s CPU, "
+        f"motion {o.motion_time_s:.0f} s"
         for o in timed[:n]
     ]
 
@@ -312,7 +311,7 @@ def report(outcomes: list[Outcome], markdown: bool) -> str:
     out = [markdown_table(rows) if markdown else text_table(rows), ""]
     out += ["Not simulated within the limit, or a limit not held:"]
     out += [f"- {p}" for p in rows[-1].problems] or ["- none"]
-    out += ["", "Most CPU per line:"] + [f"- {s}" for s in slowest(outcomes)]
+    out += ["", "Most planning CPU per block:"] + [f"- {s}" for s in slowest(outcomes)]
     return "\n".join(out)
 
 
@@ -402,7 +401,7 @@ def reused(log: Path | None, paths: set[str]) -> dict[str, Outcome]:
         row = json.loads(line)
         path = row.pop("path")
         if path in paths:
-            out[path] = Outcome(**row)
+            out[path] = Outcome(**{k: v for k, v in row.items() if k in KEYS})
     return out
 
 
