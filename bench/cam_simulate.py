@@ -4,8 +4,8 @@ acceleration held, failures, time-outs, motion time and CPU, per source of the c
     python bench/cam_simulate.py [--corpus DIR] [--linuxcnc [DIR]] [--config xyz_mill] [--workers 1]
         [--timeout 900] [--only TEXT ...] [--markdown] [--json FILE] [--log FILE [--reuse]]
 
-The corpus: one subfolder per source (CAMotics, pcb2gcode, ...), by default `corpus/cam` beside
-the clone's folder; absent, the bench says so and exits 0. `--linuxcnc` adds LinuxCNC's
+The corpus: one subfolder per source (CAMotics, pcb2gcode, ...), `--corpus DIR` or $CAM_CORPUS
+(not in the repository: without it the bench says so and exits 0). `--linuxcnc` adds LinuxCNC's
 `nc_files` (default: `corpus/linuxcnc` beside it). Each program is checked (`cncctl check`),
 each accepted one simulated (`cncctl simulate --json`), shortest first, each command a process
 of its own. `--log FILE` appends each outcome as it ends; `--reuse` skips those FILE has.
@@ -35,8 +35,7 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import IO
 
-REPO = Path(__file__).resolve().parents[1]
-CORPUS = REPO.parent / "shared" / "corpus" / "cam"
+CORPUS = os.environ.get("CAM_CORPUS")  # the corpus folder, when --corpus is not given
 EXTS = (".nc", ".ngc", ".gcode", ".tap", ".cnc")
 REL_TOL = 1e-3  # finite differences of a 1 ms reference: a limit held to 0.1 %
 CHECK_TIMEOUT_S = 120.0
@@ -317,7 +316,7 @@ def report(outcomes: list[Outcome], markdown: bool) -> str:
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--corpus", type=Path, default=CORPUS)
+    ap.add_argument("--corpus", type=Path, default=Path(CORPUS) if CORPUS else None)
     ap.add_argument(
         "--linuxcnc",
         type=Path,
@@ -350,8 +349,8 @@ def select(args: argparse.Namespace) -> list[tuple[str, Path, Path]]:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    if not args.corpus.is_dir():
-        print(f"skipped: no corpus at {args.corpus} (--corpus DIR)")
+    if args.corpus is None or not args.corpus.is_dir():
+        print(f"skipped: no corpus at {args.corpus} (--corpus DIR or $CAM_CORPUS)")
         return 0
     chosen = select(args)
     done = reused(args.log, {str(p) for _, p, _ in chosen}) if args.reuse else {}
