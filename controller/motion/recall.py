@@ -15,9 +15,11 @@ from controller.motion.retime import Retimer
 from drivers.base import Drive
 
 # A hold or a lower override keeps this much queued when it takes frames back: the card runs
-# it while the loop plans the ramp (about a millisecond: the servo model's check) and writes
-# it, so the ramp starts this soon after the request, not behind the low-water mark (20 ms).
-HOLD_KEEP_MS = 5.0
+# it while the loop plans the ramp (about a millisecond of CPU: the servo model's check) and
+# writes it, so the ramp starts this soon after the request, not behind the low-water mark
+# (20 ms). 5 ms was measured too little: with cncd's sim card on a 2-core PC at load 7, one
+# hold in about ten ran the card dry before the ramp was written (an underrun fault).
+HOLD_KEEP_MS = 10.0
 JOURNAL_ENTRIES = 512  # sends remembered; more than a FIFO's worth at two frames a cycle
 RETIMER_FIELDS = ("rate", "target", "wanted", "ramp", "frac", "back", "recent", "rows_passed",
                   "cap_at", "cap_goal", "cap_wanted")
