@@ -6,12 +6,11 @@ from abc import ABC, abstractmethod
 
 
 class AtSpeedInput(ABC):
-    """Mixed into a Drive with an at-speed input: the sim card, the serial card, CANopen."""
+    """Mixed into a Drive with an at-speed input: the sim card, the serial card, CANopen.
+    at_speed_input_name says which input it is, for messages."""
+
+    at_speed_input_name: str = "the drive's at-speed input"
 
     @abstractmethod
     def at_speed_input(self) -> bool:
         """True while the spindle is at the commanded speed (the input, as read now)."""
-
-    @abstractmethod
-    def at_speed_input_name(self) -> str:
-        """Which input it is, for messages ("sim card, option spindle_spinup_s")."""

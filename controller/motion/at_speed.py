@@ -51,5 +51,5 @@ class AtSpeedWait:
         self.since_s = None
         return (
             f"line {self.line}: spindle not at speed within {self.timeout_s:g} s "
-            f"(input: {self.drive.at_speed_input_name()}, io.spindle.at_speed_timeout_s)"
+            f"(input: {self.drive.at_speed_input_name}, io.spindle.at_speed_timeout_s)"
         )

@@ -64,6 +64,7 @@ class SimCard(Drive, FrameOutputs, AtSpeedInput):
                          "estop_input_file", "drive_fault_file", "probe_workpiece_mm",
                          "spindle_spinup_s"}) \
         | PLANT_OPTIONS | IO_OPTIONS
+    at_speed_input_name = "sim card, option spindle_spinup_s"
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
@@ -98,8 +99,8 @@ class SimCard(Drive, FrameOutputs, AtSpeedInput):
         self._limit_tripped: tuple[int, int] | None = None  # the in-process input (test hook)
         self._outputs_file = options.get("outputs_file")
         self.output_image = OutputImage()  # what the card's outputs hold
-        self.spindle = SimSpindle(spinup_option(options.get("spindle_spinup_s"), "sim: drive "
-                                                "option"), self._card_s)
+        self.spindle = SimSpindle(config.io.spindle, spinup_option(
+            options.get("spindle_spinup_s"), "sim: drive option"), self._card_s)
         self.frames_clocked = 0  # every period since open, idle ones included
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -222,16 +223,8 @@ class SimCard(Drive, FrameOutputs, AtSpeedInput):
         """A limit switch trips (axis index, +1 or -1) or none is (None) (test hook)."""
         self._limit_tripped = None if axis is None else (axis, direction)
 
-    def set_outputs(self, changes: Sequence[OutputChange]) -> list[OutputChange]:
-        changed = super().set_outputs(changes)
-        self.spindle.changed(changed)
-        return changed
-
     def at_speed_input(self) -> bool:
-        return self.spindle.at_speed(self.outputs()["spindle"] != "off")
-
-    def at_speed_input_name(self) -> str:
-        return "sim card, option spindle_spinup_s"
+        return self.spindle.at_speed()
 
     def _card_s(self) -> float:  # the card's clock: wall time, or the periods clocked
         return time.monotonic() if self.realtime else self.frames_clocked * self.period_s
@@ -239,6 +232,7 @@ class SimCard(Drive, FrameOutputs, AtSpeedInput):
     def _write_outputs(self, image: OutputImage) -> None:
         self._check_comm()
         self.output_image = image
+        self.spindle.written(image.bits, image.analog)
         record_outputs(self._outputs_file, image.bits, image.analog)
 
     # -- homing ---------------------------------------------------------------------------
