@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from controller.blocks import OutputChange
+from controller.errors import CncError
 from controller.io_config import SpindleIo
 from drivers.at_speed_input import AtSpeedInput
 from drivers.base import Drive
@@ -43,7 +44,12 @@ class AtSpeedWait:
                 f"line {self.line}: io.spindle.at_speed_input is set, but the drive "
                 f"{type(self.drive).__name__} has no spindle at-speed input"
             )
-        if self.drive.at_speed_input():
+        try:
+            at_speed = self.drive.at_speed_input()
+        except CncError as exc:
+            self.since_s = None
+            return f"line {self.line}: the spindle's at-speed input could not be read: {exc}"
+        if at_speed:
             self.since_s = None
             return None
         if self.now_s() - self.since_s < self.timeout_s:  # type: ignore[operator]

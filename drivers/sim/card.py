@@ -61,8 +61,7 @@ class SimCard(Drive, FrameOutputs, AtSpeedInput):
 
     OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm",
                          "true_start_mm", "home_switch_mm", "index_pitch_mm", "homed_at_start",
-                         "estop_input_file", "drive_fault_file", "probe_workpiece_mm",
-                         "spindle_spinup_s"}) \
+                         "estop_input_file", "drive_fault_file", "probe_workpiece_mm"}) \
         | PLANT_OPTIONS | IO_OPTIONS
     at_speed_input_name = "sim card, option spindle_spinup_s"
 

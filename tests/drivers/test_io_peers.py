@@ -194,10 +194,11 @@ def test_m62_goes_with_the_next_move_on_the_peers_without_a_stop(tmp_path: Path,
     assert events[-1]["planned_time_s"] == plain[-1]["planned_time_s"]
 
 
-AT_SPEED_INPUT = {"serial": "serial card, status io bit 9 AT_SPEED"}
+AT_SPEED_INPUT = {"serial": "serial card, status io bit 9 AT_SPEED",
+                  "canopen": "CANopen node 1, 0x60FD bit 16"}
 
 
-@pytest.mark.parametrize("backend", ["serial"])
+@pytest.mark.parametrize("backend", ["serial", "canopen"])
 def test_the_peers_at_speed_input_holds_the_job_at_the_spindle_start(tmp_path: Path,
                                                                       backend: str) -> None:
     """The peer's spindle reaches speed 0.5 s after the start (its option): within a 3 s
