@@ -88,6 +88,64 @@ def test_a_spindle_never_at_speed_faults_with_the_outputs_safe(tmp_path: Path) -
     assert result.final_position_mm["x"] == pytest.approx(0.0, abs=0.002)
 
 
+def test_a_hold_asked_during_the_wait_holds_there_once_at_speed(tmp_path: Path) -> None:
+    config = at_speed_mill(tmp_path)
+    card = SimCard(config, realtime=False, spindle_spinup_s=0.4)
+    prog = tmp_path / "prog.nc"
+    prog.write_text("G21 G90\nM3 S1000\nG1 X5 F600\nM2\n")
+    runtime: Runtime | None = None
+    states: list[tuple[str, bool]] = []  # (state, input) from the hold on
+
+    def on_event(event: dict[str, Any]) -> None:
+        if event["name"] == "spindle" and event["value"] == "cw":
+            runtime.request_hold()  # type: ignore[union-attr]  # the wait begins now
+
+    def progress(p: Any) -> None:
+        states.append((p.state.value, card.at_speed_input()))
+        if p.state.value == "held" and states.count(states[-1]) == 1:
+            runtime.request_resume()  # type: ignore[union-attr]
+
+    runtime = Runtime(
+        str(prog),
+        config,
+        RuntimeOptions(
+            virtual_time=True,
+            drive=card,
+            on_event=on_event,
+            on_progress=progress,
+            rt_priority=None,
+            settings={"progress_every_s": 0.01},
+        ),
+    )
+    result = runtime.run()
+    assert result.outcome is Outcome.DONE, result.message
+    held = [at_speed for state, at_speed in states if state == "held"]
+    assert held and all(held)  # held only once the spindle was at speed
+    assert result.final_position_mm["x"] == pytest.approx(5.0, abs=0.002)
+
+
+def test_an_abort_during_the_wait_ends_it_at_once(tmp_path: Path) -> None:
+    config = at_speed_mill(tmp_path)
+    card = SimCard(config, realtime=False, spindle_spinup_s="never")
+    prog = tmp_path / "prog.nc"
+    prog.write_text(PROGRAM)
+    runtime: Runtime | None = None
+
+    def on_event(event: dict[str, Any]) -> None:
+        if event["name"] == "spindle" and event["value"] == "cw":
+            runtime.request_abort("aborted by test")  # type: ignore[union-attr]
+
+    runtime = Runtime(
+        str(prog),
+        config,
+        RuntimeOptions(virtual_time=True, drive=card, on_event=on_event, rt_priority=None),
+    )
+    result = runtime.run()
+    assert result.outcome is Outcome.ABORTED and result.message == "aborted by test"
+    assert card.frames_clocked * config.sample_period_s < 1.0  # not the 5 s time-out
+    assert card.output_image.bits == 0 and result.final_position_mm["x"] == 0.0
+
+
 def test_without_the_input_configured_the_card_option_changes_nothing(tmp_path: Path) -> None:
     config = load_config(str(mill(tmp_path, spin_up_s=0.0)))
     result, _ = run(tmp_path, config, SimCard(config, realtime=False, spindle_spinup_s="never"))
