@@ -1,4 +1,7 @@
-"""The `sim` backend: a simulated bit-pattern pulse card with a frame FIFO and servo axes."""
+"""The `sim` backend: a simulated bit-pattern pulse card with a frame FIFO and servo axes.
+
+Kept whole: SimCard because its hooks share one lock, one frame clock and one FIFO (what a
+simulated input needs of it, such as the spindle's at-speed input, lives in drivers/sim/)."""
 
 from __future__ import annotations
 
@@ -54,7 +57,6 @@ class SimCard(Drive, FrameOutputs, AtSpeedInput):
     names, "x+", is tripped; trip_limit_input() in-process) and outputs_file (the outputs
     written there as JSON each time they change); the outputs are kept as `output_image`;
     spindle_spinup_s (0; "never"): the at-speed input comes true that long after a start.
-    Kept whole: SimCard because its hooks share one lock, one frame clock and one FIFO.
     Card rule (hostmot2 watchdog): an empty FIFO mid-program stops the card and latches
     UNDERRUN until reset(); an empty FIFO after an end-of-stream frame is simply idle.
     """
