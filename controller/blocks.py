@@ -55,6 +55,9 @@ class LineBlock:
         return float(np.sqrt(d.dot(d)))
 
 
+SPIRAL_MIN_MM = 1e-9  # an arc's end radius this close to its start radius: a circle
+
+
 @dataclass(frozen=True, slots=True)
 class ArcBlock:
     """Circular move G2/G3 in the XY plane at constant Z (absolute mm)."""
@@ -71,6 +74,14 @@ class ArcBlock:
     @property
     def radius_mm(self) -> float:
         return float(np.hypot(self.start[0] - self.center[0], self.start[1] - self.center[1]))
+
+    @property
+    def radius_change_mm(self) -> float:
+        """End radius minus start radius (LinuxCNC accepts up to 0.028 mm and moves on a
+        spiral); 0 below SPIRAL_MIN_MM, which is rounding."""
+        end = float(np.hypot(self.end[0] - self.center[0], self.end[1] - self.center[1]))
+        change = end - self.radius_mm
+        return change if abs(change) > SPIRAL_MIN_MM else 0.0
 
     @property
     def sweep_rad(self) -> float:

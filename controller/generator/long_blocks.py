@@ -55,11 +55,13 @@ def _arc_parts(block: ArcBlock, n: int) -> Iterator[ArcBlock]:
     r = block.radius_mm
     a0 = math.atan2(block.start[1] - cy, block.start[0] - cx)
     sweep = block.sweep_rad
+    change = block.radius_change_mm  # a spiral: see ArcCurve
     z = block.start[2]
     before = block.start
     for i in range(1, n + 1):
-        after = block.end if i == n else (cx + r * math.cos(a0 + sweep * i / n),
-                                          cy + r * math.sin(a0 + sweep * i / n), z)
+        ri = r + change * i / n
+        after = block.end if i == n else (cx + ri * math.cos(a0 + sweep * i / n),
+                                          cy + ri * math.sin(a0 + sweep * i / n), z)
         yield replace(block, start=before, end=after, turns=0)
         before = after
 

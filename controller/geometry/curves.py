@@ -114,16 +114,23 @@ class LineCurve(ConstantSpeedCurve):
 
 @dataclass(frozen=True)
 class ArcCurve(ConstantSpeedCurve):
-    """Circular arc: centre, radius, start angle and signed sweep (ccw > 0); u in [0, 1]."""
+    """Circular arc: centre, radius, start angle and signed sweep (ccw > 0); u in [0, 1].
+
+    radius_change (end radius minus start radius) makes it LinuxCNC's spiral: the radius goes
+    linearly with the angle, so that an arc whose end point is off its circle (the end-radius
+    rule allows up to 0.028 mm) still ends there. Its length and constant curvature are then
+    the circle's of the mean radius and of the smaller radius: the speed along u differs from
+    the constant by under radius_change / (2 * mean radius)."""
 
     center: tuple[float, float]
     radius: float
     angle0: float
     sweep: float
+    radius_change: float = 0.0
 
     @property
     def length_mm(self) -> float:
-        return abs(self.sweep) * self.radius
+        return abs(self.sweep) * (self.radius + 0.5 * self.radius_change)
 
     def evaluate(self, u: ArrayLike, order: int = 2) -> np.ndarray:
         uu = _as_u(u)
@@ -132,18 +139,26 @@ class ArcCurve(ConstantSpeedCurve):
         out = np.empty((order + 1, uu.size, 2))
         # k-th derivative of (cos, sin)(theta) is sweep^k times a rotation by k * 90 degrees.
         rotations = ((c, s), (-s, c), (-c, -s), (s, -c))
+        radius = self.radius + self.radius_change * uu if self.radius_change else self.radius
         for k in range(order + 1):
-            scale = self.radius * self.sweep**k
+            scale = radius * self.sweep**k
             rx, ry = rotations[k % 4]
             out[k, :, 0] = (self.center[0] if k == 0 else 0.0) + scale * rx
             out[k, :, 1] = (self.center[1] if k == 0 else 0.0) + scale * ry
+            if k and self.radius_change:  # Leibniz: k r' sweep^(k-1) (cos, sin)^(k-1)
+                qx, qy = rotations[(k - 1) % 4]
+                out[k, :, 0] += k * self.radius_change * self.sweep ** (k - 1) * qx
+                out[k, :, 1] += k * self.radius_change * self.sweep ** (k - 1) * qy
         return out
 
     @property
     def _curvature(self) -> float:
-        return 1.0 / self.radius
+        return 1.0 / min(self.radius, self.radius + self.radius_change)
 
     def derivatives_scalar(self, u: float) -> tuple[float, float, float, float]:
+        if self.radius_change:
+            d = self.evaluate(u, 2)[:, 0]
+            return (float(d[1, 0]), float(d[1, 1]), float(d[2, 0]), float(d[2, 1]))
         theta = self.angle0 + self.sweep * u
         c, s = math.cos(theta), math.sin(theta)
         r1, r2 = self.radius * self.sweep, self.radius * self.sweep**2

@@ -15,6 +15,7 @@ import numpy as np
 from controller.config import MachineConfig
 from controller.errors import CncError, DriveError
 from controller.motion.at_speed import AtSpeedWait
+from controller.motion.blocks import BlockSend, block_frames, fault_rows
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.events import EventFn, JobEvents
 from controller.motion.feedback_check import FeedbackCheck
@@ -24,7 +25,7 @@ from controller.motion.model_watch import ModelWatch
 from controller.motion.outputs import OutputRunner
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter, counts_of
-from controller.motion.recall import HOLD_KEEP_MS, SendState
+from controller.motion.recall import HOLD_KEEP_MS, SendState, Sent
 from controller.motion.requests import OperatorRequests
 from controller.motion.result import RunChecks, RunFigures, build_result
 from controller.motion.retime import Retimer
@@ -89,7 +90,7 @@ class MotionController:
     def run(self) -> MotionResult:
         self._setup()
         while self.state is not MotionState.FINISHED:
-            self.pacer.wait()
+            self._wait()
             self._cycle()
         if self.outcome not in (Outcome.DONE, None) and not (
                 self.outcome is Outcome.ABORTED and self.keep_outputs_at_abort):
@@ -124,6 +125,7 @@ class MotionController:
         self.outcome: Outcome | None = None
         self.message = ""
         self.sent_eos = False
+        self.block_early_s = 0.0  # see _wait
         self.next_progress_s = 0.0
         self.settle_deadline_s = 0.0
         self.position_known = True
@@ -137,6 +139,50 @@ class MotionController:
         self.estop_reason: str | None = None  # the e-stop under way (then disable)
         self.limits = LimitWatch(self.drive, self.config.axis_names, start_mm)
         self.at_speed = AtSpeedWait(self.config.io.spindle, self.drive, self.pacer.elapsed_s)
+        s = self.settings
+        span = self._frames(s.high_water_ms) - self._frames(s.low_water_ms) - s.cycle_frames
+        self.block = block_frames(s.block_ms, self.period_s, s.cycle_frames, span)
+        # Clocked in real time, smaller refills: the FIFO stays nearer its high-water mark,
+        # where a late wake-up under load takes it from.
+        virtual = isinstance(self.pacer, VirtualPacer) and self.pacer.blocks
+        self.refill = self.block if virtual else block_frames(s.refill_ms, self.period_s,
+                                                              s.cycle_frames, span // 2)
+
+    def _wait(self) -> None:
+        """The cycle's wait; in virtual time, while the stream runs steadily, a block of
+        frames at once (motion/blocks.py), no more than the FIFO holds above its low mark."""
+        self.block_early_s = 0.0
+        if not (isinstance(self.pacer, VirtualPacer) and self.pacer.blocks and self._steady()):
+            self.pacer.wait()
+            return
+        try:
+            room = self.drive.fifo_level() - self._frames(self.settings.low_water_ms)
+        except DriveError:  # the cycle reads it again and stops on it
+            room = 0
+        cycle = self.settings.cycle_frames
+        frames = min(self.block, room) // cycle * cycle
+        if frames <= cycle:
+            self.pacer.wait()
+            return
+        clocked = self.pacer.wait_block(frames, self._fault_rows)
+        # The block's first cycle ended this much before its last (the first motion's time).
+        self.block_early_s = (clocked - cycle) * self.period_s
+
+    def _steady(self) -> bool:
+        """Streaming at the program's own pace, nothing asked or under way that a cycle must
+        see within its two frames (a stop, a pause, a hold, an override, the stream's end)."""
+        r = self.requests
+        return (self.state is MotionState.RUNNING and self.outcome is None and not self.sent_eos
+                and not self.pausing and not self.holding and not self.restarting
+                and self.pending_tail is None and self.retimer.identity and not r.hold
+                and not r.resume and r.abort_message is None and r.estop_message is None
+                and self.estop_reason is None and not self.synced.pending
+                and not self.synced.written)  # M62's outputs: set and reported per cycle
+
+    def _fault_rows(self, fb: Feedback) -> int | None:
+        """Rows of a virtual-time block read before a fault a cycle would have acted on."""
+        return fault_rows(self._own_numbers(fb), self.checks.fbcheck, self.checks.ferr,
+                          self.stream.hist)
 
     def _cycle(self) -> None:
         try:
@@ -187,7 +233,8 @@ class MotionController:
             return
         now_s = self.pacer.elapsed_s()
         if self.figures.first_motion_s is None:
-            self.figures.first_motion_s = now_s
+            early_s = self.block_early_s  # virtual time: whole cycles (no float residue)
+            self.figures.first_motion_s = round(now_s - early_s, 9) if early_s else now_s
         self.figures.last_motion_s = now_s
         self.figures.executed = int(fb.seq[-1]) + 1
         self.figures.last_enc = fb.encoder_counts[-1]
@@ -241,6 +288,11 @@ class MotionController:
             low_fifo = self.figures.min_fifo_frames
             self.figures.min_fifo_frames = level if low_fifo is None else min(level, low_fifo)
         self.restarting = self.restarting and level == 0  # after a pause: empty until refilled
+        if self.state is MotionState.RUNNING and not self.restarting and want < self.refill:
+            state, problem = self.source.state()  # a failed producer is seen every cycle
+            if state is SourceState.FAILED:
+                self._begin_stop(Outcome.FAULT, problem)
+            return  # a block at a time: the FIFO holds more than high water less a block
         finished_before, _ = self.source.state()
         ask = max(0, want + hold - len(self.stream.held))
         rows = self.synced.take(self.source.read(ask) if ask else np.zeros((0, self.n + 2)),
@@ -264,6 +316,7 @@ class MotionController:
         # (a stop along it is not needed), and the card idles after it, no underrun.
         limit = pause + 1 if pause is not None else sendable
         before = self.stream.before_send()
+        as_they_are = self.retimer.identity  # rows out as they are: a block in pieces
         out, used = self.retimer.take(self.stream.held, limit, max(want, 0),
                                       land=pause is not None or final)
         held = self.stream.held
@@ -276,15 +329,27 @@ class MotionController:
             self.output_mark = int(row_lines(held[pause:pause + 1])[0])  # type: ignore[misc]
         self.program_pause = self.program_pause or (at_pause and not mark)
         end = final and not len(self.stream.held) and whole
+        every = self.settings.cycle_frames if as_they_are else 0
         self._send(out, end=end, pause=at_pause or at_hold)
         if end or at_pause or at_hold:
             self.stream.journal.clear()  # the card ends its stream there: nothing to take back
         else:
-            self.stream.journal.record(len(out), consumed, before)
+            self._journal(out, consumed, before, every)
         if self.stream.sent and not final and pause is None and not self.pausing \
                 and level + len(out) < low:
             self._begin_stop(Outcome.FAULT, f"feed hold at line {self.figures.line}: reference "
                              "points ran late (generator starved), stopped along the path")
+
+    def _journal(self, out: np.ndarray, consumed: np.ndarray, before: Sent, every: int) -> None:
+        """A send in the journal; a block sent as it is, in pieces of `every` (blocks.py)."""
+        if not every or len(out) <= every:
+            self.stream.journal.record(len(out), consumed, before)
+            return
+        hist = self.stream.hist
+        counts = hist.cmd_counts[(before.hist_count + np.arange(len(out))) % hist.capacity]
+        block = BlockSend(before, consumed, counts, self.stream.precomp)  # type: ignore[arg-type]
+        for entry in block.pieces(every):
+            self.stream.journal.record(entry.frames, entry.consumed, entry)
 
     def _read_ahead(self, max_rows: int = 4096) -> None:
         """More held rows while re-timing: a ramp looks at the rows it will cross."""

@@ -16,13 +16,14 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.motion.checks import BATCH_ROWS, RefHistory
-from controller.servo.model import contour_error_mm, discretise, filter_block
+from controller.servo.model import contour_error_mm, discretise
+from controller.servo.stacked import StackedFilter
 
 
 class ModelWatch:
     """Running max/RMS of measured minus modelled position, per axis and normal to the path
-    (eq. 28's direction, as contour_error_mm); BATCH_ROWS rows at a time, each axis's filter
-    vectorised over the frames between two batches."""
+    (eq. 28's direction, as contour_error_mm); BATCH_ROWS rows at a time, every axis's filter
+    in one call over the frames between two batches."""
 
     def __init__(self, config: MachineConfig, start_counts: np.ndarray) -> None:
         self.names = config.axis_names
@@ -30,7 +31,7 @@ class ModelWatch:
         self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
         self.servos = [discretise(a.servo, self.period_s) for a in config.axes]
         # The job starts at rest: the models' states are zero there.
-        self.states = [np.zeros(s.order) for s in self.servos]
+        self.models = StackedFilter(self.servos)
         self.prev_counts = np.asarray(start_counts, dtype=np.int64).copy()
         self.next_seq = 0  # the first frame the models have not run yet
         self.limit_mm = config.interpolator.contour_error_limit_mm
@@ -86,10 +87,7 @@ class ModelWatch:
         self.unmatched += int(len(seq) - matched.sum())
         v_mm_s = np.diff(np.vstack([self.prev_counts, counts]), axis=0) * (
             self.pulse_mm / self.period_s)
-        model_mm = counts * self.pulse_mm
-        for i, servo in enumerate(self.servos):
-            err, self.states[i] = filter_block(servo, v_mm_s[:, i], self.states[i])
-            model_mm[:, i] -= err
+        model_mm = counts * self.pulse_mm - self.models.step(v_mm_s)
         self.prev_counts, self.next_seq = counts[-1].copy(), int(frames[-1]) + 1
         seq, enc = seq[matched], enc[matched]
         if not len(seq):

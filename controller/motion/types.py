@@ -31,6 +31,8 @@ class MotionSettings:
     low_water_ms: float = 20.0
     high_water_ms: float = 100.0
     holdback_ms: float = 60.0  # reference kept back so that a stop can follow the path
+    block_ms: float = 64.0  # virtual time: a cycle clocks and refills this much (motion/blocks.py)
+    refill_ms: float = 16.0  # real time: the card is refilled once it has this much room
     settle_s: float = 0.3
     progress_every_s: float = 0.1
     in_position_mm: float = 0.002  # the motion time ends once the tool is this close to the end

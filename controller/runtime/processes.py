@@ -283,8 +283,12 @@ class Runtime:
                 starting = ctrl is None or not ctrl.stream.sent  # first motion: the ring full
                 return ((ahead >= need and not (starting and not source.primed())) or aborted
                         or watch() is not None or source.state()[0] is not SourceState.STREAMING)
+            # Blocks (motion/blocks.py) but where a probe is watched: its input is read each
+            # cycle, and a block would run past the trip.
+            until = getattr(drive, "advance_until", None) if self.options.probe_watch is None \
+                else None
             pacer: Any = VirtualPacer(self.settings.cycle_frames, period_s, drive.advance,
-                                      ready=ready)
+                                      ready=ready, advance_until=until)
         else:
             pacer = WallPacer(self.settings.cycle_frames * period_s)
         self._pacer_t0_s = time.monotonic()

@@ -32,10 +32,10 @@ from controller.config import ServoParams
 from controller.servo.model import (
     DiscreteServo,
     discretise,
-    filter_block,
     small_s_gains,
     zoh,
 )
+from controller.servo.stacked import StackedFilter
 
 # Frames appended at a standstill until the lead has died away to this (a fraction of a pulse).
 SETTLED_LEAD_MM = 1e-5
@@ -131,7 +131,10 @@ class Precompensator:
                         for p in servos]
         self.period_s = sample_period_s
         self.last_mm = np.asarray(start_mm, float).copy()
-        self.states = [None if f is None else np.zeros(f.order) for f in self.filters]
+        # The compensated axes' filters run together: one call a push, not one per axis.
+        self.axes = [i for i, f in enumerate(self.filters) if f is not None]
+        self.stacked = StackedFilter([f for f in self.filters if f is not None]) \
+            if self.axes else None
         self.lead_mm = np.zeros(len(self.filters))
 
     def push(self, wanted_mm: np.ndarray) -> np.ndarray:
@@ -140,12 +143,10 @@ class Precompensator:
             return wanted_mm
         v = np.diff(np.vstack([self.last_mm[None, :], wanted_mm]), axis=0) / self.period_s
         out = np.array(wanted_mm, float, copy=True)
-        for i, f in enumerate(self.filters):
-            if f is None:
-                continue
-            lead, self.states[i] = filter_block(f, v[:, i], self.states[i])
-            out[:, i] += lead
-            self.lead_mm[i] = lead[-1]
+        if self.stacked is not None:
+            lead = self.stacked.step(v[:, self.axes])
+            out[:, self.axes] += lead
+            self.lead_mm[self.axes] = lead[-1]
         self.last_mm = np.asarray(wanted_mm[-1], float).copy()
         return out
 
@@ -164,10 +165,11 @@ class Precompensator:
         return np.vstack([self.push(wanted_mm), self.settling_rows()])
 
     def state(self) -> tuple:
-        return (self.last_mm.copy(), [None if s is None else s.copy() for s in self.states],
-                self.lead_mm.copy())
+        filt = None if self.stacked is None else self.stacked.state.copy()
+        return self.last_mm.copy(), filt, self.lead_mm.copy()
 
     def restore(self, state: tuple) -> None:
-        last, states, lead = state
-        self.last_mm, self.states, self.lead_mm = last.copy(), [
-            None if s is None else s.copy() for s in states], lead.copy()
+        last, filt, lead = state
+        self.last_mm, self.lead_mm = last.copy(), lead.copy()
+        if self.stacked is not None:
+            self.stacked.state = filt.copy()

@@ -8,8 +8,9 @@ from typing import Any
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.servo.model import AxisServoStepper, discretise
+from controller.servo.model import discretise
 from controller.servo.plant_option import PlantOptionError, plant_config
+from controller.servo.stacked import StackedFilter
 from drivers.errors import DriveUnavailableError
 
 
@@ -32,7 +33,8 @@ class SimAxes:
     def __init__(self, config: MachineConfig, start_counts: np.ndarray) -> None:
         self.period_s = config.sample_period_s
         self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
-        self.steppers = [AxisServoStepper(discretise(a.servo, self.period_s)) for a in config.axes]
+        # All axes' plants in one filter: a period's frame costs one call, not one per axis.
+        self.servo = StackedFilter([discretise(a.servo, self.period_s) for a in config.axes])
         self.commanded = start_counts.astype(np.int64).copy()
         self.actual_mm = self.commanded * self.pulse_mm
         n = len(config.axes)
@@ -47,13 +49,22 @@ class SimAxes:
         cmd = self.commanded + np.cumsum(frames, axis=0)
         r_mm = cmd * self.pulse_mm
         v_mm_s = frames * self.pulse_mm / self.period_s
-        err = np.column_stack([s.step(v_mm_s[:, i]) for i, s in enumerate(self.steppers)])
+        err = self.servo.step(v_mm_s)
         actual = r_mm - err - self._lag_rows(frames.shape[0])
         actual[:, self.frozen] = self.frozen_mm[self.frozen]
         if frames.shape[0]:
             self.commanded = cmd[-1].copy()
             self.actual_mm = actual[-1].copy()
         return cmd, self.encoder(actual)
+
+    def snapshot(self) -> tuple[np.ndarray, ...]:
+        """What stepping changes: a block clocked ahead can be taken back (block_clock.py)."""
+        return (self.commanded.copy(), self.actual_mm.copy(), self.servo.state.copy(),
+                self.extra_lag_mm.copy())
+
+    def restore(self, snap: tuple[np.ndarray, ...]) -> None:
+        self.commanded, self.actual_mm, self.servo.state, self.extra_lag_mm = (
+            a.copy() for a in snap)
 
     def encoder(self, actual_mm: np.ndarray) -> np.ndarray:
         return np.rint(actual_mm / self.pulse_mm).astype(np.int64)

@@ -30,6 +30,7 @@ from drivers.io_peer import (
     workpiece_option,
 )
 from drivers.sim.axes import SimAxes, plant_of
+from drivers.sim.block_clock import BlockClock
 from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
 from drivers.sim.spindle import SimSpindle, spinup_option
@@ -38,7 +39,7 @@ from drivers.sim.switches import SimSwitches, timeout_message
 REST_AFTER_S = 2.0  # idle this long, the Table II servo has settled (poles of ~100/s and up)
 
 
-class SimCard(Drive, FrameOutputs, AtSpeedInput):
+class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     """Frames are clocked one per sample period T, in wall-clock time or virtual time.
 
     Options: realtime (bool, default True), fifo_frames (256), max_pulses_per_frame (127,
@@ -70,6 +71,7 @@ class SimCard(Drive, FrameOutputs, AtSpeedInput):
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
         self.period_s = config.sample_period_s
+        self._rest_frames = max(1, round(REST_AFTER_S / self.period_s))  # see _sleep_at_rest
         self.realtime = bool(options.get("realtime", True))
         self.max_pulses = int(_option(options, "max_pulses_per_frame", 127, 1, 32767))
         start_mm = np.asarray(options.get("start_mm", np.zeros(self.n_axes)), dtype=float)
@@ -314,10 +316,6 @@ class SimCard(Drive, FrameOutputs, AtSpeedInput):
                 continue
             next_s = t0 + (self.frames_clocked + 1) * self.period_s
             time.sleep(max(0.0, next_s - time.monotonic()))
-
-    @property
-    def _rest_frames(self) -> int:
-        return max(1, round(REST_AFTER_S / self.period_s))
 
     def _busy(self) -> bool:
         """Anything for the clock to do: frames, a stream, a homing, an injected lag ramping."""

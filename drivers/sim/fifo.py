@@ -58,6 +58,11 @@ class FrameFifo:
         self._head += n
         return self._frames[idx].copy(), self._seq[idx].copy(), self._eos[idx].copy()
 
+    def unpop(self, n: int) -> None:
+        """Put the last n frames popped back at the head (their slots are not reused until a
+        push, so a block stepped ahead can be taken back before the next write)."""
+        self._head -= n
+
     def clear(self) -> np.ndarray:
         """Discard everything queued; returns the discarded pulse sums per axis."""
         frames, _, _ = self.pop(len(self))

@@ -80,8 +80,11 @@ def block_curve(block: MotionBlock, feed_cap_mm_s: float,
     if isinstance(block, ArcBlock):
         c = block.center
         a0 = math.atan2(block.start[1] - c[1], block.start[0] - c[0])
-        return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad), feed, line, False,
-                          tol)
+        # The end radius may differ from the start radius (LinuxCNC's rule): a spiral to the
+        # programmed end, not a circle that misses it.
+        change = block.radius_change_mm
+        return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad, change), feed, line,
+                          False, tol)
     assert isinstance(block, LineBlock)
     p0, p1 = block.start[:2], block.end[:2]
     if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
