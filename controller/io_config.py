@@ -40,6 +40,10 @@ class SpindleIo:
     # Wait after a start, a reversal or a speed change with the spindle on, before the next
     # move: the spindle is at speed when the cut begins (LinuxCNC waits for spindle.at-speed).
     spin_up_s: float = 0.0
+    # Instead of that fixed wait: stand at the start until the backend's at-speed input is
+    # true (controller/motion/at_speed.py), a fault after at_speed_timeout_s.
+    at_speed_input: bool = False
+    at_speed_timeout_s: float = 10.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,7 +99,13 @@ def read_io(sec: Section) -> IoConfig:
                         reverse_bit=_optional_int(sp, "reverse_bit", N_BITS - 1),
                         speed_channel=_optional_int(sp, "speed_channel", N_CHANNELS - 1),
                         max_rpm=sp.float("max_rpm", 100_000.0, above=0.0),
-                        spin_up_s=sp.float("spin_up_s", 0.0, minval=0.0, maxval=60.0))
+                        spin_up_s=sp.float("spin_up_s", 0.0, minval=0.0, maxval=60.0),
+                        at_speed_input=sp.bool("at_speed_input", False),
+                        at_speed_timeout_s=sp.float("at_speed_timeout_s", 10.0, above=0.0,
+                                                    maxval=600.0))
+    if spindle.at_speed_input and spindle.spin_up_s:
+        raise ConfigError(sp.path, sp._key("spin_up_s"), "must be 0 with at_speed_input (the "
+                          "input, not a fixed time, ends the spin-up)")
     sp.finish()
     cool = sec.section("coolant", {})
     mist = _optional_int(cool, "mist_bit", N_BITS - 1)

@@ -12,7 +12,8 @@ from typing import Any
 from controller.errors import DriveError
 from controller.probe import Workpiece
 
-IO_OPTIONS = frozenset({"limit_input_file", "outputs_file"})
+# spindle_spinup_s: the simulated at-speed input (drivers/sim/spindle.py)
+IO_OPTIONS = frozenset({"limit_input_file", "outputs_file", "spindle_spinup_s"})
 
 
 def limit_tripped(path: str | None, axes: tuple[str, ...]) -> tuple[int, int] | None:

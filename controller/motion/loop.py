@@ -14,6 +14,7 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.errors import CncError, DriveError
+from controller.motion.at_speed import AtSpeedWait
 from controller.motion.blocks import BlockSend, block_frames, fault_rows
 from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
 from controller.motion.events import EventFn, JobEvents
@@ -137,6 +138,7 @@ class MotionController:
         self.pending_tail: tuple | None = None  # a stream's end at rest still to go out
         self.estop_reason: str | None = None  # the e-stop under way (then disable)
         self.limits = LimitWatch(self.drive, self.config.axis_names, start_mm)
+        self.at_speed = AtSpeedWait(self.config.io.spindle, self.drive, self.pacer.elapsed_s)
         s = self.settings
         span = self._frames(s.high_water_ms) - self._frames(s.low_water_ms) - s.cycle_frames
         self.block = block_frames(s.block_ms, self.period_s, s.cycle_frames, span)
@@ -437,6 +439,8 @@ class MotionController:
         on resume (from a hold: a planned ramp back to the override's feed). A standstill
         of 0 % override goes on by itself once the override is turned up."""
         if self.state not in (MotionState.PAUSED, MotionState.HELD):
+            if self.at_speed.waiting and (not self._at_speed_reached() or not self.holding):
+                return  # standing at the spindle start; then going on (or held, or a fault)
             if level == 0 and self.output_mark is not None:
                 if not self._set_outputs(self.output_mark) or not self.holding:
                     return  # set and going on (or a fault); held there: held as below
@@ -459,18 +463,34 @@ class MotionController:
     def _set_outputs(self, line: int) -> bool:
         """At an output mark, the card run out (the machine stands there): set the outputs,
         then go on unless a feed hold came to rest there (the spin-up wait is planned rows
-        after the mark). False: they could not be set, and the job stops."""
+        after the mark). False: they could not be set, and the job stops, or the machine now
+        waits there for the spindle's at-speed input (controller/motion/at_speed.py)."""
         self.output_mark = None
-        next_outputs = getattr(self.source, "next_outputs", lambda: None)
-        problem = self.outputs.at_mark(next_outputs(), self.figures.executed * self.period_s,
-                                       line)
+        changes = getattr(self.source, "next_outputs", lambda: None)()
+        problem = self.outputs.at_mark(changes, self.figures.executed * self.period_s, line)
         if problem is not None:
             self._begin_stop(Outcome.FAULT, problem)
             return False
+        if self.at_speed.begin(changes, line):
+            return False
+        self._go_on()
+        return True
+
+    def _at_speed_reached(self) -> bool:
+        """Waiting at a spindle start: True once the input is true (going on unless held)."""
+        problem = self.at_speed.poll()
+        if problem is not None:
+            self._begin_stop(Outcome.FAULT, problem)
+            self.message = problem  # (not "program pause ...; then": no pause was asked)
+        if problem is not None or self.at_speed.waiting:
+            return False
+        self._go_on()
+        return True
+
+    def _go_on(self) -> None:
         if not self.holding:
             self.pausing = False
             self.restarting = True
-        return True
 
     # -- stops otherwise than planned: a fault during a stop, the e-stop ------------------
     def _asked(self) -> str:

@@ -11,6 +11,7 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.outputs import OutputImage
+from drivers.at_speed_input import AtSpeedInput
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.canopen import bringup, homing, machine_io
 from drivers.canopen import cia402 as c
@@ -29,7 +30,7 @@ from drivers.probe_latch import ProbeLatch
 CLOSE_CONFIRM_S = 0.2  # wait this long for the drives to confirm the shutdown at close
 
 
-class CanopenDrive(Drive, ProbeLatch):
+class CanopenDrive(Drive, ProbeLatch, AtSpeedInput):
     """One BaseNode402 per axis; the host keeps the frame FIFO and clocks it out by SYNC.
 
     Each sample period T the cycle thread pops one frame (the sim card's rule: an empty FIFO
@@ -285,6 +286,14 @@ class CanopenDrive(Drive, ProbeLatch):
         """Statusword bit 11 (in every TPDO1) says a drive's limit switch is open; its 0x60FD
         then says which, read once by SDO."""
         return machine_io.limit_input(self._link, self._nodes, self.axes)
+
+    def at_speed_input(self) -> bool:
+        self._check_comm()  # an SDO a motion cycle while the machine waits at a spindle start
+        return machine_io.at_speed_input(self._nodes, self.axes, self.o)
+
+    @property
+    def at_speed_input_name(self) -> str:  # type: ignore[override]
+        return f"CANopen node {self.o.io_node}, 0x60FD bit 16"
 
     def _write_outputs(self, image: OutputImage) -> None:
         self._check_comm()

@@ -125,6 +125,7 @@ def period_code(period_s: float) -> tuple[int, int]:
 # does not define (drives put them in manufacturer objects; 0x2400 in our EDS).
 DIGITAL_INPUTS = 0x60FD  # bit 0: negative limit switch, bit 1: positive limit switch
 DI_NEGATIVE_LIMIT, DI_POSITIVE_LIMIT = 0x1, 0x2
+DI_SPINDLE_AT_SPEED = 1 << 16  # the first manufacturer-specific input: the spindle at speed
 DIGITAL_OUTPUTS = 0x60FE  # sub 1: physical outputs, sub 2: bit mask (outputs enabled)
 ANALOG_OUTPUTS = 0x2400  # sub 1-4: REAL32, channels 0-3
 SW_INTERNAL_LIMIT = 0x0800  # statusword bit 11: internal limit active (a limit switch)

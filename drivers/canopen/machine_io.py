@@ -50,6 +50,13 @@ def limit_input(link: Any, nodes: list[Any], axes: tuple[str, ...]) -> str | Non
     return switch_name(axes[i], direction)
 
 
+def at_speed_input(nodes: list[Any], axes: tuple[str, ...], o: CanopenOptions) -> bool:
+    """The spindle's at-speed input: bit 16 of the io_node drive's 0x60FD, read by SDO."""
+    i = o.node_ids.index(o.io_node)
+    inputs = bringup.sdo_read(nodes[i], axes[i], c.DIGITAL_INPUTS, None, "digital inputs")
+    return bool(inputs & c.DI_SPINDLE_AT_SPEED)
+
+
 def arm_touch_probe(nodes: list[Any], axes: tuple[str, ...], toward: bool) -> None:
     """0x60B8 on every drive: probe 1 on, first event, at the positive edge (toward) or the
     negative; writing it clears what a drive had stored."""

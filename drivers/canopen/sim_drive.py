@@ -310,7 +310,7 @@ class SimDriveSet:
                                                  if k in SWITCH_OPTIONS}, np.zeros(len(names)),
                                     "simulated drive")
         search_limit_mm = opt_float(options, "search_limit_mm")
-        self.io = SimIo402(options, names)
+        self.io = SimIo402(options, names, config.io.spindle)
         for i, (axis, node_id, cpm) in enumerate(zip(plant.axes, layout.node_ids,
                                                      layout.counts_per_mm, strict=True)):
             inject = injections(options) if axis.name == fault_axis else Injections(

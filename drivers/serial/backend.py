@@ -11,6 +11,7 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.outputs import OutputImage
+from drivers.at_speed_input import AtSpeedInput
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, LostCommunicationError
 from drivers.io_peer import switch_name
@@ -23,7 +24,7 @@ _BITS = ((p.ST_UNDERRUN, CardStatus.UNDERRUN), (p.ST_BAD_FRAME, CardStatus.BAD_F
          (p.ST_FOLLOWING_ERROR, CardStatus.FOLLOWING_ERROR))
 
 
-class SerialCard(Drive):
+class SerialCard(Drive, AtSpeedInput):
     """Streams one sample frame per period T to the card; a reader thread decodes its reports.
 
     Options: port (required), baudrate (115200), status_period_s (0.010, the card's report
@@ -40,6 +41,7 @@ class SerialCard(Drive):
 
     OPTIONS = frozenset({"port", "baudrate", "status_period_s", "fifo_frames", "link_timeout_s",
                          "reply_timeout_s", "poll_period_s", "realtime"})
+    at_speed_input_name = "serial card, status io bit 9 AT_SPEED"
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
@@ -390,6 +392,9 @@ class SerialCard(Drive):
     def _probe_input(self) -> bool:
         s = self._last  # in every status frame too (io bit PROBE_INPUT)
         return s is not None and bool(s.io & p.IO_PROBE_INPUT)
+
+    def at_speed_input(self) -> bool:
+        return self._last is not None and bool(self._last.io & p.IO_AT_SPEED)  # io bit 9
 
     def _limit_input(self) -> str | None:
         s = self._last  # the limit switches ride in the same io word

@@ -45,6 +45,7 @@ IO_ESTOP_INPUT = 0x02  # the card's e-stop input is open (tripped)
 IO_LIMIT_NEG = 0x04  # axis i's negative limit switch is open: this bit shifted left by 2 i
 IO_LIMIT_POS = 0x08  # axis i's positive limit switch is open: this bit shifted left by 2 i
 IO_PROBE_INPUT = 0x100  # the probe input (G38) is in contact (the io word's second byte)
+IO_AT_SPEED = 0x200  # the spindle's at-speed input is true (io.spindle.at_speed_input)
 N_ANALOG = 4  # analog channels in an OUTPUTS frame
 
 # fault_code of ST_HOME_FAILED (a drive fault during homing is ST_DRIVE_FAULT instead)

@@ -21,6 +21,7 @@ from drivers.serial import protocol as p
 from drivers.sim.axes import SimAxes, plant_of
 from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
+from drivers.sim.spindle import SimSpindle, spinup_option
 from drivers.sim.switches import SWITCH_OPTIONS, SimSwitches
 
 # Option -> default. Times marked "after" count from the first sample frame received.
@@ -48,9 +49,11 @@ PEER_OPTIONS: dict[str, Any] = {
     "probe_workpiece_mm": None,  # x0,y0,z0,x1,y1,z1: the probe is in contact inside this box
     "limit_input_file": None,  # a path: the limit switch it names ("x+") is open while it exists
     "outputs_file": None,  # a path: the outputs as JSON, written on every OUTPUTS frame
+    "spindle_spinup_s": None,  # the at-speed input (io AT_SPEED) this long after a start; never
 } | dict.fromkeys(PLANT_OPTIONS)  # each axis's own loop, mismatch (controller/servo/plant_option)
 LIST_OPTIONS = ("start_mm", "true_start_mm", "home_switch_mm", "probe_workpiece_mm")
 TEXT_OPTIONS = ("estop_input_file", "limit_input_file", "outputs_file")
+SPINUP = "spindle_spinup_s"  # seconds or "never" (drivers/sim/spindle.py checks it)
 
 
 def check_options(options: dict[str, Any]) -> dict[str, Any]:
@@ -61,7 +64,7 @@ def check_options(options: dict[str, Any]) -> dict[str, Any]:
                          f"(known: {', '.join(sorted(PEER_OPTIONS))})")
     merged = PEER_OPTIONS | options
     for key, value in merged.items():
-        if key in LIST_OPTIONS or key in PLANT_OPTIONS or value is None:
+        if key in LIST_OPTIONS or key in PLANT_OPTIONS or value is None or key == SPINUP:
             continue
         if key in TEXT_OPTIONS:
             if not isinstance(value, str) or not value:
@@ -115,6 +118,8 @@ class PeerCard:
         self.first_rx_s: float | None = None
         self.injected: set[str] = set()
         self.outputs = p.Outputs(0, 0)  # the digital outputs and analog channels
+        self.spindle = SimSpindle(config.io.spindle, spinup_option(
+            self.opt[SPINUP], "serial simdrive: option"), lambda: self.ticks * self.period_s)
         self.t0_s = time.monotonic()
         self.ticks = 0
 
@@ -160,6 +165,7 @@ class PeerCard:
             self.send_status(frame.token)
         elif isinstance(frame, p.Outputs):
             self.outputs = frame  # the outputs hold these from now (the host sets them safe)
+            self.spindle.written(frame.bits, frame.analog)
             record_outputs(self.opt["outputs_file"], frame.bits, frame.analog)
             self.send_status(frame.token)
         elif isinstance(frame, p.End):
@@ -339,7 +345,8 @@ class PeerCard:
             encoder_delta=tuple(int(e) for e in cur_enc - self.prev_enc),
             io=(p.IO_DISABLED if self.disabled else 0)
             | (p.IO_ESTOP_INPUT if self.estop_input() else 0) | self.limit_io()
-            | (p.IO_PROBE_INPUT if self.probe_input() else 0))
+            | (p.IO_PROBE_INPUT if self.probe_input() else 0)
+            | (p.IO_AT_SPEED if self.spindle.at_speed() else 0))
         data = p.encode_status(status)
         if self._after("corrupt_status_after_s"):
             data = data[:-1] + bytes([data[-1] ^ 0xFF])

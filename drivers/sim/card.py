@@ -1,4 +1,7 @@
-"""The `sim` backend: a simulated bit-pattern pulse card with a frame FIFO and servo axes."""
+"""The `sim` backend: a simulated bit-pattern pulse card with a frame FIFO and servo axes.
+
+Kept whole: SimCard because its hooks share one lock, one frame clock and one FIFO (what a
+simulated input needs of it, such as the spindle's at-speed input, lives in drivers/sim/)."""
 
 from __future__ import annotations
 
@@ -14,6 +17,7 @@ from controller.blocks import OutputChange
 from controller.config import MachineConfig
 from controller.outputs import OutputImage
 from controller.servo.plant_option import PLANT_OPTIONS
+from drivers.at_speed_input import AtSpeedInput
 from drivers.base import CardStatus, Drive, Feedback
 from drivers.errors import BadFrameError, DriveError, HomingError, LostCommunicationError
 from drivers.frame_outputs import FrameOutputQueue, FrameOutputs
@@ -29,12 +33,13 @@ from drivers.sim.axes import SimAxes, plant_of
 from drivers.sim.block_clock import BlockClock
 from drivers.sim.fifo import FrameFifo
 from drivers.sim.homing import SimAxesHoming
+from drivers.sim.spindle import SimSpindle, spinup_option
 from drivers.sim.switches import SimSwitches, timeout_message
 
 REST_AFTER_S = 2.0  # idle this long, the Table II servo has settled (poles of ~100/s and up)
 
 
-class SimCard(BlockClock, Drive, FrameOutputs):
+class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     """Frames are clocked one per sample period T, in wall-clock time or virtual time.
 
     Options: realtime (bool, default True), fifo_frames (256), max_pulses_per_frame (127,
@@ -51,7 +56,8 @@ class SimCard(BlockClock, Drive, FrameOutputs):
     drive_fault_file (a path: X's amplifier faults, latched, once that file exists).
     Machine I/O (drivers/io_peer.py): limit_input_file (while it exists, the limit switch it
     names, "x+", is tripped; trip_limit_input() in-process) and outputs_file (the outputs
-    written there as JSON each time they change); the outputs are kept as `output_image`.
+    written there as JSON each time they change); the outputs are kept as `output_image`;
+    spindle_spinup_s (0; "never"): the at-speed input comes true that long after a start.
     Card rule (hostmot2 watchdog): an empty FIFO mid-program stops the card and latches
     UNDERRUN until reset(); an empty FIFO after an end-of-stream frame is simply idle.
     """
@@ -60,6 +66,7 @@ class SimCard(BlockClock, Drive, FrameOutputs):
                          "true_start_mm", "home_switch_mm", "index_pitch_mm", "homed_at_start",
                          "estop_input_file", "drive_fault_file", "probe_workpiece_mm"}) \
         | PLANT_OPTIONS | IO_OPTIONS
+    at_speed_input_name = "sim card, option spindle_spinup_s"
 
     def __init__(self, config: MachineConfig, **options: Any) -> None:
         super().__init__(config, **options)
@@ -95,6 +102,8 @@ class SimCard(BlockClock, Drive, FrameOutputs):
         self._limit_tripped: tuple[int, int] | None = None  # the in-process input (test hook)
         self._outputs_file = options.get("outputs_file")
         self.output_image = OutputImage()  # what the card's outputs hold
+        self.spindle = SimSpindle(config.io.spindle, spinup_option(
+            options.get("spindle_spinup_s"), "sim: drive option"), self._card_s)
         self.frames_clocked = 0  # every period since open, idle ones included
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -217,9 +226,16 @@ class SimCard(BlockClock, Drive, FrameOutputs):
         """A limit switch trips (axis index, +1 or -1) or none is (None) (test hook)."""
         self._limit_tripped = None if axis is None else (axis, direction)
 
+    def at_speed_input(self) -> bool:
+        return self.spindle.at_speed()
+
+    def _card_s(self) -> float:  # the card's clock: wall time, or the periods clocked
+        return time.monotonic() if self.realtime else self.frames_clocked * self.period_s
+
     def _write_outputs(self, image: OutputImage) -> None:
         self._check_comm()
         self.output_image = image
+        self.spindle.written(image.bits, image.analog)
         record_outputs(self._outputs_file, image.bits, image.analog)
 
     # -- homing ---------------------------------------------------------------------------

@@ -192,3 +192,33 @@ def test_m62_goes_with_the_next_move_on_the_peers_without_a_stop(tmp_path: Path,
     assert seen == [{"bits": 1 << 4, "analog": [0.0] * 4}]
     # no stop at it: planned as the program without it
     assert events[-1]["planned_time_s"] == plain[-1]["planned_time_s"]
+
+
+AT_SPEED_INPUT = {"serial": "serial card, status io bit 9 AT_SPEED",
+                  "canopen": "CANopen node 1, 0x60FD bit 16"}
+
+
+@pytest.mark.parametrize("backend", ["serial", "canopen"])
+def test_the_peers_at_speed_input_holds_the_job_at_the_spindle_start(tmp_path: Path,
+                                                                      backend: str) -> None:
+    """The peer's spindle reaches speed 0.5 s after the start (its option): within a 3 s
+    time-out the job goes on; within 0.2 s it faults naming the input, the outputs safe."""
+    data = yaml.safe_load(config_with_io(tmp_path, backend).read_text())
+    data["io"]["spindle"].update(spin_up_s=0.0, at_speed_input=True)
+    configs = {}
+    for timeout_s in (3.0, 0.2):
+        data["io"]["spindle"]["at_speed_timeout_s"] = timeout_s
+        configs[timeout_s] = tmp_path / f"at_speed_{timeout_s:g}.yaml"
+        configs[timeout_s].write_text(yaml.safe_dump(data))
+    record = tmp_path / "outputs.json"
+    program = "G21 G90\nM3 S1000\nG1 X2 F600\nG0 X0\nM2\n"
+    with peer(backend, configs[3.0], f"outputs_file={record}", "spindle_spinup_s=0.5") as port:
+        code, events, err = run(backend, configs[3.0], port, program, tmp_path)
+        assert code == 0 and events[-1]["event"] == "done", (err, events[-1])
+        code, events, err = run(backend, configs[0.2], port, program, tmp_path)
+    final = events[-1]
+    assert code == 3 and final["event"] == "fault", (code, final, err)
+    assert final["message"] == (f"line 2: spindle not at speed within 0.2 s (input: "
+                                f"{AT_SPEED_INPUT[backend]}, io.spindle.at_speed_timeout_s)")
+    assert set(final["final_position_mm"].values()) == {0.0} and final["position_known"]
+    assert wait_file(record, lambda got: got["bits"] == 0)["analog"] == [0.0] * 4
