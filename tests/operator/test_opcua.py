@@ -254,7 +254,7 @@ def test_a_job_goes_idle_running_done_and_a_fault_raises_a_message(
     m = shop[0]
     program = _slow_program(tmp_path)
 
-    async def watch() -> tuple[Recorder, dict[str, Any]]:
+    async def watch() -> tuple[Recorder, dict[str, Any], int]:
         async with Client(m.endpoint) as client:
             rec, nodes = await _subscribe(client)
             await _until(lambda: rec.values("ChannelState"), 5.0, "the first values")
@@ -274,9 +274,9 @@ def test_a_job_goes_idle_running_done_and_a_fault_raises_a_message(
             await _until(lambda: rec.events, 15.0, "a message for the fault")
             m.fault_file.unlink()
             assert m.daemon.cncctl("reset").returncode == 0
-            return rec, result
+            return rec, result, before
 
-    rec, result = asyncio.run(watch())
+    rec, result, first_job_changes = asyncio.run(watch())
     assert result["event"] == "done", result
     states = [v for v in rec.values("ChannelState")]
     assert states[:3] == [2, 0, 2], states  # Reset -> Active -> Reset
@@ -288,8 +288,11 @@ def test_a_job_goes_idle_running_done_and_a_fault_raises_a_message(
     program_states = [v.Text for v in rec.values("ProgramState") if v is not None]
     assert program_states[:program_states.index("Ended") + 1][-2:] == ["Running", "Ended"]
     assert any(v == 1 for v in rec.values("OperationMode"))  # Automatic while it ran
-    xs = rec.values("X")
-    assert max(xs) == pytest.approx(4.0, abs=0.01) and len(xs) > 10
+    # The first job's X: the measured tool reaches the corner X4, within the contour limit
+    # (30 um: the run's own figures give up to 20 um at these corners, and a sample can
+    # catch it there); the second job's drive fault lets the axis coast.
+    xs = [v for _, n, v in rec.changes[:first_job_changes] if n == "X"]
+    assert max(xs) == pytest.approx(4.0, abs=0.03) and len(xs) > 10
     assert len(rec.values("Hash")[-1]) == 64
     fault = rec.events[0]
     assert fault.Identifier == "fault" and fault.Severity == 900, fault
