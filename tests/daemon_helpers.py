@@ -189,3 +189,26 @@ def wait_moving(run: subprocess.Popen, after_s: float = 0.1) -> None:
         event = json.loads(line)
         if event["event"] == "progress" and event.get("executed_s", 0) > after_s:
             return
+
+
+def run_confirming_tools(args: list[str]) -> list[dict[str, Any]]:
+    """`cncctl run --json` answering each manual tool change with Enter; its events but the
+    progress reports. The process is stopped by its pid if it outlives the reading."""
+    proc = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=REPO)
+    events = []
+    try:
+        assert proc.stdout is not None and proc.stdin is not None
+        for line in proc.stdout:
+            event = json.loads(line)
+            if event["event"] != "progress":
+                events.append(event)
+            if event["event"] == "tool":
+                proc.stdin.write("\n")
+                proc.stdin.flush()
+        assert proc.wait(timeout=60) == 0, (events[-1], proc.stderr.read() if proc.stderr else "")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return events

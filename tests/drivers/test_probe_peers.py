@@ -7,10 +7,10 @@ from __future__ import annotations
 import json
 import subprocess
 from pathlib import Path
-from typing import Any
 
 import pytest
 import yaml
+from daemon_helpers import run_confirming_tools
 from test_canopen_process import peer as canopen_peer
 from test_io_peers import peer as io_peer
 from test_serial_card import CLI, LINK_S, REPO
@@ -130,26 +130,3 @@ def test_the_io_demo_runs_on_three_canopen_drives_with_their_touch_probe(tmp_pat
     # at the peer: spindle, coolant and P0 off at the end, E0 (channel 1) as the program left it
     held = read_outputs(str(record))
     assert held is not None and held["bits"] == 0 and held["analog"][1] == 2.5
-
-
-def run_confirming_tools(args: list[str]) -> list[dict[str, Any]]:
-    """`cncctl run --json` answering each manual tool change with Enter; its events but the
-    progress reports. The process is stopped by its pid if it outlives the reading."""
-    proc = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=REPO)
-    events = []
-    try:
-        assert proc.stdout is not None and proc.stdin is not None
-        for line in proc.stdout:
-            event = json.loads(line)
-            if event["event"] != "progress":
-                events.append(event)
-            if event["event"] == "tool":
-                proc.stdin.write("\n")
-                proc.stdin.flush()
-        assert proc.wait(timeout=60) == 0, (events[-1], proc.stderr.read() if proc.stderr else "")
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    return events

@@ -6,7 +6,7 @@ import json
 import subprocess
 from pathlib import Path
 
-from daemon_helpers import CNCCTL, REPO
+from daemon_helpers import CNCCTL, REPO, run_confirming_tools
 
 DEMO = REPO / "nc_programs" / "io_demo.nc"
 MILL = str(REPO / "config" / "xyz_mill.yaml")
@@ -32,25 +32,10 @@ def test_io_demo_checks_with_its_tools_and_names_a_missing_one(tmp_path: Path) -
 def test_io_demo_runs_on_the_sim_card_with_its_tool_changes_and_probe(tmp_path: Path) -> None:
     tools = tmp_path / "tool.tbl"
     tools.write_text("T1 P1 Z5 D6\nT2 P2 Z12 D3\n")
-    proc = subprocess.Popen([*CNCCTL, "run", str(DEMO), "--config", MILL, "--tools", str(tools),
-                     "--drive-option", "probe_workpiece_mm=-50,-50,-50,50,50,0",
-                     "--virtual-time", "--json"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                    stderr=subprocess.PIPE, text=True)
-    events = []
-    try:
-        assert proc.stdout is not None and proc.stdin is not None
-        for line in proc.stdout:
-            event = json.loads(line)
-            if event["event"] != "progress":
-                events.append(event)
-            if event["event"] == "tool":  # the operator puts the tool in and confirms
-                proc.stdin.write("\n")
-                proc.stdin.flush()
-        proc.wait(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    events = run_confirming_tools([*CNCCTL, "run", str(DEMO), "--config", MILL, "--tools",
+                                   str(tools), "--drive-option",
+                                   "probe_workpiece_mm=-50,-50,-50,50,50,0",
+                                   "--virtual-time", "--json"])
     outputs = [(e["line"], e["name"], e["value"]) for e in events if e["event"] == "output"]
     output_t_s = [e["t_s"] for e in events if e["event"] == "output"]
     events = [e for e in events if e["event"] != "output"]
