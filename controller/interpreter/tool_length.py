@@ -38,23 +38,23 @@ class ToolState:
 
     def select(self, value: float) -> None:
         """A T word: the tool must be in the table (when one is in force)."""
+        self.selected = self._tool_number(value, "T", "tool number")
+
+    def _tool_number(self, value: float, word: str, what: str) -> int:
+        """value as a tool number: a non-negative integer, in the table when one is in force."""
         if value < 0 or value != int(value):
-            raise WordError("T", "tool number must be a non-negative integer")
+            raise WordError(word, f"{what} must be a non-negative integer")
         number = int(value)
         if self.table is not None and number and self.table.get(number) is None:
-            raise WordError("T", f"T{number} is not in the tool table (`cncctl tool list`)")
-        self.selected = number
+            raise WordError(word, f"T{number} is not in the tool table (`cncctl tool list`)")
+        return number
 
     def set_loaded(self, value: float | None) -> None:
         """M61 Q: the tool in the spindle is Q, without a change (LinuxCNC); like M6, a G43
         that follows the loaded tool puts its length in force."""
         if value is None:
             raise WordError("M61", "M61 needs Q (the tool number)")
-        if value < 0 or value != int(value):
-            raise WordError("Q", "M61 Q must be a non-negative integer")
-        number = int(value)
-        if self.table is not None and number and self.table.get(number) is None:
-            raise WordError("Q", f"T{number} is not in the tool table (`cncctl tool list`)")
+        number = self._tool_number(value, "Q", "M61 Q")
         self.loaded = number
         if self.follows_loaded:
             self._put_length(self._length_of(number, "Q"), "M61")
