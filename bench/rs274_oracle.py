@@ -101,12 +101,16 @@ _NAMED_CALL_RE = re.compile(r"o\s*<[^>]*>\s*call", re.IGNORECASE)
 
 
 def run_rs274(rs274: str, program: str, folder: str) -> Oracle:
-    """rs274's canonical calls for `program`, run in `folder` (no parameter file there)."""
+    """rs274's canonical calls for `program`, run in `folder` (no parameter file there).
+
+    HOME is `folder` too: rs274 keeps its tool table in $HOME/.tool.mmap, truncated by each run
+    that starts, so two runs sharing a HOME (pytest's workers) crash each other with SIGBUS."""
     try:
         ini = ["-i", sub_ini(folder, program)] if _calls_by_name(program) else []
         proc = subprocess.run([rs274, "-g", "-t", tool_table(folder), *ini,
                                os.path.abspath(program)],
-                              cwd=folder, capture_output=True, text=True, errors="replace",
+                              cwd=folder, env={**os.environ, "HOME": folder},
+                              capture_output=True, text=True, errors="replace",
                               timeout=RS274_TIMEOUT_S, stdin=subprocess.DEVNULL, check=False)
     except subprocess.TimeoutExpired:
         return Oracle(False, message=f"rs274 ran over {RS274_TIMEOUT_S:g} s")
