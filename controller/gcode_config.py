@@ -1,4 +1,4 @@
-"""The `gcode` section of a machine config: the folders `o<name> call` searches for name.ngc."""
+"""The `gcode` section of a machine config: subroutine folders and the dialect's start state."""
 
 from __future__ import annotations
 
@@ -8,18 +8,36 @@ from typing import Any
 
 from controller.errors import ConfigError
 
+POWER_UP_MOTIONS = ("none", "G0")
+
 
 @dataclass(frozen=True, slots=True)
 class GcodeConfig:
     """subroutine_path: folders (absolute) searched, after the program's own folder, for the
     file `name.ngc` of an `o<name> call` whose subroutine the program does not hold (LinuxCNC's
-    [RS274NGC]SUBROUTINE_PATH)."""
+    [RS274NGC]SUBROUTINE_PATH).
+
+    default_feed_mm_min: the feed of a G1/G2/G3 before the program's first F (Klipper's and
+    Marlin's rule); None refuses such a move, as LinuxCNC and grbl do.
+
+    power_up_motion: the motion mode an axis word follows before the program's first motion
+    code: "none" refuses it (LinuxCNC), "G0" moves at rapid (grbl's power-up state)."""
 
     subroutine_path: tuple[str, ...] = ()
+    default_feed_mm_min: float | None = None
+    power_up_motion: str = "none"
 
 
 def read_gcode_section(sec: Any) -> GcodeConfig:
     """The section (a yaml_strict Section); folders relative to the config's folder must exist."""
+    folders = _subroutine_path(sec)
+    feed = _default_feed(sec)
+    motion = sec.str("power_up_motion", "none", choices=POWER_UP_MOTIONS)
+    sec.finish()
+    return GcodeConfig(folders, feed, motion)
+
+
+def _subroutine_path(sec: Any) -> tuple[str, ...]:
     raw = sec._raw("subroutine_path", [])
     key = sec._key("subroutine_path")
     if not isinstance(raw, list) or not all(isinstance(d, str) and d for d in raw):
@@ -29,5 +47,10 @@ def read_gcode_section(sec: Any) -> GcodeConfig:
     for name, folder in zip(raw, folders, strict=True):
         if not os.path.isdir(folder):
             raise ConfigError(sec.path, key, f"{name}: no such folder")
-    sec.finish()
-    return GcodeConfig(folders)
+    return folders
+
+
+def _default_feed(sec: Any) -> float | None:
+    if sec._raw("default_feed_mm_min", None) is None:
+        return None
+    return sec.float("default_feed_mm_min", above=0.0)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import yaml
+
 from controller.blocks import NcBlock
 from controller.config import MachineConfig, load_config
 from controller.geometry.nurbs import Nurbs
@@ -26,6 +28,19 @@ def motion(blocks: list[NcBlock]) -> list[NcBlock]:
 
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def mill_with_gcode(tmp_path: Path, gcode: object) -> MachineConfig:
+    """xyz_mill with its `gcode` section replaced (written to tmp_path/mill.yaml)."""
+    data = yaml.safe_load((REPO / "config" / "xyz_mill.yaml").read_text())
+    data["gcode"] = gcode
+    path = tmp_path / "mill.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return load_config(str(path))
+
+
+# xyz_mill as LinuxCNC starts: no power-up G0, no default feed
+LINUXCNC_START = {"power_up_motion": "none"}
 
 
 def program(name: str) -> Path:

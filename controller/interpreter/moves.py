@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from controller.blocks import LineBlock, NcBlock, Source
 from controller.config import MachineConfig
 from controller.interpreter.codes import WordError, g_name
@@ -34,6 +36,14 @@ class Moves:
         self.has_z = config.has_axis("z")
         self.rapid_mm_s = config.interpolator.rapid_feed_mm_s
         self.nurbs: NurbsCollector | None = None  # the block of an open G5.2 or G6.2
+        gcode = config.gcode
+        self.default_feed_mm_min = gcode.default_feed_mm_min
+        # grbl's power-up G0: the modal motion until the program's first motion code
+        self.power_up_g0 = gcode.power_up_motion == "G0"
+        if self.power_up_g0:
+            modal.motion = 0
+        # (lineno, word, message): a word accepted beyond LinuxCNC; InterpState's warn_word
+        self.warn_word: Callable[[int, str, str], None] = lambda lineno, word, message: None
 
     def move(self, motion: int | None, vals: dict[str, float], lineno: int,
              machine: bool = False) -> None:
@@ -41,6 +51,10 @@ class Moves:
         modal = self.modal
         if motion is not None:
             modal.motion = None if motion in (800, 53) else motion
+            self.power_up_g0 = False
+        elif self.power_up_g0 and modal.motion == 0:
+            self._warn_power_up(vals, lineno)
+            self.power_up_g0 = False  # said once: the next lines follow the same G0
         mode = modal.motion if motion is None else motion
         if mode == 800 and not _AXES.intersection(vals):
             return  # G80 alone cancels the motion mode
@@ -56,16 +70,29 @@ class Moves:
         if mode == 0:
             self._line(end, True, lineno)
         elif mode == 10:
-            self._need_feed(motion)
+            self._need_feed(motion, lineno)
             self._line(end, False, lineno)
         else:
-            self._need_feed(motion)
+            self._need_feed(motion, lineno)
             self._arc(mode == 20, end, vals, lineno)
 
-    def _need_feed(self, motion: int | None) -> None:
-        if self.modal.feed_mm_s <= 0.0:
-            word = g_name(motion if motion is not None else self.modal.motion or 10)
+    def _need_feed(self, motion: int | None, lineno: int) -> None:
+        if self.modal.feed_mm_s > 0.0:
+            return
+        word = g_name(motion if motion is not None else self.modal.motion or 10)
+        if self.default_feed_mm_min is None:
             raise WordError(word, f"{word} feed move with no feed rate: program F first")
+        self.modal.feed_mm_s = self.default_feed_mm_min / 60.0
+        self.warn_word(lineno, word, f"no F programmed yet: moves at "
+                                     f"gcode.default_feed_mm_min = {self.default_feed_mm_min:g} "
+                                     f"mm/min (Klipper's and Marlin's rule; LinuxCNC and grbl "
+                                     f"refuse)")
+
+    def _warn_power_up(self, vals: dict[str, float], lineno: int) -> None:
+        word = next(a for a in "XYZ" if a in vals) if _AXES.intersection(vals) else "G0"
+        self.warn_word(lineno, word, "no motion mode programmed yet: moves at rapid, as G0 "
+                                     "(gcode.power_up_motion: G0, grbl's power-up mode; "
+                                     "LinuxCNC refuses)")
 
     def _end_point(self, vals: dict[str, float],
                    machine: bool = False) -> tuple[float, float, float]:
@@ -97,7 +124,7 @@ class Moves:
             raise WordError(g_name(code), f"{g_name(code)} moves Z on a machine without a Z "
                                           f"axis (config '{self.config.name}')")
         if not rapid:
-            self._need_feed(code)
+            self._need_feed(code, lineno)
         self._line(end, rapid, lineno)
 
     def end_point(self, vals: dict[str, float]) -> tuple[float, float, float]:
@@ -154,7 +181,7 @@ class Moves:
         name = g_name(mode)
         if not self.modal.absolute:
             raise WordError(name, f"{name} NURBS in incremental mode (G91) is not supported")
-        self._need_feed(mode)
+        self._need_feed(mode, lineno)
         if "Z" in vals and self._machine(2, vals["Z"]) != self.modal.pos[2]:
             raise WordError("Z", "NURBS must stay at constant Z (no Z motion)")
         x0, y0, z0 = self.modal.pos

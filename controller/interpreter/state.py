@@ -69,6 +69,7 @@ class InterpState:
         self.offsets = WorkOffsets(offsets if offsets is not None else OffsetTable(), track,
                                    config.has_axis("z"), config.name)
         self.moves = Moves(self.modal, self.offsets, config, path, self.out)
+        self.moves.warn_word = self.warn_word
         self.tools = ToolState(config, self.modal, self.offsets, path, self.out)
         if track is not None:
             self.tools.events = track.io_events  # the caller reads them after the program

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from nc_helpers import XY_TABLE, XYZ_MILL, blocks_of
+from nc_helpers import LINUXCNC_START, XY_TABLE, XYZ_MILL, blocks_of, mill_with_gcode
 
 from controller.blocks import DwellBlock, LineBlock, PathMode
 from controller.errors import NcError
@@ -110,12 +110,20 @@ def test_cycle_words_are_sticky_and_checked(tmp_path: Path) -> None:
         ("F100\nG82 X1 Z-1 R2\n", "G82 needs P"),
         ("F100\nG81 X1 Z3 R2\n", "R plane (2) is below the bottom Z (3)"),
         ("F100\nG81 X1 Z-1 R2 L0\n", "L (repeats) must be a positive integer"),
-        ("G81 X1 Z-1 R2\n", "no feed rate"),
         ("F100\nG18\nG81 X1 Z-1 R2\n", "XY plane"),  # cycles run in G17 only
     ]:
         with pytest.raises(NcError) as info:
             blocks_of(tmp_path, text, XYZ_MILL)
         assert fragment in info.value.message
+
+
+def test_a_cycle_before_any_f_is_refused_or_takes_the_default_feed(tmp_path: Path) -> None:
+    strict = mill_with_gcode(tmp_path, LINUXCNC_START)
+    with pytest.raises(NcError, match="G81 feed move with no feed rate"):
+        blocks_of(tmp_path, "G81 X1 Z-1 R2\n", strict)
+    feeds = [b.feed_mm_s for b in blocks_of(tmp_path, "G81 X1 Z-1 R2\nG80\n", XYZ_MILL)
+             if isinstance(b, LineBlock) and not b.rapid]
+    assert feeds == [XYZ_MILL.gcode.default_feed_mm_min / 60.0]
 
 
 def test_cycle_moves_are_exact_path_and_modes_come_back(tmp_path: Path) -> None:

@@ -6,11 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import yaml
-from nc_helpers import REPO, XYZ_MILL
+from nc_helpers import XYZ_MILL, mill_with_gcode
 
 from controller.blocks import LineBlock
-from controller.config import load_config
 from controller.errors import ConfigError, NcError
 from controller.interpreter.program import position_at_line, read_program
 from controller.offsets import ProgramOffsets
@@ -87,14 +85,6 @@ def test_run_from_a_line_after_a_call_is_not_started_inside_the_file(tmp_path: P
     assert position_at_line(main, XYZ_MILL, 4).position_mm == (1.0, 0.0, 0.0)
 
 
-def config_with(tmp_path: Path, gcode: object) -> object:
-    data = yaml.safe_load((REPO / "config" / "xyz_mill.yaml").read_text())
-    data["gcode"] = gcode
-    path = tmp_path / "mill.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return load_config(str(path))
-
-
 def test_the_configured_subroutine_path_is_searched_after_the_program_folder(
     tmp_path: Path,
 ) -> None:
@@ -104,7 +94,7 @@ def test_the_configured_subroutine_path_is_searched_after_the_program_folder(
     progs = tmp_path / "progs"
     progs.mkdir()
     main = write(progs, "main.ngc", "G21 F100\no<side> call [3]\nM2\n")
-    config = config_with(tmp_path, {"subroutine_path": ["lib"]})
+    config = mill_with_gcode(tmp_path, {"subroutine_path": ["lib"]})
     assert config.gcode.subroutine_path == (str(lib),)
     (move,) = [b for b in read_program(main, config) if isinstance(b, LineBlock)]
     assert move.end[0] == 3.0 and move.source.path == str(lib / "side.ngc")
@@ -123,7 +113,7 @@ def test_the_configured_subroutine_path_is_searched_after_the_program_folder(
 )
 def test_the_gcode_section_is_read_strictly(tmp_path: Path, gcode: object, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
-        config_with(tmp_path, gcode)
+        mill_with_gcode(tmp_path, gcode)
 
 
 def test_a_name_with_a_folder_is_not_looked_up(tmp_path: Path) -> None:
