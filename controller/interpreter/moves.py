@@ -74,7 +74,7 @@ class Moves:
             self._line(end, False, lineno)
         else:
             self._need_feed(motion, lineno)
-            self._arc(mode == 20, end, vals, lineno)
+            self._arc(mode == 20, end, vals, lineno, inherited=motion is None)
 
     def _need_feed(self, motion: int | None, lineno: int) -> None:
         if self.modal.feed_mm_s > 0.0:
@@ -151,10 +151,17 @@ class Moves:
         modal.pos = end
 
     def _arc(self, clockwise: bool, end: tuple[float, float, float], vals: dict[str, float],
-             lineno: int) -> None:
+             lineno: int, inherited: bool = False) -> None:
         modal = self.modal
-        block = arc_block(modal, self.offsets.origin, self.has_z, self.config.name, clockwise,
-                          end, vals, Source(self.path, lineno, lineno))
+        try:
+            block = arc_block(modal, self.offsets.origin, self.has_z, self.config.name,
+                              clockwise, end, vals, Source(self.path, lineno, lineno))
+        except WordError as err:
+            if not (inherited and err.message.startswith("arc needs")):
+                raise
+            # X Y alone after a G2 line: most often a straight move meant (a G1 left out)
+            raise WordError(err.word, f"{err.word} is in force from an earlier line: "
+                                      f"{err.message} (a straight move needs G1)") from None
         _within_a_day(block.length_mm, self._capped(modal.feed_mm_s), "P" if block.turns else "F")
         self.out.append(block)
         modal.pos = end
