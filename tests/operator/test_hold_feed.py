@@ -43,7 +43,9 @@ def test_hold_resume_and_feed_through_the_daemon(tmp_path: Path) -> None:
             again = d.status()
             assert again["state"] == "HELD" and again["position_mm"] == held["position_mm"]
             x, y = held["position_mm"]["x"], held["position_mm"]["y"]
-            assert 0.0 < x < 40.0 and y == 0.0  # on the first side, not at a corner
+            # held on the square (the first side on a quiet machine; under load the hold may
+            # come later), within its corner blends, and before its end
+            assert _from_square_mm(x, y) <= 0.05 and (x, y) != (0.0, 0.0)
             assert d.cncctl("feed", "50").returncode == 0
             assert d.status()["feed_override_pct"] == 50.0
             time.sleep(0.2)
@@ -66,6 +68,14 @@ def test_hold_resume_and_feed_through_the_daemon(tmp_path: Path) -> None:
         states = {e["state"] for e in events if e["event"] == "progress"}
         assert "held" in states
         assert "feed hold" in d.log_text() and "feed override 50 %" in d.log_text()
+
+
+def _from_square_mm(x: float, y: float) -> float:
+    """Distance from the square's sides (0,0)-(40,0)-(40,10)-(0,10)-(0,0)."""
+    dx = max(0.0 - x, 0.0, x - 40.0)
+    dy = max(0.0 - y, 0.0, y - 10.0)
+    outside = (dx * dx + dy * dy) ** 0.5
+    return outside if outside > 0.0 else min(x, 40.0 - x, y, 10.0 - y)
 
 
 def _read_until(fd: int, needle: bytes, timeout_s: float = 20.0) -> bytes:
