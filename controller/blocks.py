@@ -144,14 +144,25 @@ class HelixBlock:
                              float(np.arctan2(e2 - c2, e1 - c1)), self.clockwise, self.turns)
 
     @property
+    def radius_change_mm(self) -> float:
+        """End radius minus start radius in the plane (a spiral, as ArcBlock's); 0 below
+        SPIRAL_MIN_MM."""
+        e1, e2, _ = self.in_plane(self.end)
+        end = float(np.hypot(e1 - self.center[0], e2 - self.center[1]))
+        change = end - self.radius_mm
+        return change if abs(change) > SPIRAL_MIN_MM else 0.0
+
+    @property
     def axial_mm(self) -> float:
         """Displacement along the plane's normal (the helix's rise)."""
         return self.in_plane(self.end)[2] - self.in_plane(self.start)[2]
 
     @property
     def length_mm(self) -> float:
-        """Exact: the helix unrolled is a straight line of legs r * sweep and the rise."""
-        return float(np.hypot(self.radius_mm * self.sweep_rad, self.axial_mm))
+        """The helix unrolled is a straight line of legs r * sweep and the rise (exact on a
+        circle; of the mean radius on a spiral)."""
+        mean_mm = self.radius_mm + 0.5 * self.radius_change_mm
+        return float(np.hypot(mean_mm * self.sweep_rad, self.axial_mm))
 
 
 def _signed_sweep(a0: float, a1: float, clockwise: bool, turns: int) -> float:

@@ -103,7 +103,7 @@ def _check_copy(curve: HelixCurve, cap_mm_s: float, accel_mm_s2: float,
         return curve
     f = ramps_mm / curve.length_mm
     return HelixCurve(curve.plane, curve.center, curve.radius, curve.angle0, curve.sweep * f,
-                      curve.n0, curve.rise * f)
+                      curve.n0, curve.rise * f, curve.radius_change * f)
 
 
 def plan_helix(block: HelixBlock, config: MachineConfig) -> tuple[FeedProfile, float, float]:

@@ -20,8 +20,13 @@ SEARCH_STEPS = 8
 
 @dataclass(frozen=True)
 class HelixCurve:
-    """C(u) = centre + r (cos, sin)(angle0 + sweep u) in the plane, n0 + rise u along its
-    normal, u in [0, 1]; coordinates in machine axes (x, y, z) through PLANE_AXES."""
+    """C(u) = centre + r(u) (cos, sin)(angle0 + sweep u) in the plane, n0 + rise u along its
+    normal, u in [0, 1]; coordinates in machine axes (x, y, z) through PLANE_AXES.
+
+    r(u) = radius + radius_change u: an arc whose end point is off its circle (the end-radius
+    rule allows up to 0.028 mm) is LinuxCNC's spiral to that point, as ArcCurve's. Its length
+    is then the helix's of the mean radius (the speed along u differs from constant by under
+    radius_change / (2 * mean radius)), its curvature the largest of the radii it passes."""
 
     plane: str
     center: tuple[float, float]
@@ -30,24 +35,31 @@ class HelixCurve:
     sweep: float
     n0: float
     rise: float
+    radius_change: float = 0.0
 
     @classmethod
     def from_block(cls, block: HelixBlock) -> HelixCurve:
         s1, s2, n0 = block.in_plane(block.start)
         c1, c2 = block.center
         return cls(block.plane, (c1, c2), block.radius_mm, math.atan2(s2 - c2, s1 - c1),
-                   block.sweep_rad, n0, block.axial_mm)
+                   block.sweep_rad, n0, block.axial_mm, block.radius_change_mm)
 
     @property
     def length_mm(self) -> float:
-        """Exact: unrolled on its cylinder, the helix is a line of legs r * sweep and rise."""
-        return math.hypot(self.radius * self.sweep, self.rise)
+        """Unrolled on its cylinder, the helix is a line of legs r * sweep and rise (exact on a
+        circle; the mean radius on a spiral)."""
+        return math.hypot((self.radius + 0.5 * self.radius_change) * self.sweep, self.rise)
 
     @property
     def curvature_per_mm(self) -> float:
-        """Constant along the helix: r / (r^2 + c^2) with c the rise per radian."""
-        length = self.length_mm
-        return self.radius * self.sweep**2 / length**2 if length > 0 else 0.0
+        """r / (r^2 + c^2) with c the rise per radian: constant on a circle; on a spiral the
+        largest over the radii it passes (the most at r = c)."""
+        if not self.sweep:
+            return 0.0
+        c = abs(self.rise / self.sweep)
+        r0, r1 = sorted((self.radius, self.radius + self.radius_change))
+        radii = [r0, r1] + ([c] if r0 < c < r1 else [])
+        return max(r / (r * r + c * c) if r > 0 else 0.0 for r in radii)
 
     def evaluate(self, u: ArrayLike, order: int = 2) -> np.ndarray:
         """[C, C', ..., C^(order)] at u: shape (order + 1, N, 3), machine axes."""
@@ -57,11 +69,17 @@ class HelixCurve:
         rotations = ((c, s), (-s, c), (-c, -s), (s, -c))  # k-th derivative of (cos, sin)
         a, b, n = PLANE_AXES[self.plane]
         out = np.zeros((order + 1, uu.size, 3))
+        change = self.radius_change
+        radius = self.radius + change * uu if change else self.radius
         for k in range(order + 1):
-            scale = self.radius * self.sweep**k
+            scale = radius * self.sweep**k
             r1, r2 = rotations[k % 4]
             out[k, :, a] = (self.center[0] if k == 0 else 0.0) + scale * r1
             out[k, :, b] = (self.center[1] if k == 0 else 0.0) + scale * r2
+            if k and change:  # Leibniz: k r' sweep^(k-1) (cos, sin)^(k-1)
+                q1, q2 = rotations[(k - 1) % 4]
+                out[k, :, a] += k * change * self.sweep ** (k - 1) * q1
+                out[k, :, b] += k * change * self.sweep ** (k - 1) * q2
         out[0, :, n] = self.n0 + self.rise * uu
         if order >= 1:
             out[1, :, n] = self.rise
@@ -98,7 +116,8 @@ class HelixCurve:
 
     def box(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
         """The axis-aligned box (min xyz, max xyz): the circle's extremes where the sweep
-        passes them, the ends otherwise; the normal axis from its start to its end."""
+        passes them (at the larger radius of a spiral: up to its radius change wide), the
+        ends otherwise; the normal axis from its start to its end."""
         ends = self.points([0.0, 1.0])
         lo, hi = ends.min(axis=0), ends.max(axis=0)
         a, b, _ = PLANE_AXES[self.plane]
@@ -107,7 +126,8 @@ class HelixCurve:
         for angle, axis, sign in ((0.0, a, 1), (math.pi / 2, b, 1), (math.pi, a, -1),
                                   (1.5 * math.pi, b, -1)):
             if (angle - start) % (2 * math.pi) <= span:
-                extreme = self.center[0 if axis == a else 1] + sign * self.radius
+                reach = max(self.radius, self.radius + self.radius_change)
+                extreme = self.center[0 if axis == a else 1] + sign * reach
                 lo[axis], hi[axis] = min(lo[axis], extreme), max(hi[axis], extreme)
         return (float(lo[0]), float(lo[1]), float(lo[2])), (float(hi[0]), float(hi[1]),
                                                             float(hi[2]))
