@@ -10,12 +10,12 @@ loop's line, found by the check before any motion.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 from controller.errors import NcError
 from controller.interpreter.expr import ExprError, Reader
-from controller.interpreter.owords import ASCII_UPPER, OWord, peek_oword, read_oword
+from controller.interpreter.owords import ASCII_UPPER, PROGRAM, OWord, peek_oword, read_oword
 from controller.interpreter.params import ParamError, Parameters
 
 MAX_LOOP_PASSES = 100_000  # one loop's passes; CAM loops (pecks, passes, holes) stay far below
@@ -32,8 +32,10 @@ _LOOP_END = {"WHILE": "ENDWHILE", "REPEAT": "ENDREPEAT", "DO": "WHILE"}
 class LineCursor:
     """The program's raw lines by number (from 1); lines from `keep_from` on can be revisited."""
 
-    def __init__(self, raw: Iterator[str]) -> None:
+    def __init__(self, raw: Iterator[str],
+                 reread: Callable[[int], list[str]] | None = None) -> None:
         self._raw = raw
+        self._reread = reread  # the program's first n lines, read again from the file
         self.kept: list[str] | None = None
         self.first_kept = 0
         self.read = 0  # lines read from the file so far
@@ -61,11 +63,24 @@ class LineCursor:
             self.next_line = n + 1
             yield raw
 
-    def keep_from(self, lineno: int, raw: str) -> None:
-        """Keep line `lineno` (the one just read) and every later line."""
+    def keep_from(self, lineno: int, raw: str | None = None) -> None:
+        """Keep line `lineno` (the one just read; read again when `raw` is None) and every
+        later line."""
         if self.kept is None:
+            if raw is None:
+                raw = self._reread(lineno)[-1]  # type: ignore[misc]
             self.kept = [raw]
             self.first_kept = lineno
+
+    def to_start(self) -> None:
+        """Go back to line 1 (M99 in the main program): the lines before the first kept one
+        are read again from the file."""
+        if self.kept is None:
+            self.kept, self.first_kept = self._reread(self.read), 1  # type: ignore[misc]
+        elif self.first_kept > 1:
+            self.kept[:0] = self._reread(self.first_kept - 1)  # type: ignore[misc]
+            self.first_kept = 1
+        self.next_line = 1
 
     def line(self, n: int) -> str | None:
         """Raw line n (n >= the first kept line); None after the end of the file."""
@@ -112,6 +127,9 @@ class _Frame:
     return_line: int
     call_line: int
     loops: dict[str, _Loop] = field(default_factory=dict)
+    fanuc: bool = False  # an M98 call of a numbered program (O100 ... M99)
+    start: int = 0  # M98: the line of its O100, where each repeat starts again
+    left: int = 0  # M98: the repeats still to run after this one (its L word)
 
 
 class Flow:
@@ -129,7 +147,7 @@ class Flow:
         self.total_passes = 0
         self._closed: set[int] = set()  # lines of if/while/do/repeat whose end was found
 
-    def run(self, ow: OWord, lineno: int, raw: str) -> None:
+    def run(self, ow: OWord, lineno: int, raw: str | None = None) -> None:
         self.cursor.keep_from(lineno, raw)
         getattr(self, "_" + ow.keyword.lower())(ow, lineno)
 
@@ -205,6 +223,9 @@ class Flow:
 
     # ---- subroutines ------------------------------------------------------------------------
     def _sub(self, ow: OWord, lineno: int) -> None:
+        if self.frames[-1].fanuc:
+            raise self._error(ow, lineno, f"{ow.name} inside the numbered program "
+                                          f"O{self.frames[-1].label} (an M98 call runs up to M99)")
         self.subs[ow.label] = lineno
         end, _ = self._find(ow, lineno, {"ENDSUB"})
         self.cursor.jump(end + 1)  # the body runs only when called
@@ -214,9 +235,12 @@ class Flow:
         start = self.subs.get(ow.label)
         if start is None:  # defined later in the file: LinuxCNC looks ahead for it too
             try:
-                start, _ = self._find(ow, lineno, {"SUB"})
+                start, keyword = self._find(ow, lineno, {"SUB", PROGRAM})
             except NcError:
-                start = self._sub_file(ow, lineno)
+                start, keyword = self._sub_file(ow, lineno), "SUB"
+            if keyword == PROGRAM:
+                raise self._error(ow, start, f"O{ow.label} is a numbered program (O{ow.label} "
+                                             f"... M99): call it with M98 P{ow.label}")
             self.subs[ow.label] = start
         if len(self.frames) > MAX_CALL_DEPTH:
             raise self._error(ow, lineno, f"subroutine calls nested deeper than "
@@ -268,6 +292,9 @@ class Flow:
         frame = self.frames[-1]
         if frame.label is None:
             raise self._error(ow, lineno, f"{ow.name} outside a subroutine call")
+        if frame.fanuc:
+            raise self._error(ow, lineno, f"{ow.name} inside the numbered program "
+                                          f"O{frame.label}, which ends with M99")
         if frame.label != ow.label and ow.keyword == "ENDSUB":
             # a return may carry another label (LinuxCNC's retval.ngc: `o1010 return` inside
             # `o1010 if`, in o1000); an endsub closes its own subroutine only
@@ -281,6 +308,14 @@ class Flow:
         self.cursor.jump(frame.return_line)
 
     _return = _endsub
+
+    def _program(self, ow: OWord, lineno: int) -> None:
+        """A bare O100 reached in the flow: the lines go on into its body (LinuxCNC 2.9: a
+        main program's number, or a numbered program the flow runs into)."""
+        frame = self.frames[-1]
+        if frame.label is not None and not frame.fanuc:
+            raise self._error(ow, lineno, f"{ow.name} inside subroutine O{frame.label}: a "
+                                          f"numbered program is called with M98 P{ow.label}")
 
     # ---- if ---------------------------------------------------------------------------------
     def _if(self, ow: OWord, lineno: int) -> None:

@@ -1,4 +1,7 @@
-"""O-word lines (LinuxCNC's subroutines and control flow): their label, keyword and arguments."""
+"""O-word lines (LinuxCNC's subroutines and control flow): their label, keyword and arguments.
+
+A bare `O100` line (nothing after it but a comment) starts a Fanuc-style numbered program
+(LinuxCNC 2.9: its body runs up to `M99`, called by `M98 P100`); its keyword here is PROGRAM."""
 
 from __future__ import annotations
 
@@ -13,8 +16,8 @@ KEYWORDS = frozenset((
 ))
 # Label and keyword of an O-word line, for scanning lines that are skipped (never raises).
 _HEAD_RE = re.compile(r"\s*(?:N\s*\d+\s*)?O\s*(\d+|<[^>]*>)\s*([A-Z]*)", re.ASCII)
-NO_KEYWORD = ("an O-word needs a keyword (O100 sub, O100 if [...]); a program number line "
-              "(O1000) is not RS274/NGC, and LinuxCNC refuses it too")
+NO_KEYWORD = "an O-word needs a keyword (O100 sub, O100 if [...]) or a line of its own (O100)"
+PROGRAM = "PROGRAM"  # the keyword of a bare `O100` line: a numbered program starts there
 ASCII_UPPER = str.maketrans("abcdefghijklmnopqrstuvwxyz", "ABCDEFGHIJKLMNOPQRSTUVWXYZ")
 
 
@@ -31,6 +34,8 @@ class OWord:
 
     @property
     def name(self) -> str:
+        if self.keyword == PROGRAM:
+            return f"O{self.label}"
         return f"O{self.label} {self.keyword.lower()}"
 
 
@@ -45,7 +50,7 @@ def peek_oword(raw: str) -> tuple[str, str] | None:
     m = _HEAD_RE.match(raw.translate(ASCII_UPPER))
     if m is None:
         return None
-    return _label(m.group(1)), m.group(2)
+    return _label(m.group(1)), m.group(2) or PROGRAM
 
 
 def read_oword(text: str, path: str, lineno: int) -> OWord:
@@ -64,7 +69,7 @@ def read_oword(text: str, path: str, lineno: int) -> OWord:
             raise NcError(path, lineno, col, word, f"{word} is followed by {rest.split()[0]!r}, "
                                                    f"not by an O-word keyword (sub, call, if, "
                                                    f"while, ...)")
-        raise NcError(path, lineno, col, word, NO_KEYWORD)
+        return OWord(label, PROGRAM, m.end(), text, col)  # a numbered program starts here
     if keyword not in KEYWORDS:
         raise NcError(path, lineno, col, word,
                       f"unknown O-word keyword {keyword.lower()!r} (sub endsub call return if "

@@ -31,7 +31,7 @@ class Parameters:
         self.numbered: dict[int, float] = {}
         self.globals: dict[str, float] = {}
         self.locals: dict[str, float] = {}
-        self._saved: list[tuple[dict[int, float], dict[str, float]]] = []
+        self._saved: list[tuple[dict[int, float] | None, dict[str, float]]] = []
         self.unset_reads: list[int] = []  # numbered parameters read as 0; the reader drains it
         self.system: SystemParams | None = None  # the read-only ones (set by the interpreter)
         self.on_return: Callable[[int], None] | None = None  # told the depth a return closes
@@ -80,8 +80,13 @@ class Parameters:
             return True
         return name in (self.globals if name.startswith("_") else self.locals)
 
-    def call(self, args: list[float]) -> None:
-        """Open a subroutine scope with its arguments as #1, #2, ..."""
+    def call(self, args: list[float] | None) -> None:
+        """Open a subroutine scope with its arguments as #1, #2, ...; None (an M98 call):
+        #1-#30 stay shared with the caller, only the named locals are the callee's own."""
+        if args is None:
+            self._saved.append((None, self.locals))
+            self.locals = {}
+            return
         if len(args) > LOCAL_NUMBERED:
             raise ParamError(f"a call passes at most {LOCAL_NUMBERED} arguments")
         saved = {n: v for n, v in self.numbered.items() if n <= LOCAL_NUMBERED}
@@ -95,6 +100,8 @@ class Parameters:
         if self.on_return is not None:
             self.on_return(len(self._saved))
         saved, self.locals = self._saved.pop()
+        if saved is None:  # an M98 call: #1-#30 were the caller's all along
+            return
         for n in range(1, LOCAL_NUMBERED + 1):
             self.numbered.pop(n, None)
         self.numbered.update(saved)

@@ -8,6 +8,7 @@ the current NURBS block (at most MAX_CONTROL_POINTS points) is held.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from itertools import islice
 from dataclasses import replace
 from typing import TextIO
 
@@ -27,9 +28,10 @@ from controller.interpreter.codes import (
 from controller.interpreter.flow import EXTERNAL_LINE_BASE, Flow, LineCursor
 from controller.interpreter.lexer import CLEAN_RE, MAX_LINE_CHARS, WORD_RE, Line, lex_line
 from controller.interpreter.line_state import LineState
-from controller.interpreter.owords import NO_KEYWORD, OWord
+from controller.interpreter.owords import NO_KEYWORD, OWord, read_oword
 from controller.interpreter.params import ParamError
 from controller.interpreter.state import InterpState
+from controller.interpreter.subprograms import Subprograms
 from controller.offsets import OffsetTable, ProgramOffsets
 
 _G_CACHE: dict[str, int] = {}  # G number text -> code10, for supported/known codes only
@@ -121,9 +123,12 @@ class Interpreter:
             raise NcError(self.path, first, 0, "",
                           f"cannot run from line {first}: lines are numbered from 1")
         emitting = from_line is None
-        cursor = self.cursor = LineCursor(_raw_lines(handle, self.path))
+        cursor = self.cursor = LineCursor(_raw_lines(handle, self.path),
+                                          lambda n: _first_lines(self.path, n))
         self.state.locate = lambda n: cursor.locate(self.path, n)
-        flow = Flow(self.path, cursor, self.params, self.state.config.gcode.subroutine_path)
+        flow = self.flow = Flow(self.path, cursor, self.params,
+                                self.state.config.gcode.subroutine_path)
+        self.subprograms = Subprograms(flow)
         for raw in cursor:
             lineno = cursor.next_line - 1
             if not emitting and first <= lineno < EXTERNAL_LINE_BASE:
@@ -145,11 +150,7 @@ class Interpreter:
                         break
                     continue
                 if isinstance(line, OWord):
-                    self.words_seen = True
-                    self.state.contexts.return_line = lineno  # an M73 return's blocks
-                    flow.run(line, lineno, raw)
-                    if self.params.unset_reads:
-                        self._warn_unset(lineno)
+                    self._oword(line, lineno, raw)
                     continue
                 self._execute(line, lineno)  # type: ignore[arg-type]
             if not emitting:
@@ -174,6 +175,13 @@ class Interpreter:
                                                    f"program ends at line {lineno}")
         yield from out
         out.clear()
+
+    def _oword(self, ow: OWord, lineno: int, raw: str | None = None) -> None:
+        self.words_seen = True
+        self.state.contexts.return_line = lineno  # an M73 return's blocks
+        self.flow.run(ow, lineno, raw)
+        if self.params.unset_reads:
+            self._warn_unset(lineno)
 
     def _located(self, blocks: list[NcBlock]) -> list[NcBlock]:
         """Blocks of a subroutine file's lines, with that file and its line numbers."""
@@ -236,15 +244,40 @@ class Interpreter:
 
     def _execute(self, line: Line, lineno: int) -> None:
         words = line.words
+        if words and words[-1][0] == "O" and len(words) <= 2 and words[0][0] in "NO":
+            # a bare O100 (or N10 O100): a numbered program starts here
+            self._oword(read_oword(line.text, self.path, lineno), lineno)
+            return
         if words:
             self.words_seen = True
             gs, ms, vals = self._classify(line, words, lineno)
             try:
+                if ms and (98 in ms or 99 in ms):
+                    self._subprogram(line, gs, ms, vals, lineno)
+                    return
                 self.state.execute(gs, ms, vals, lineno)
             except WordError as exc:
                 raise self._error(line, lineno, exc.word, exc.message) from None
         if line.assigns:
             self._assign(line, lineno)
+
+    def _subprogram(self, line: Line, gs: list[int], ms: list[int], vals: dict[str, float],
+                    lineno: int) -> None:
+        """An M98 or M99 line: it stands alone (LinuxCNC refuses other words with it)."""
+        code = 98 if 98 in ms else 99
+        others = [g_name(g) for g in gs] + [f"M{m}" for m in ms if m != code] + \
+            [k for k in vals if k not in ("PL" if code == 98 else "")]
+        if others:
+            with_it = "P, L and N" if code == 98 else "N"
+            raise WordError(f"M{code}", f"M{code} stands alone on its line, with {with_it} "
+                                        f"only (LinuxCNC refuses {others[0]} with it)")
+        if line.assigns:
+            self._assign(line, lineno)
+            line.assigns = None
+        if code == 98:
+            self.subprograms.m98(vals, lineno)
+        else:
+            self.subprograms.m99(lineno)
 
     def _classify(self, line: Line, words: list[tuple[str, str]], lineno: int
                   ) -> tuple[list[int], list[int], dict[str, float]]:
@@ -290,6 +323,8 @@ class Interpreter:
         if code is not None:
             return code
         number = float(text)
+        if number in (98.0, 99.0):
+            return int(number)  # M98 and M99: _subprogram runs them
         if number != int(number) or int(number) not in M_GROUP:
             raise NcError(self.path, lineno, line.col(i), "M" + text, m_refusal(number))
         _M_CACHE[text] = int(number)
@@ -336,6 +371,12 @@ def _raw_lines(handle: TextIO, path: str) -> Iterator[str]:
         yield from parts
     if rest:
         yield rest
+
+
+def _first_lines(path: str, count: int) -> list[str]:
+    """The program's first `count` lines, read again (M98 and M99 go back to earlier lines)."""
+    with open(path, encoding="utf-8-sig", errors="replace", newline=None) as handle:
+        return list(islice(_raw_lines(handle, path), count))
 
 
 def _unknown_letter(letter: str) -> str:
