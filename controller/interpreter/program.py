@@ -8,8 +8,8 @@ the current NURBS block (at most MAX_CONTROL_POINTS points) is held.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from itertools import islice
 from dataclasses import replace
+from itertools import islice
 from typing import TextIO
 
 from controller.blocks import NcBlock, NurbsBlock, Source
@@ -28,6 +28,7 @@ from controller.interpreter.codes import (
 from controller.interpreter.flow import EXTERNAL_LINE_BASE, Flow, LineCursor
 from controller.interpreter.lexer import CLEAN_RE, MAX_LINE_CHARS, WORD_RE, Line, lex_line
 from controller.interpreter.line_state import LineState
+from controller.interpreter.mach3 import G31_CODE10, Mach3Probing
 from controller.interpreter.owords import NO_KEYWORD, OWord, read_oword
 from controller.interpreter.params import ParamError
 from controller.interpreter.state import InterpState
@@ -113,6 +114,7 @@ class Interpreter:
         self.cursor: LineCursor | None = None  # the lines, once run() opens them
         self.ended_by_percent = False
         self.words_seen = False
+        self.mach3 = Mach3Probing(path, self.state.warn_word)
 
     def run(self, handle: TextIO, from_line: int | None = None) -> Iterator[NcBlock]:
         """The blocks of the program; from `from_line` on only (see read_program)."""
@@ -255,7 +257,10 @@ class Interpreter:
                 if ms and (98 in ms or 99 in ms):
                     self._subprogram(line, gs, ms, vals, lineno)
                     return
+                if ms and (40 in ms or 41 in ms):
+                    ms = self.mach3.probe_log(ms, lineno)
                 self.state.execute(gs, ms, vals, lineno)
+                self.mach3.after_line(lineno, self.params)
             except WordError as exc:
                 raise self._error(line, lineno, exc.word, exc.message) from None
         if line.assigns:
@@ -307,6 +312,8 @@ class Interpreter:
             return code
         code = g_code10(float(text))
         word = "G" + text
+        if code == G31_CODE10:
+            return self.mach3.g31(lineno)  # not cached: each G31 line is noted
         if code is None:
             raise NcError(self.path, lineno, line.col(i), word, f"unknown G code {word}")
         if code in G_UNSUPPORTED:
@@ -323,8 +330,8 @@ class Interpreter:
         if code is not None:
             return code
         number = float(text)
-        if number in (98.0, 99.0):
-            return int(number)  # M98 and M99: _subprogram runs them
+        if number in (98.0, 99.0, 40.0, 41.0):
+            return int(number)  # M98/M99: _subprogram runs them; M40/M41: see Mach3Probing
         if number != int(number) or int(number) not in M_GROUP:
             raise NcError(self.path, lineno, line.col(i), "M" + text, m_refusal(number))
         _M_CACHE[text] = int(number)

@@ -13,7 +13,13 @@ MAX_PROGRAM_PASSES passes, else an error names the M99 line. The two styles do n
 from __future__ import annotations
 
 from controller.interpreter.codes import WordError
-from controller.interpreter.flow import MAX_CALL_DEPTH, MAX_TOTAL_PASSES, Flow, _Frame
+from controller.interpreter.flow import (
+    EXTERNAL_LINE_BASE,
+    MAX_CALL_DEPTH,
+    MAX_TOTAL_PASSES,
+    Flow,
+    _Frame,
+)
 from controller.interpreter.owords import ASCII_UPPER, KEYWORDS, PROGRAM, peek_oword, read_oword
 
 # Whole-program passes of a main program that M99 sends back to its start. A program meant to
@@ -34,8 +40,11 @@ class Subprograms:
     def m98(self, vals: dict[str, float], lineno: int) -> None:
         """M98 P<number> [L<count>] (the line's other words were checked by the caller)."""
         if "P" not in vals:
-            raise WordError("M98", "M98 needs P: the number of the program to call (M98 P100 "
-                                   "runs the lines after O100 up to M99)")
+            raise WordError(
+                "M98",
+                "M98 needs P: the number of the program to call (M98 P100 "
+                "runs the lines after O100 up to M99)",
+            )
         label = _whole(vals["P"], "P", "M98 P: a program number is a whole number >= 0")
         count = 1
         if "L" in vals:
@@ -46,12 +55,14 @@ class Subprograms:
             return
         flow = self.flow
         if len(flow.frames) > MAX_CALL_DEPTH:
-            raise WordError("M98", f"M98 calls nested deeper than {MAX_CALL_DEPTH} (endless "
-                                   "recursion?)")
+            raise WordError(
+                "M98", f"M98 calls nested deeper than {MAX_CALL_DEPTH} (endless recursion?)"
+            )
         self._count_pass("M98")
         flow.params.call(None)
-        flow.frames.append(_Frame(str(label), lineno + 1, lineno, fanuc=True, start=start,
-                                  left=count - 1))
+        flow.frames.append(
+            _Frame(str(label), lineno + 1, lineno, fanuc=True, start=start, left=count - 1)
+        )
         flow.cursor.jump(start + 1)
 
     def m99(self, lineno: int) -> None:
@@ -63,9 +74,12 @@ class Subprograms:
             self._to_start()
             return
         if not frame.fanuc:
-            raise WordError("M99", f"M99 inside subroutine O{frame.label}, which ends with "
-                                   f"O{frame.label} endsub or return (M99 ends an O{frame.label} "
-                                   "called by M98)")
+            raise WordError(
+                "M99",
+                f"M99 inside subroutine O{frame.label}, which ends with "
+                f"O{frame.label} endsub or return (M99 ends an O{frame.label} "
+                "called by M98)",
+            )
         flow.params.ret()
         if frame.left > 0:
             frame.left -= 1
@@ -86,8 +100,11 @@ class Subprograms:
             flow.subs[label] = start
         text = (flow.cursor.line(start) or "").translate(ASCII_UPPER)
         if read_oword(text, flow.path, start).keyword != PROGRAM:  # an error if malformed
-            raise WordError("P", f"M98 P{label}: O{label} is a subroutine (O{label} sub ... "
-                                 f"endsub), called with O{label} call")
+            raise WordError(
+                "P",
+                f"M98 P{label}: O{label} is a subroutine (O{label} sub ... "
+                f"endsub), called with O{label} call",
+            )
         return start
 
     def _find_forward(self, label: str, lineno: int) -> int:
@@ -99,16 +116,35 @@ class Subprograms:
                 return n
             n += 1
         line = cursor.locate(self.flow.path, lineno)[1]
-        raise WordError("P", f"M98 P{label}: no program O{label} after line {line} (a numbered "
-                             f"program O{label} ... M99 must follow its call in the file)")
+        before = self._find_before(label, lineno)
+        where = f" (it stands before, at line {before})" if before else ""
+        raise WordError(
+            "P",
+            f"M98 P{label}: no program O{label} after line {line}{where}; "
+            f"LinuxCNC looks for a numbered program O{label} ... M99 only "
+            "after its call in the file",
+        )
+
+    def _find_before(self, label: str, lineno: int) -> int | None:
+        """A line O<label> among the kept lines before the call (for the error message)."""
+        cursor = self.flow.cursor
+        first = cursor.first_kept if lineno < EXTERNAL_LINE_BASE else lineno
+        for n in range(first, lineno):
+            head = peek_oword(cursor.line(n) or "")
+            if head is not None and head[0] == label and head[1] == PROGRAM:
+                return n
+        return None
 
     def _to_start(self) -> None:
         flow = self.flow
         self.program_passes += 1
         if self.program_passes > MAX_PROGRAM_PASSES:
-            raise WordError("M99", f"M99 in the main program starts it again (LinuxCNC's "
-                                   f"endless program): the program did not end within "
-                                   f"{MAX_PROGRAM_PASSES} passes")
+            raise WordError(
+                "M99",
+                f"M99 in the main program starts it again (LinuxCNC's "
+                f"endless program): the program did not end within "
+                f"{MAX_PROGRAM_PASSES} passes",
+            )
         self._count_pass("M99")
         flow.frames[0].loops.clear()
         flow.cursor.to_start()
@@ -117,8 +153,10 @@ class Subprograms:
         flow = self.flow
         flow.total_passes += 1
         if flow.total_passes > MAX_TOTAL_PASSES:
-            raise WordError(word, f"the program's loops and calls passed more than "
-                                  f"{MAX_TOTAL_PASSES} times in all")
+            raise WordError(
+                word,
+                f"the program's loops and calls passed more than {MAX_TOTAL_PASSES} times in all",
+            )
 
 
 def _whole(value: float, letter: str, message: str) -> int:

@@ -162,8 +162,8 @@ def test_program_without_owords_is_not_kept(tmp_path: Path) -> None:
     seen: list[LineCursor] = []
     original = LineCursor.__init__
 
-    def spy(self: LineCursor, raw) -> None:  # noqa: ANN001
-        original(self, raw)
+    def spy(self: LineCursor, *args) -> None:  # noqa: ANN002
+        original(self, *args)
         seen.append(self)
 
     LineCursor.__init__ = spy  # type: ignore[method-assign]
