@@ -67,7 +67,7 @@ class LineCursor:
         """Keep line `lineno` (the one just read; read again when `raw` is None) and every
         later line."""
         if self.kept is None:
-            if raw is None:
+            if raw is None:  # (lines of subroutine files are kept already)
                 raw = self._reread(lineno)[-1]  # type: ignore[misc]
             self.kept = [raw]
             self.first_kept = lineno
