@@ -130,7 +130,7 @@ class Interpreter:
         self.state.locate = lambda n: cursor.locate(self.path, n)
         flow = self.flow = Flow(self.path, cursor, self.params,
                                 self.state.config.gcode.subroutine_path)
-        self.subprograms = Subprograms(flow)
+        self.subprograms = Subprograms(flow, self.state.warn_word)
         for raw in cursor:
             lineno = cursor.next_line - 1
             if not emitting and first <= lineno < EXTERNAL_LINE_BASE:

@@ -12,6 +12,8 @@ MAX_PROGRAM_PASSES passes, else an error names the M99 line. The two styles do n
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from controller.interpreter.codes import WordError
 from controller.interpreter.flow import (
     EXTERNAL_LINE_BASE,
@@ -33,8 +35,9 @@ _LOOP_COUNT_TOLERANCE = 1e-4  # LinuxCNC's tolerance for a whole number (its "in
 class Subprograms:
     """The M98 calls and M99 returns of a program, on the flow of its O-word lines."""
 
-    def __init__(self, flow: Flow) -> None:
+    def __init__(self, flow: Flow, warn_word: Callable[[int, str, str], None]) -> None:
         self.flow = flow
+        self.warn_word = warn_word
         self.program_passes = 0
 
     def m98(self, vals: dict[str, float], lineno: int) -> None:
@@ -71,7 +74,7 @@ class Subprograms:
         flow = self.flow
         frame = flow.frames[-1]
         if frame.label is None:
-            self._to_start()
+            self._to_start(lineno)
             return
         if not frame.fanuc:
             raise WordError(
@@ -135,8 +138,16 @@ class Subprograms:
                 return n
         return None
 
-    def _to_start(self) -> None:
+    def _to_start(self, lineno: int) -> None:
         flow = self.flow
+        if self.program_passes == 0:
+            self.warn_word(
+                lineno,
+                "M99",
+                "M99 in the main program starts it again from its "
+                "first line (LinuxCNC's task; its rs274 ends the "
+                "program there)",
+            )
         self.program_passes += 1
         if self.program_passes > MAX_PROGRAM_PASSES:
             raise WordError(
