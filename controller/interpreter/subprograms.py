@@ -52,10 +52,10 @@ class Subprograms:
         count = 1
         if "L" in vals:
             count = _whole(vals["L"], "L", "M98 L: the repeat count is a whole number >= 0")
+        if count == 0:
+            return  # LinuxCNC does not look for the program either
         self.flow.cursor.keep_from(lineno)  # the return lands on the next line
         start = self._program_line(str(label), lineno)
-        if count == 0:
-            return
         flow = self.flow
         if len(flow.frames) > MAX_CALL_DEPTH:
             raise WordError(

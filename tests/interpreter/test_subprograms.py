@@ -52,7 +52,7 @@ def test_m99_in_the_main_program_runs_it_again_until_it_ends(tmp_path: Path) -> 
 
 def test_a_numbered_program_repeats_with_l_and_shares_numbered_parameters(tmp_path: Path) -> None:
     text = (
-        "G21 G90 F600\n#1 = 0\n#<x> = 5\nM98 P7 L3\nG1 X#1 Y#<x>\nM98 P7 L0\nM2\n"
+        "G21 G90 F600\n#1 = 0\n#<x> = 5\nM98 P7 L3\nG1 X#1 Y#<x>\nM98 P7 L0\nM98 P8 L0\nM2\n"
         "O7\n#1 = [#1 + 1]\n#<x> = 99\nG1 Y#1\nM99\n"
     )
     assert ends(tmp_path, text) == [
