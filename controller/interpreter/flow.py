@@ -122,7 +122,7 @@ class _Loop:
 
 
 @dataclass(slots=True)
-class _Frame:
+class Frame:
     label: str | None  # the subroutine's label; None for the main program
     return_line: int
     call_line: int
@@ -143,7 +143,7 @@ class Flow:
         self.cursor = cursor
         self.params = params
         self.subs: dict[str, int] = {}  # label -> line of its `sub`
-        self.frames: list[_Frame] = [_Frame(None, 0, 0)]
+        self.frames: list[Frame] = [Frame(None, 0, 0)]
         self.total_passes = 0
         self._closed: set[int] = set()  # lines of if/while/do/repeat whose end was found
 
@@ -253,7 +253,7 @@ class Flow:
             self.params.call(args)
         except ParamError as exc:
             raise self._error(ow, lineno, str(exc)) from None
-        self.frames.append(_Frame(ow.label, lineno + 1, lineno))
+        self.frames.append(Frame(ow.label, lineno + 1, lineno))
         self.cursor.jump(start + 1)
 
     def _sub_file(self, ow: OWord, lineno: int) -> int:

@@ -20,7 +20,7 @@ from controller.interpreter.flow import (
     MAX_CALL_DEPTH,
     MAX_TOTAL_PASSES,
     Flow,
-    _Frame,
+    Frame,
 )
 from controller.interpreter.owords import ASCII_UPPER, KEYWORDS, PROGRAM, peek_oword, read_oword
 
@@ -64,7 +64,7 @@ class Subprograms:
         self._count_pass("M98")
         flow.params.call(None)
         flow.frames.append(
-            _Frame(str(label), lineno + 1, lineno, fanuc=True, start=start, left=count - 1)
+            Frame(str(label), lineno + 1, lineno, fanuc=True, start=start, left=count - 1)
         )
         flow.cursor.jump(start + 1)
 
