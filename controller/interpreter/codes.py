@@ -67,8 +67,6 @@ M_OTHER: dict[int, str] = {
     25: "Centroid: move Z to its home position",
     40: "Mach3: open a probe log; Fanuc and Haas: a gear range",
     41: "Mach3: close the probe log; Fanuc and Haas: a gear range",
-    98: "Fanuc: call a subprogram (here: O100 call)",
-    99: "Fanuc: return from a subprogram (here: O100 endsub)",
 }
 
 
