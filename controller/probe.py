@@ -3,8 +3,9 @@ the simulated work the sim card and the serial peer probe against (with the exac
 of a straight move, the reference the tests hold a run to).
 
 A probe move ends early, where the probe trips, so what follows depends on its result: the
-interpreter reads on past a probe only once its result is known (`ProbeResults`, keyed by the
-probe's line); `check` reads on as if the probe went the whole way (the farthest it can go).
+interpreter reads on past a probe only once its result is known (`ProbeResults`, in the
+order the probes ran: a probe line in a loop runs more than once); `check` reads on as if the
+probe went the whole way (the farthest it can go).
 """
 
 from __future__ import annotations
@@ -44,17 +45,29 @@ class ProbeResult:
 
 @dataclass
 class ProbeResults:
-    """The probes' results known so far, by line, and the parameters a later evaluator reads.
+    """The probes' results known so far, in the order the probes ran, and the parameters a
+    later evaluator reads.
 
     barrier: a probe whose result is not known yet ends the interpreter's stream (a run: the
     rest is read again once it is); without it (`check`) a probe is taken to go the whole way.
+    resume_after: the stream yields only what follows the probe run that many-th (the one the
+    machine has just run), from where it stopped; 0: from the start.
     """
 
-    by_line: dict[int, ProbeResult] = field(default_factory=dict)
+    by_index: list[ProbeResult] = field(default_factory=list)
     barrier: bool = False
     parameters: dict[int, float] = field(default_factory=dict)  # #5061-#5063, #5070 last set
     stopped_at: int | None = None  # the line of the probe the stream ended at (barrier)
     seen: dict[int, str] = field(default_factory=dict)  # every probe read: line -> G38.x
+    resume_after: int = 0
+    ran: int = 0  # probes read so far in this stream
+
+    def next_result(self) -> tuple[ProbeResult | None, bool]:
+        """The result of the probe read now (None: not run yet), and whether the stream
+        yields from after it (it is the resume_after-th)."""
+        index, self.ran = self.ran, self.ran + 1
+        known = self.by_index[index] if index < len(self.by_index) else None
+        return known, self.ran == self.resume_after
 
 
 @dataclass(frozen=True, slots=True)

@@ -28,6 +28,7 @@ class Probing:
         self.modal, self.offsets, self.moves, self.path, self.out = modal, offsets, moves, path, out
         self.results = results if results is not None else ProbeResults()
         self.stop_reading = False  # a probe without a result under a barrier: read no further
+        self.resume_here = False  # the stretch's output starts after this line's probe
 
     def probe(self, code10: int, vals: dict[str, float], lineno: int) -> None:
         name = g_name(code10)
@@ -44,7 +45,7 @@ class Probing:
         self.out.append(ProbeBlock(name, start, end, self.modal.feed_mm_s,
                                    Source(self.path, lineno, lineno)))
         self.results.seen[lineno] = name
-        result = self.results.by_line.get(lineno)
+        result, self.resume_here = self.results.next_result()
         if result is not None and not result.tripped and code10 in (382, 384):
             raise WordError(name, f"{name}: the probe move ended without "
                                   f"{'making' if code10 == 382 else 'losing'} contact")

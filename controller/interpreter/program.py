@@ -124,7 +124,7 @@ class Interpreter:
         if first < 1:
             raise NcError(self.path, first, 0, "",
                           f"cannot run from line {first}: lines are numbered from 1")
-        emitting = from_line is None
+        emitting = from_line is None and not self.state.probing.results.resume_after
         cursor = self.cursor = LineCursor(_raw_lines(handle, self.path),
                                           lambda n: _first_lines(self.path, n))
         self.state.locate = lambda n: cursor.locate(self.path, n)
@@ -133,7 +133,7 @@ class Interpreter:
         self.subprograms = Subprograms(flow, self.state.warn_word)
         for raw in cursor:
             lineno = cursor.next_line - 1
-            if not emitting and first <= lineno < EXTERNAL_LINE_BASE:
+            if not emitting and from_line and first <= lineno < EXTERNAL_LINE_BASE:
                 emitting = self._start_here(first)
             text = raw.upper()
             # The hot path (almost every line of a CAM program): plain ASCII words, no comment.

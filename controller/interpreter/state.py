@@ -143,6 +143,8 @@ class InterpState:
                 self.probing.probe(motion or self.modal.motion, vals, lineno)  # type: ignore
                 for number, value in self.probing.results.parameters.items():
                     self.params.set(number, value)  # #5061-#5063, #5070 for what follows
+                if self.probing.resume_here:
+                    self.mark(lineno + 1)  # a probing run's stretch starts after it
             else:
                 moves.move(motion, vals, lineno, machine=nonmodal == 530)
         stop = mgroups.get("stopping")

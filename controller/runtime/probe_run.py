@@ -6,6 +6,8 @@ controller/probe.py), the stretch runs, the motion loop watches the probe input 
 line and, once it trips, stops along the path at Amax (the abort's stop). The next stretch
 reads the program again from its first line with the results known and yields from the line
 after the probe on, from where the machine came to rest; #5061-#5063 and #5070 are set there.
+The results are kept in the order the probes ran, and a stretch yields from after the last
+one run: a probe line in a loop (or a subprogram called again) runs once per pass.
 """
 
 from __future__ import annotations
@@ -147,14 +149,14 @@ class ProbeRun(CurrentRun):
     def run(self) -> MotionResult:
         results = ProbeResults(barrier=True)
         start = self.drive.commanded_xyz_mm()
-        from_line = None
         last_line = _line_count(self.path)
         while True:
             watch = ProbeWatch(self.lines, self.drive, self.config, start)
             runtime = Runtime(self.path, self.config, replace(
                 self.options, drive=self.drive, keep_drive_open=True,
-                start_mm=self.options.start_mm or start, from_line=from_line,
-                probes=ProbeResults(dict(results.by_line), barrier=True), probe_watch=watch))
+                start_mm=self.options.start_mm or start, from_line=None,
+                probes=ProbeResults(list(results.by_index), barrier=True,
+                                    resume_after=len(results.by_index)), probe_watch=watch))
             runtime.set_feed_override(self.override_pct)
             self.current = runtime
             if self.abort is not None:
@@ -169,7 +171,7 @@ class ProbeRun(CurrentRun):
             line, code = watch.line, self.lines[watch.line]
             trip = watch.latched_trip_mm() or watch.trip_mm or stop
             probe = ProbeResult(line, watch.tripped, trip, stop)
-            results.by_line[line] = probe
+            results.by_index.append(probe)
             self.on_event(io_event("probe", t_s, line, code=code, **{
                 k: v for k, v in probe.describe().items() if k != "line"}))
             if not probe.tripped and code in ("G38.2", "G38.4"):
@@ -178,7 +180,6 @@ class ProbeRun(CurrentRun):
                     f"{'making' if code == 'G38.2' else 'losing'} contact"))
             if line >= last_line:
                 return replace(result, outcome=Outcome.DONE, message="")
-            from_line = line + 1
 
 
 class _RunClock:

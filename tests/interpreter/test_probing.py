@@ -58,7 +58,7 @@ def test_a_run_reads_no_further_than_a_probe_without_its_result(tmp_path: Path) 
     assert isinstance(b[-1], ProbeBlock) and b[-1].source.first_line == 4
     assert probes.stopped_at == 4
     # its result known: on from where the machine stopped, to the next probe
-    probes = ProbeResults({4: ProbeResult(4, True, (10, 10, -2.5), (10, 10, -2.6))},
+    probes = ProbeResults([ProbeResult(4, True, (10, 10, -2.5), (10, 10, -2.6))],
                           barrier=True)
     b = read(tmp_path, PROGRAM, probes)
     assert b[-2].end == pytest.approx((10, 10, -0.6))  # G91 G0 Z2 from the stop point
@@ -70,11 +70,33 @@ def test_a_run_reads_no_further_than_a_probe_without_its_result(tmp_path: Path) 
 def test_g38_2_without_contact_is_an_error_g38_3_goes_on(tmp_path: Path) -> None:
     missed = ProbeResult(4, False, (10, 10, -10), (10, 10, -10))
     with pytest.raises(NcError) as err:
-        read(tmp_path, PROGRAM, ProbeResults({4: missed}, barrier=True))
+        read(tmp_path, PROGRAM, ProbeResults([missed], barrier=True))
     assert err.value.line == 4 and "without making contact" in err.value.message
-    probes = ProbeResults({6: ProbeResult(6, False, (30, 10, -8), (30, 10, -8))})
+    first = ProbeResult(4, True, (10, 10, -10), (10, 10, -10))
+    probes = ProbeResults([first, ProbeResult(6, False, (30, 10, -8), (30, 10, -8))])
     read(tmp_path, PROGRAM, probes)
     assert probes.parameters[5070] == 0.0
+
+
+LOOP = ("G21 G90 G0 X0 Y0 Z5\nF100\no1 repeat [3]\nG38.2 Z-10\nG91 G0 Z2 X10\nG90\n"
+        "o1 endrepeat\nG0 Z20\nM2\n")
+
+
+def test_a_probe_line_run_again_in_a_loop_has_a_result_per_pass(tmp_path: Path) -> None:
+    """Results go by the order the probes ran: a stretch yields from after the last one."""
+    tripped = [ProbeResult(4, True, (10.0 * k, 0, -1.0 * k), (10.0 * k, 0, -1.0 * k - 0.1))
+               for k in range(3)]
+    probes = ProbeResults(tripped[:1], barrier=True, resume_after=1)
+    b = read(tmp_path, LOOP, probes)
+    # from where the first probe stopped: Z2 up and X10 along, then the second pass's probe
+    assert b[0].start == pytest.approx((0, 0, -0.1)) and b[0].end == pytest.approx((10, 0, 1.9))
+    assert isinstance(b[-1], ProbeBlock) and b[-1].start == b[0].end
+    assert probes.stopped_at == 4 and probes.ran == 2
+    assert probes.parameters[5063] == -0.0  # the first pass's trip
+    probes = ProbeResults(tripped, barrier=True, resume_after=3)
+    b = read(tmp_path, LOOP, probes)
+    assert probes.stopped_at is None and probes.ran == 3
+    assert [blk.end for blk in b if isinstance(blk, LineBlock)][-1][2] == 20.0
 
 
 @pytest.mark.parametrize(("text", "says"), [

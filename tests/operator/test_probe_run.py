@@ -54,6 +54,25 @@ def test_g38_2_trips_on_the_face_stops_and_the_program_goes_on_from_there(
     assert final["final_position_mm"]["x"] == 0.0
 
 
+def test_a_probe_in_a_loop_runs_once_a_pass_from_where_the_last_one_stopped(
+        tmp_path: Path) -> None:
+    """pcb2gcode's autoleveller probes a grid from one probe line in a loop (or a numbered
+    program called again): each pass is a probe of its own, the next pass from its stop."""
+    code, events, err = run(tmp_path, "G21 G90 F300\nG0 X-10 Y5 Z3\n#1 = 0\n"
+                                      "o1 while [#1 LT 3]\nG38.2 Z-5\n#[100 + #1] = #5063\n"
+                                      "G91 G0 Z3 X5\nG90\n#1 = [#1 + 1]\no1 endwhile\n"
+                                      "G0 Z#101\nM2\n", "--drive-option", WORK)
+    assert code == 0, err
+    probes = [e for e in events if e["event"] == "probe"]
+    assert [p["line"] for p in probes] == [5, 5, 5] and all(p["tripped"] for p in probes)
+    assert [round(p["trip_mm"][0], 3) for p in probes] == [-10.0, -5.0, 0.0]
+    assert all(-0.05 < p["trip_mm"][2] <= 0.0 for p in probes)
+    final = events[-1]
+    assert final["event"] == "done" and final["final_position_mm"]["x"] == 5.0
+    # #101: the second pass's trip, as the program read it
+    assert final["final_position_mm"]["z"] == pytest.approx(probes[1]["trip_mm"][2], abs=0.0011)
+
+
 def test_g38_2_without_contact_is_an_error_g38_3_goes_on(tmp_path: Path) -> None:
     text = "G21 G90 F300\nG0 X50 Y50 Z10\n{}\nG0 Z20\nM2\n"
     code, events, err = run(tmp_path, text.format("G38.2 Z-5"), "--drive-option", WORK)
