@@ -10,7 +10,9 @@ points, arc centres and turns, and feeds, each to 1 um (plus the rounding of rs2
 printed decimals: 0.05 um in mm, 1.27 um in inch programs). rs274 prints in the program's units
 (USE_LENGTH_UNITS); they are converted to mm. Zero-length traverses that rs274 prints (G28
 through the point where the tool stands, a `G0` with no axis words) are dropped, as we drop them.
-NURBS programs are not compared (rs274 prints NURBS_FEED, a different form of the same curve).
+A NURBS (G5.1, G5.2) is compared by its place among the moves only: rs274 prints
+`NURBS_FEED(count, ...)` without its control points. A program with NURBS is not-compared when
+all its other moves are the same (they show where each side ends each NURBS), else differ.
 A program that probes (G38.x) and differs is compared up to its first probe (not-compared when
 those moves are the same): rs274 standalone simulates the probe tripping 0.01 in (0.254 mm)
 short of its end point, our check takes it to the end, so positions read after it differ by
@@ -151,6 +153,7 @@ def parse_calls(text: str) -> Oracle:
             g92 = [float(a) for a in args.split(",")[:3]]
         elif name.startswith("NURBS"):
             oracle.nurbs = True
+            oracle.moves.append(Move("NURBS", (math.nan,) * 3, feed * unit / 60.0, unit_mm=unit))
         elif name == "STRAIGHT_PROBE" and oracle.probe_at is None:
             oracle.probe_at = len(collapse(list(oracle.moves)))
         elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
@@ -179,7 +182,7 @@ def collapse(moves: list[Move], start: tuple[float, float, float] = (0.0, 0.0, 0
     pos = start
     for move in moves:
         tol = TOLERANCE_MM / 2 + 0.5e-4 * move.unit_mm
-        if move.kind != "ARC" and max(abs(a - b) for a, b in zip(move.end_mm, pos,
+        if move.kind not in ("ARC", "NURBS") and max(abs(a - b) for a, b in zip(move.end_mm, pos,
                                                                   strict=True)) <= tol:
             continue
         kept.append(move)
@@ -195,9 +198,13 @@ def run_ours(program: str, config: MachineConfig) -> Oracle:
     except CncError as exc:
         return Oracle(False, message=str(exc))
     ours = Oracle(True)
+    nurbs_source = None  # one NURBS of the program may be several blocks (split at corners)
     for block in blocks:
         if isinstance(block, NurbsBlock):
             ours.nurbs = True
+            if block.source != nurbs_source:
+                ours.moves.append(Move("NURBS", block.end, block.feed_mm_s))
+            ours.moves[-1].end_mm = block.end
         elif isinstance(block, ProbeBlock) and ours.probe_at is None:
             ours.probe_at = len(collapse(list(ours.moves)))
         elif isinstance(block, LineBlock):
@@ -210,6 +217,7 @@ def run_ours(program: str, config: MachineConfig) -> Oracle:
             ours.moves.append(Move("ARC", tuple(block.end), block.feed_mm_s,
                                    tuple(block.center), -turns if block.clockwise else turns,
                                    plane))
+        nurbs_source = block.source if isinstance(block, NurbsBlock) else None
     ours.moves = collapse(ours.moves)
     return ours
 
@@ -243,7 +251,7 @@ def first_difference(theirs: list[Move], ours: list[Move]) -> str | None:
 
 def _tiny(move: Move, last: tuple[float, float, float], unit_mm: float) -> bool:
     allowance = TOLERANCE_MM + 1e-4 * unit_mm
-    return move.kind != "ARC" and max(abs(p - q) for p, q in zip(move.end_mm, last,
+    return move.kind not in ("ARC", "NURBS") and max(abs(p - q) for p, q in zip(move.end_mm, last,
                                                                   strict=True)) <= allowance
 
 
@@ -251,6 +259,8 @@ def _differs(a: Move, b: Move) -> str | None:
     tol = TOLERANCE_MM + 0.5e-4 * a.unit_mm
     if a.kind != b.kind:
         return f"rs274 {a.kind} to {_show(a.end_mm)}, we {b.kind} to {_show(b.end_mm)}"
+    if a.kind == "NURBS":
+        return _differs_nurbs(a, b)
     if max(abs(p - q) for p, q in zip(a.end_mm, b.end_mm, strict=True)) > tol:
         return f"{a.kind} end: rs274 {_show(a.end_mm)}, we {_show(b.end_mm)}"
     if a.kind != "G0" and abs(a.feed_mm_s - b.feed_mm_s) > 0.5e-4 * a.unit_mm / 60 + 1e-9:
@@ -265,6 +275,13 @@ def _differs(a: Move, b: Move) -> str | None:
     return None
 
 
+def _differs_nurbs(a: Move, b: Move) -> str | None:
+    """rs274 prints no NURBS geometry: only the feed can be compared."""
+    if abs(a.feed_mm_s - b.feed_mm_s) > 0.5e-4 * a.unit_mm / 60 + 1e-9:
+        return f"NURBS feed: rs274 {a.feed_mm_s * 60:.4f} mm/min, we {b.feed_mm_s * 60:.4f}"
+    return None
+
+
 def _show(p: tuple[float, ...]) -> str:
     return "(" + ", ".join(f"{v:.4f}" for v in p) + ")"
 
@@ -274,11 +291,13 @@ def compare(program: str, config: MachineConfig, rs274: str, folder: str) -> dic
     ours = run_ours(program, config)
     row = {"file": program, "rs274": theirs.message, "ours": ours.message}
     if theirs.accepted and ours.accepted:
-        if theirs.nurbs or ours.nurbs:
+        diff = first_difference(theirs.moves, ours.moves)
+        if (theirs.nurbs or ours.nurbs) and diff is None:
+            count = sum(m.kind == "NURBS" for m in ours.moves)
             row["status"] = "not-compared"
-            row["why"] = "NURBS"
+            row["why"] = (f"NURBS: {count} NURBS in their places, the "
+                          f"{len(ours.moves) - count} other moves the same")
         else:
-            diff = first_difference(theirs.moves, ours.moves)
             row["status"] = "differ" if diff else "same"
             row["why"] = diff or f"{len(ours.moves)} moves"
             if diff and (theirs.probe_at is not None or ours.probe_at is not None):
