@@ -124,17 +124,18 @@ def run_rs274(rs274: str, program: str, folder: str) -> Oracle:
 
 def parse_calls(text: str) -> Oracle:
     """The moves of rs274's printout in machine mm. rs274 prints positions in the work frame
-    (program coordinates); its SET_G5X_OFFSET and SET_G92_OFFSET calls give the offsets to add."""
+    (program coordinates); its SET_G5X_OFFSET and SET_G92_OFFSET calls give the offsets to add,
+    in the units in force when they are printed (a later G20 or G21 does not print them again)."""
     oracle = Oracle(True)
     unit = 1.0
     feed = 0.0
     plane = "CANON_PLANE_XY"
-    g5x = [0.0, 0.0, 0.0]
-    g92 = [0.0, 0.0, 0.0]
+    g5x_mm = [0.0, 0.0, 0.0]
+    g92_mm = [0.0, 0.0, 0.0]
 
     def machine(v: list[float]) -> tuple[float, float, float]:
-        return ((v[0] + g5x[0] + g92[0]) * unit, (v[1] + g5x[1] + g92[1]) * unit,
-                (v[2] + g5x[2] + g92[2]) * unit)
+        return (v[0] * unit + g5x_mm[0] + g92_mm[0], v[1] * unit + g5x_mm[1] + g92_mm[1],
+                v[2] * unit + g5x_mm[2] + g92_mm[2])
 
     for line in text.splitlines():
         m = _CALL_RE.match(line)
@@ -148,9 +149,9 @@ def parse_calls(text: str) -> Oracle:
         elif name == "SELECT_PLANE":
             plane = args.strip()
         elif name == "SET_G5X_OFFSET":
-            g5x = [float(a) for a in args.split(",")[1:4]]
+            g5x_mm = [float(a) * unit for a in args.split(",")[1:4]]
         elif name == "SET_G92_OFFSET":
-            g92 = [float(a) for a in args.split(",")[:3]]
+            g92_mm = [float(a) * unit for a in args.split(",")[:3]]
         elif name.startswith("NURBS"):
             oracle.nurbs = True
             oracle.moves.append(Move("NURBS", (math.nan,) * 3, feed * unit / 60.0, unit_mm=unit))
