@@ -23,21 +23,28 @@ def _word(vals: dict[str, float]) -> str:
     return "@" if "@" in vals else "^"
 
 
-def check_polar(vals: dict[str, float], plane: int, axis_code: bool, machine: bool,
-                motion: int | None) -> None:
+def check_polar(
+    vals: dict[str, float], plane: int, axis_code: bool, machine: bool, motion: int | None
+) -> None:
     """The rules a line with `@` or `^` must follow: `axis_code`, the line has G10, G28, G30,
     G92 or G43.1 (which take axis words for themselves); `machine`, it has G53; `motion`, the
     motion code in force on it (code10; None or G80: none)."""
     word = _word(vals)
     if axis_code or motion in (None, 800):
-        raise WordError(word, f"polar coordinates ({word}) can only be used for motion "
-                              "(G0 G1 G2 G3 G5.1, canned cycles, probes)")
+        raise WordError(
+            word,
+            f"polar coordinates ({word}) can only be used for motion "
+            "(G0 G1 G2 G3 G5.1, canned cycles, probes)",
+        )
     if plane != 170:
         raise WordError(word, f"polar coordinates ({word}) only in the XY plane (G17)")
     for axis in "XY":
         if axis in vals:
-            raise WordError(axis, f"{axis} word with polar coordinates (@ ^) on one line: "
-                                  "they replace X and Y; use one or the other")
+            raise WordError(
+                axis,
+                f"{axis} word with polar coordinates (@ ^) on one line: "
+                "they replace X and Y; use one or the other",
+            )
     if machine:
         raise WordError(word, f"polar coordinates ({word}) cannot be used with G53")
 
@@ -48,19 +55,23 @@ def polar_xy(vals: dict[str, float], x: float, y: float, absolute: bool) -> tupl
     at_origin = x == 0.0 and y == 0.0
     if absolute:
         if "@" in vals and "^" not in vals and at_origin:
-            raise WordError("@", "@ without ^ at the work origin: the angle is undefined; "
-                                 "give ^ too")
+            raise WordError(
+                "@", "@ without ^ at the work origin: the angle is undefined; give ^ too"
+            )
         radius = vals["@"] if "@" in vals else math.hypot(x, y)
         theta = math.radians(vals["^"]) if "^" in vals else math.atan2(y, x)
         return radius * math.cos(theta), radius * math.sin(theta)
     if at_origin:
-        raise WordError(_word(vals), "G91 polar move at the work origin: the angle is "
-                                     "undefined (move off X0 Y0 first)")
+        raise WordError(
+            _word(vals),
+            "G91 polar move at the work origin: the angle is undefined (move off X0 Y0 first)",
+        )
     return polar_step(x, y, vals.get("@", 0.0), math.radians(vals.get("^", 0.0)))
 
 
-def polar_step(x: float, y: float, radius_step: float, theta_step_rad: float
-               ) -> tuple[float, float]:
+def polar_step(
+    x: float, y: float, radius_step: float, theta_step_rad: float
+) -> tuple[float, float]:
     """(x, y) moved by `radius_step` along its radius and then turned by `theta_step_rad` about
     the origin (LinuxCNC's order; a zero step changes nothing, as there)."""
     if radius_step:
@@ -74,8 +85,9 @@ def polar_step(x: float, y: float, radius_step: float, theta_step_rad: float
     return x, y
 
 
-def cycle_polar(vals: dict[str, float], x: float, y: float, absolute: bool
-                ) -> tuple[tuple[float, float], tuple[float, float]]:
+def cycle_polar(
+    vals: dict[str, float], x: float, y: float, absolute: bool
+) -> tuple[tuple[float, float], tuple[float, float]]:
     """A canned cycle's `@ ^` (LinuxCNC's convert_cycle_xy): in G90 the hole's point (no check
     at the origin there: atan2(0, 0) is 0); in G91 the (radius, angle in radians) step that
     every repeat adds. Returns ((x, y), (radius step, angle step))."""
@@ -89,6 +101,8 @@ def cycle_polar(vals: dict[str, float], x: float, y: float, absolute: bool
 def cycle_step(x: float, y: float, polar: tuple[float, float]) -> tuple[float, float]:
     """One repeat's polar step of a G91 cycle; at the work origin it is undefined."""
     if (polar[0] or polar[1]) and x == 0.0 and y == 0.0:
-        raise WordError("@" if polar[0] else "^", "G91 polar cycle at the work origin: the "
-                                                  "angle is undefined (move off X0 Y0 first)")
+        raise WordError(
+            "@" if polar[0] else "^",
+            "G91 polar cycle at the work origin: the angle is undefined (move off X0 Y0 first)",
+        )
     return polar_step(x, y, *polar)
