@@ -51,11 +51,10 @@ class Moves:
              machine: bool = False) -> None:
         """The line's motion; `machine`: its X Y Z are machine coordinates (G53)."""
         modal = self.modal
-        previous = modal.motion
-        if motion is not None:
+        if motion is not None and motion != 51:  # G5.1 leaves the motion mode as it was
             modal.motion = None if motion in (800, 53) else motion
             self.power_up_g0 = False
-        elif self.power_up_g0 and modal.motion == 0:
+        elif motion is None and self.power_up_g0 and modal.motion == 0:
             self._warn_power_up(vals, lineno)
             self.power_up_g0 = False  # said once: the next lines follow the same G0
         mode = modal.motion if motion is None else motion
@@ -70,7 +69,7 @@ class Moves:
             self._start_nurbs(mode, vals, lineno)
             return
         if mode == 51:
-            self._quadratic(vals, lineno, previous)
+            self._quadratic(vals, lineno)
             return
         end = self._end_point(vals, machine)
         if mode == 0:
@@ -95,7 +94,7 @@ class Moves:
                                      f"refuse)")
 
     def _warn_power_up(self, vals: dict[str, float], lineno: int) -> None:
-        word = next(a for a in "XYZ" if a in vals) if _AXES.intersection(vals) else "G0"
+        word = next((a for a in "XYZ@^" if a in vals), "G0")
         self.warn_word(lineno, word, "no motion mode programmed yet: moves at rapid, as G0 "
                                      "(gcode.power_up_motion: G0, grbl's power-up mode; "
                                      "LinuxCNC refuses)")
@@ -200,12 +199,11 @@ class Moves:
         origin = self.offsets.origin
         return (mm if origin is None else mm - origin[axis]) / self.modal.scale
 
-    def _quadratic(self, vals: dict[str, float], lineno: int, previous: int | None) -> None:
+    def _quadratic(self, vals: dict[str, float], lineno: int) -> None:
         """G5.1: one quadratic B-spline, the NURBS of order 3 through the current point, the
         control point start + I J and the end point (weights 1). As in LinuxCNC, G5.1 acts on
         its own line only: the motion mode in force before it stays."""
-        self.modal.motion = previous
-        self._need_feed(51)
+        self._need_feed(51, lineno)
         start = self.modal.pos
         control = quadratic_control(self.modal, vals)
         end = self._end_point(vals)

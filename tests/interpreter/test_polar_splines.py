@@ -7,11 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from nc_helpers import XYZ_MILL, blocks_of
+from nc_helpers import LINUXCNC_START, XYZ_MILL, blocks_of, mill_with_gcode
 
 from controller.blocks import ArcBlock, LineBlock, NurbsBlock, ProbeBlock
 from controller.errors import NcError
 from controller.geometry.nurbs import Nurbs
+from controller.interpreter.program import read_program
+from controller.offsets import ProgramOffsets
 
 
 def _polar(radius: float, angle_deg: float) -> tuple[float, float]:
@@ -168,7 +170,6 @@ def test_g5_1_leaves_the_motion_mode_in_force_before_it(tmp_path: Path) -> None:
         ("G21 G0 X1 Y1\nG5.1 F100 X5 Y1 J2\n", "J", "both I and J"),
         ("G21 G0 X1 Y1\nG5.1 F100 I2 J2\n", "G5.1", "needs its end point"),
         ("G21 G0 X1 Y1\nG18 G5.1 F100 X5 Y1 I2 J2\n", "G5.1", "XY plane (G17) only"),
-        ("G21 G0 X1 Y1\nG5.1 X5 Y1 I2 J2\n", "G5.1", "no feed rate"),
     ],
 )
 def test_misused_g5_1_is_refused_naming_the_word(
@@ -180,3 +181,33 @@ def test_misused_g5_1_is_refused_naming_the_word(
 
 def test_g5_1_without_motion_is_no_block(tmp_path: Path) -> None:
     assert blocks_of(tmp_path, "G21 G0 X1 Y1\nG5.1 F100 X1 Y1 I0 J0\n", XYZ_MILL)[1:] == []
+
+
+def _with_warnings(tmp_path: Path, text: str, gcode: object) -> tuple[list, list[str]]:
+    prog = tmp_path / "prog.nc"
+    prog.write_text(text)
+    track = ProgramOffsets()
+    config = mill_with_gcode(tmp_path, gcode)
+    return list(read_program(str(prog), config, track=track)), track.warnings
+
+
+def test_g5_1_needs_a_feed_where_linuxcnc_does(tmp_path: Path) -> None:
+    with pytest.raises(NcError, match="G5.1 feed move with no feed rate") as info:
+        _with_warnings(tmp_path, "G21 G0 X1 Y1\nG5.1 X5 Y1 I2 J2\nM2\n", LINUXCNC_START)
+    assert info.value.line == 2 and info.value.word == "G5.1"
+
+
+def test_g5_1_before_any_f_moves_at_the_default_feed_with_a_warning(tmp_path: Path) -> None:
+    gcode = {"default_feed_mm_min": 90.0}
+    blocks, warnings = _with_warnings(tmp_path, "G21 G0 X1 Y1\nG5.1 X5 Y1 I2 J2\nM2\n", gcode)
+    (spline,) = [b for b in blocks if isinstance(b, NurbsBlock)]
+    assert spline.feed_mm_s == pytest.approx(1.5)
+    assert len(warnings) == 1 and ":2: G5.1: no F programmed yet" in warnings[0]
+
+
+def test_a_polar_line_under_the_power_up_g0_moves_at_rapid_and_says_so(tmp_path: Path) -> None:
+    text = "G21 G90\n@5 ^90\nM2\n"
+    blocks, warnings = _with_warnings(tmp_path, text, {"power_up_motion": "G0"})
+    (line,) = [b for b in blocks if isinstance(b, LineBlock)]
+    assert line.rapid and line.end == pytest.approx((0.0, 5.0, 0.0))
+    assert len(warnings) == 1 and ":2: @: no motion mode programmed yet" in warnings[0]
