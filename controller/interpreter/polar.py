@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 from controller.interpreter.codes import WordError
+from controller.interpreter.modal import Modal
 
 POLAR_LETTERS = frozenset("@^")
 
@@ -24,11 +25,14 @@ def _word(vals: dict[str, float]) -> str:
 
 
 def check_polar(
-    vals: dict[str, float], plane: int, axis_code: bool, machine: bool, motion: int | None
+    vals: dict[str, float], groups: dict[str, int], modal: Modal, axis_code: bool
 ) -> None:
-    """The rules a line with `@` or `^` must follow: `axis_code`, the line has G10, G28, G30,
-    G92 or G43.1 (which take axis words for themselves); `machine`, it has G53; `motion`, the
-    motion code in force on it (code10; None or G80: none)."""
+    """The rules a line with `@` or `^` must follow. `groups`: the line's codes by modal group
+    (its G17, G53 and motion code count); `axis_code`: the line has G10, G28, G30, G92 or
+    G43.1, which take axis words for themselves."""
+    motion = groups.get("motion", modal.motion)  # code10; None or G80: no motion
+    plane = groups.get("plane", modal.plane)
+    machine = groups.get("non-modal") == 530
     word = _word(vals)
     if axis_code or motion in (None, 800):
         raise WordError(

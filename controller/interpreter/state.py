@@ -120,9 +120,8 @@ class InterpState:
                           else 431)
             raise WordError(word, f"{word} and {g_name(motion)} both use axis words: put "
                                   f"them on separate lines")
-        if has_polar(vals):  # @ ^ name the end of a motion only; this line's G17 counts
-            check_polar(vals, groups.get("plane", self.modal.plane), axis_code, nonmodal == 530,
-                        motion if motion is not None else self.modal.motion)
+        if has_polar(vals):  # @ ^ name the end of a motion only
+            check_polar(vals, groups, self.modal, axis_code)
         _check_letters(groups, vals,
                        motion if motion is not None or axis_code else self.modal.motion, ms)
         self._modes(groups, vals)

@@ -211,3 +211,8 @@ def test_a_polar_line_under_the_power_up_g0_moves_at_rapid_and_says_so(tmp_path:
     (line,) = [b for b in blocks if isinstance(b, LineBlock)]
     assert line.rapid and line.end == pytest.approx((0.0, 5.0, 0.0))
     assert len(warnings) == 1 and ":2: @: no motion mode programmed yet" in warnings[0]
+
+
+def test_a_g17_on_the_polar_line_itself_counts(tmp_path: Path) -> None:
+    ends = _ends(tmp_path, "G21 G18 G0 X3 Y4\nG17 G1 F100 @10\n")
+    assert ends[-1] == pytest.approx((6.0, 8.0, 0.0))
