@@ -226,14 +226,16 @@ def run_ours(program: str, config: MachineConfig) -> Oracle:
 def first_difference(theirs: list[Move], ours: list[Move]) -> str | None:
     """None when the two lists are the same moves; else what differs first. A straight move
     shorter than the printing allowance on one side only is passed over: rs274's four decimals
-    make some of an inch program's sub-micrometre moves zero-length, and not others."""
+    make some of an inch program's sub-micrometre moves zero-length, and not others. rs274
+    prints no NURBS end: where ours ended stands for it (a zero-length move that rs274 prints
+    after it, to where it ended, is passed over only if it goes to where ours ended)."""
     i = j = 0
     last_a = last_b = (0.0, 0.0, 0.0)
     while i < len(theirs) and j < len(ours):
         a, b = theirs[i], ours[j]
         why = _differs(a, b)
         if why is None:
-            last_a, last_b = a.end_mm, b.end_mm
+            last_a, last_b = b.end_mm if a.kind == "NURBS" else a.end_mm, b.end_mm
             i, j = i + 1, j + 1
         elif _tiny(b, last_b, a.unit_mm):
             last_b = b.end_mm

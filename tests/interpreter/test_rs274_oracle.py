@@ -95,6 +95,22 @@ def test_the_comparison_finds_a_spline_that_ends_elsewhere(tmp_path: Path) -> No
     assert "end" in ORACLE.first_difference(theirs.moves, ours.moves)
 
 
+def test_a_zero_length_move_after_a_nurbs_is_passed_over_only_at_our_nurbs_end() -> None:
+    """rs274 prints the G0 to where its NURBS ended; we drop it, being there already."""
+    nan = (float("nan"),) * 3
+    theirs = [ORACLE.Move("NURBS", nan, 1.0), ORACLE.Move("G0", (1.0, 1.0, 0.0))]
+    assert ORACLE.first_difference(theirs, [ORACLE.Move("NURBS", (1.0, 1.0, 0.0), 1.0)]) is None
+    elsewhere = [ORACLE.Move("NURBS", (1.0, 1.002, 0.0), 1.0)]
+    assert "more moves" in ORACLE.first_difference(theirs, elsewhere)
+
+
+@needs_rs274
+def test_a_g5_2_program_reads_to_the_same_moves_around_its_nurbs(tmp_path: Path) -> None:
+    path = DATA / "linuxcnc" / "nurbs" / "G5" / "Curva_Delfino__1_1_G5.ngc"
+    row = ORACLE.compare(str(path), XYZ_MILL, RS274, str(tmp_path))
+    assert row["status"] == "not-compared" and row["why"].startswith("NURBS: 1 NURBS"), row
+
+
 def test_an_offset_is_read_in_the_units_it_was_printed_in() -> None:
     """G10 in mm, then G20: rs274 does not print the offset again in inches."""
     text = "\n".join([
