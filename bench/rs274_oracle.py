@@ -10,7 +10,9 @@ points, arc centres and turns, and feeds, each to 1 um (plus the rounding of rs2
 printed decimals: 0.05 um in mm, 1.27 um in inch programs). rs274 prints in the program's units
 (USE_LENGTH_UNITS); they are converted to mm. Zero-length traverses that rs274 prints (G28
 through the point where the tool stands, a `G0` with no axis words) are dropped, as we drop them.
-NURBS programs are not compared (rs274 prints NURBS_FEED, a different form of the same curve).
+A NURBS (G5.1, G5.2) is compared by its place among the moves only: rs274 prints
+`NURBS_FEED(count, ...)` without its control points. A program with NURBS is not-compared when
+all its other moves are the same (they show where each side ends each NURBS), else differ.
 A program that probes (G38.x) and differs is compared up to its first probe (not-compared when
 those moves are the same): rs274 standalone simulates the probe tripping 0.01 in (0.254 mm)
 short of its end point, our check takes it to the end, so positions read after it differ by
@@ -122,17 +124,18 @@ def run_rs274(rs274: str, program: str, folder: str) -> Oracle:
 
 def parse_calls(text: str) -> Oracle:
     """The moves of rs274's printout in machine mm. rs274 prints positions in the work frame
-    (program coordinates); its SET_G5X_OFFSET and SET_G92_OFFSET calls give the offsets to add."""
+    (program coordinates); its SET_G5X_OFFSET and SET_G92_OFFSET calls give the offsets to add,
+    in the units in force when they are printed (a later G20 or G21 does not print them again)."""
     oracle = Oracle(True)
     unit = 1.0
     feed = 0.0
     plane = "CANON_PLANE_XY"
-    g5x = [0.0, 0.0, 0.0]
-    g92 = [0.0, 0.0, 0.0]
+    g5x_mm = [0.0, 0.0, 0.0]
+    g92_mm = [0.0, 0.0, 0.0]
 
     def machine(v: list[float]) -> tuple[float, float, float]:
-        return ((v[0] + g5x[0] + g92[0]) * unit, (v[1] + g5x[1] + g92[1]) * unit,
-                (v[2] + g5x[2] + g92[2]) * unit)
+        return (v[0] * unit + g5x_mm[0] + g92_mm[0], v[1] * unit + g5x_mm[1] + g92_mm[1],
+                v[2] * unit + g5x_mm[2] + g92_mm[2])
 
     for line in text.splitlines():
         m = _CALL_RE.match(line)
@@ -146,11 +149,12 @@ def parse_calls(text: str) -> Oracle:
         elif name == "SELECT_PLANE":
             plane = args.strip()
         elif name == "SET_G5X_OFFSET":
-            g5x = [float(a) for a in args.split(",")[1:4]]
+            g5x_mm = [float(a) * unit for a in args.split(",")[1:4]]
         elif name == "SET_G92_OFFSET":
-            g92 = [float(a) for a in args.split(",")[:3]]
+            g92_mm = [float(a) * unit for a in args.split(",")[:3]]
         elif name.startswith("NURBS"):
             oracle.nurbs = True
+            oracle.moves.append(Move("NURBS", (math.nan,) * 3, feed * unit / 60.0, unit_mm=unit))
         elif name == "STRAIGHT_PROBE" and oracle.probe_at is None:
             oracle.probe_at = len(collapse(list(oracle.moves)))
         elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
@@ -179,7 +183,7 @@ def collapse(moves: list[Move], start: tuple[float, float, float] = (0.0, 0.0, 0
     pos = start
     for move in moves:
         tol = TOLERANCE_MM / 2 + 0.5e-4 * move.unit_mm
-        if move.kind != "ARC" and max(abs(a - b) for a, b in zip(move.end_mm, pos,
+        if move.kind not in ("ARC", "NURBS") and max(abs(a - b) for a, b in zip(move.end_mm, pos,
                                                                   strict=True)) <= tol:
             continue
         kept.append(move)
@@ -195,9 +199,13 @@ def run_ours(program: str, config: MachineConfig) -> Oracle:
     except CncError as exc:
         return Oracle(False, message=str(exc))
     ours = Oracle(True)
+    nurbs_source = None  # one NURBS of the program may be several blocks (split at corners)
     for block in blocks:
         if isinstance(block, NurbsBlock):
             ours.nurbs = True
+            if block.source != nurbs_source:
+                ours.moves.append(Move("NURBS", block.end, block.feed_mm_s))
+            ours.moves[-1].end_mm = block.end
         elif isinstance(block, ProbeBlock) and ours.probe_at is None:
             ours.probe_at = len(collapse(list(ours.moves)))
         elif isinstance(block, LineBlock):
@@ -210,6 +218,7 @@ def run_ours(program: str, config: MachineConfig) -> Oracle:
             ours.moves.append(Move("ARC", tuple(block.end), block.feed_mm_s,
                                    tuple(block.center), -turns if block.clockwise else turns,
                                    plane))
+        nurbs_source = block.source if isinstance(block, NurbsBlock) else None
     ours.moves = collapse(ours.moves)
     return ours
 
@@ -217,14 +226,16 @@ def run_ours(program: str, config: MachineConfig) -> Oracle:
 def first_difference(theirs: list[Move], ours: list[Move]) -> str | None:
     """None when the two lists are the same moves; else what differs first. A straight move
     shorter than the printing allowance on one side only is passed over: rs274's four decimals
-    make some of an inch program's sub-micrometre moves zero-length, and not others."""
+    make some of an inch program's sub-micrometre moves zero-length, and not others. rs274
+    prints no NURBS end: where ours ended stands for it (a zero-length move that rs274 prints
+    after it, to where it ended, is passed over only if it goes to where ours ended)."""
     i = j = 0
     last_a = last_b = (0.0, 0.0, 0.0)
     while i < len(theirs) and j < len(ours):
         a, b = theirs[i], ours[j]
         why = _differs(a, b)
         if why is None:
-            last_a, last_b = a.end_mm, b.end_mm
+            last_a, last_b = b.end_mm if a.kind == "NURBS" else a.end_mm, b.end_mm
             i, j = i + 1, j + 1
         elif _tiny(b, last_b, a.unit_mm):
             last_b = b.end_mm
@@ -243,7 +254,7 @@ def first_difference(theirs: list[Move], ours: list[Move]) -> str | None:
 
 def _tiny(move: Move, last: tuple[float, float, float], unit_mm: float) -> bool:
     allowance = TOLERANCE_MM + 1e-4 * unit_mm
-    return move.kind != "ARC" and max(abs(p - q) for p, q in zip(move.end_mm, last,
+    return move.kind not in ("ARC", "NURBS") and max(abs(p - q) for p, q in zip(move.end_mm, last,
                                                                   strict=True)) <= allowance
 
 
@@ -251,6 +262,8 @@ def _differs(a: Move, b: Move) -> str | None:
     tol = TOLERANCE_MM + 0.5e-4 * a.unit_mm
     if a.kind != b.kind:
         return f"rs274 {a.kind} to {_show(a.end_mm)}, we {b.kind} to {_show(b.end_mm)}"
+    if a.kind == "NURBS":
+        return _differs_nurbs(a, b)
     if max(abs(p - q) for p, q in zip(a.end_mm, b.end_mm, strict=True)) > tol:
         return f"{a.kind} end: rs274 {_show(a.end_mm)}, we {_show(b.end_mm)}"
     if a.kind != "G0" and abs(a.feed_mm_s - b.feed_mm_s) > 0.5e-4 * a.unit_mm / 60 + 1e-9:
@@ -265,6 +278,13 @@ def _differs(a: Move, b: Move) -> str | None:
     return None
 
 
+def _differs_nurbs(a: Move, b: Move) -> str | None:
+    """rs274 prints no NURBS geometry: only the feed can be compared."""
+    if abs(a.feed_mm_s - b.feed_mm_s) > 0.5e-4 * a.unit_mm / 60 + 1e-9:
+        return f"NURBS feed: rs274 {a.feed_mm_s * 60:.4f} mm/min, we {b.feed_mm_s * 60:.4f}"
+    return None
+
+
 def _show(p: tuple[float, ...]) -> str:
     return "(" + ", ".join(f"{v:.4f}" for v in p) + ")"
 
@@ -274,11 +294,13 @@ def compare(program: str, config: MachineConfig, rs274: str, folder: str) -> dic
     ours = run_ours(program, config)
     row = {"file": program, "rs274": theirs.message, "ours": ours.message}
     if theirs.accepted and ours.accepted:
-        if theirs.nurbs or ours.nurbs:
+        diff = first_difference(theirs.moves, ours.moves)
+        if (theirs.nurbs or ours.nurbs) and diff is None:
+            count = sum(m.kind == "NURBS" for m in ours.moves)
             row["status"] = "not-compared"
-            row["why"] = "NURBS"
+            row["why"] = (f"NURBS: {count} NURBS in their places, the "
+                          f"{len(ours.moves) - count} other moves the same")
         else:
-            diff = first_difference(theirs.moves, ours.moves)
             row["status"] = "differ" if diff else "same"
             row["why"] = diff or f"{len(ours.moves)} moves"
             if diff and (theirs.probe_at is not None or ours.probe_at is not None):

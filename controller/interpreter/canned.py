@@ -7,6 +7,7 @@ from controller.blocks import DwellBlock, PathControl, PathMode, Source
 from controller.interpreter.codes import WordError, g_name
 from controller.interpreter.modal import Modal
 from controller.interpreter.moves import Moves
+from controller.interpreter.polar import cycle_polar, cycle_step, has_polar
 
 CYCLES = frozenset((730, 810, 820, 830, 850, 890))  # code10 of the supported cycles
 _NEEDS_Q = frozenset((730, 830))
@@ -62,6 +63,9 @@ class CannedCycles:
             r_z = r + old_z
             bottom = r_z + z
             x, y = x0, y0
+        polar = (0.0, 0.0)  # G91 @ ^: the radius and angle every repeat adds
+        if has_polar(vals):
+            (x, y), polar = cycle_polar(vals, x0, y0, modal.absolute)
         if r_z < bottom:
             raise WordError("R", f"{name}: the R plane ({r_z:g}) is below the bottom Z "
                                  f"({bottom:g})")
@@ -70,16 +74,17 @@ class CannedCycles:
         saved = modal.path_control
         modal.path_control = PathControl(PathMode.EXACT_PATH)  # LinuxCNC: G61.1 in cycles
         try:
-            self._cycles(code, lineno, (x, y), (dx, dy), (old_z, z0, r_z, bottom), q, p,
-                         repeats)
+            self._cycles(code, lineno, (x, y), (dx, dy, *polar), (old_z, z0, r_z, bottom), q,
+                         p, repeats)
         finally:
             modal.path_control = saved
 
     def _cycles(self, code: int, lineno: int, xy: tuple[float, float],
-                step: tuple[float, float], heights: tuple[float, float, float, float],
+                step: tuple[float, float, float, float], heights: tuple[float, float, float, float],
                 q: float | None, p: float | None, repeats: int) -> None:
         """LinuxCNC 2.9's CYCLE_MACRO: up to R first if the initial level is below it; the first
-        hole is reached at the current height, the others at the clear height."""
+        hole is reached at the current height, the others at the clear height. `step`: what
+        each repeat adds, X Y and then (G91 @ ^) the radius and the angle (radians)."""
         x, y = xy
         old_z, z_now, r_z, bottom = heights
         if old_z < r_z:  # first straight up to R where the tool stands
@@ -90,6 +95,8 @@ class CannedCycles:
         clear = r_z if self.retract_to_r else old_z
         for n in range(repeats):
             x, y = x + step[0], y + step[1]
+            if step[2] or step[3]:
+                x, y = cycle_step(x, y, step[2:])
             if n == 0 and z_now > r_z:
                 self._go(x, y, z_now, True, lineno)
                 self._go(x, y, r_z, True, lineno)

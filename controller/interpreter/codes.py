@@ -4,7 +4,7 @@ from __future__ import annotations
 
 # G codes are keyed by ten times their number (G61.1 -> 611) so that lookups are exact integers.
 G_GROUP: dict[int, str] = {
-    0: "motion", 10: "motion", 20: "motion", 30: "motion", 52: "motion", 53: "motion",
+    0: "motion", 10: "motion", 20: "motion", 30: "motion", 51: "motion", 52: "motion", 53: "motion",
     62: "motion", 800: "motion", 382: "motion", 383: "motion", 384: "motion", 385: "motion",
     730: "motion", 810: "motion", 820: "motion", 830: "motion", 850: "motion", 890: "motion",
     40: "non-modal", 100: "non-modal", 530: "non-modal",
@@ -25,12 +25,12 @@ G_GROUP: dict[int, str] = {
 }
 
 _CANNED = "this canned cycle is not supported (G73 G81 G82 G83 G85 G89 are)"
+_FANUC_POLAR = "Fanuc's polar mode (G15/G16) is not supported; use @ (radius) and ^ (angle)"
 _G59_X = "coordinate systems G59.1-G59.3 are not supported (G54-G59 only)"
 G_UNSUPPORTED: dict[int, str] = {
     50: "cubic splines (G5) are not supported; use G5.2 NURBS",
-    51: "quadratic splines (G5.1) are not supported; use G5.2 NURBS",
     70: "lathe diameter mode is not supported", 80: "lathe radius mode is not supported",
-    150: "polar coordinates are not supported", 160: "polar coordinates are not supported",
+    150: _FANUC_POLAR, 160: _FANUC_POLAR,
     171: "the UV planes (G17.1, G18.1, G19.1) are not supported",
     181: "the UV planes (G17.1, G18.1, G19.1) are not supported",
     191: "the UV planes (G17.1, G18.1, G19.1) are not supported",

@@ -98,7 +98,7 @@ def _lex_slow(text: str, path: str, lineno: int,
                 pos = _skip_comment(text, pos, path, lineno)
             elif ch == "#":
                 pos = _lex_assign(reader, pos, path, lineno, assigns)
-            elif "A" <= ch <= "Z":
+            elif "A" <= ch <= "Z" or ch in "@^":  # @ ^: polar radius and angle
                 pos = _lex_word(reader, pos, path, lineno, words, cols)
             else:
                 raise NcError(path, lineno, pos + 1, ch, f"unexpected character {_show(ch)}")

@@ -10,13 +10,15 @@ from controller.interpreter.codes import WordError, g_name
 from controller.interpreter.modal import Modal
 from controller.interpreter.nurbs_blocks import NurbsCollector, check_order, split_at_corners
 from controller.interpreter.plane_arcs import arc_block
+from controller.interpreter.polar import has_polar, polar_xy
+from controller.interpreter.splines import quadratic_block, quadratic_control
 from controller.interpreter.work_offsets import WorkOffsets
 
 # G6.2's first control point must be the current position within this: a drive reports whole
 # pulses (1 um), so a program that ended at Y0.00059 stands at Y0.001 when run again.
 SAME_POINT_MM = 2e-3
 _G6_LETTERS = frozenset("XYZRK")
-_AXES = frozenset("XYZ")
+_AXES = frozenset("XYZ@^")  # the words that name an end point (@ ^: polar.py)
 
 
 class Moves:
@@ -49,22 +51,25 @@ class Moves:
              machine: bool = False) -> None:
         """The line's motion; `machine`: its X Y Z are machine coordinates (G53)."""
         modal = self.modal
-        if motion is not None:
+        if motion is not None and motion != 51:  # G5.1 leaves the motion mode as it was
             modal.motion = None if motion in (800, 53) else motion
             self.power_up_g0 = False
-        elif self.power_up_g0 and modal.motion == 0:
+        elif motion is None and self.power_up_g0 and modal.motion == 0:
             self._warn_power_up(vals, lineno)
             self.power_up_g0 = False  # said once: the next lines follow the same G0
         mode = modal.motion if motion is None else motion
         if mode == 800 and not _AXES.intersection(vals):
             return  # G80 alone cancels the motion mode
         if mode is None or mode == 800:
-            raise WordError("X" if "X" in vals else ("Y" if "Y" in vals else "Z"),
+            raise WordError(next((w for w in "XYZ@^" if w in vals), "X"),
                             "axis word with no motion mode (G0, G1, G2, G3) in force")
         if mode == 53:
             raise WordError("G5.3", "G5.3 without an open G5.2 block")
         if mode in (52, 62):
             self._start_nurbs(mode, vals, lineno)
+            return
+        if mode == 51:
+            self._quadratic(vals, lineno)
             return
         end = self._end_point(vals, machine)
         if mode == 0:
@@ -89,7 +94,7 @@ class Moves:
                                      f"refuse)")
 
     def _warn_power_up(self, vals: dict[str, float], lineno: int) -> None:
-        word = next(a for a in "XYZ" if a in vals) if _AXES.intersection(vals) else "G0"
+        word = next((a for a in "XYZ@^" if a in vals), "G0")
         self.warn_word(lineno, word, "no motion mode programmed yet: moves at rapid, as G0 "
                                      "(gcode.power_up_motion: G0, grbl's power-up mode; "
                                      "LinuxCNC refuses)")
@@ -97,6 +102,8 @@ class Moves:
     def _end_point(self, vals: dict[str, float],
                    machine: bool = False) -> tuple[float, float, float]:
         modal = self.modal
+        if has_polar(vals):
+            return self._polar_end(vals)
         x, y, z = modal.pos
         s = modal.scale
         o = self.offsets.origin
@@ -116,6 +123,15 @@ class Moves:
             raise WordError("Z", f"Z move on a machine without a Z axis "
                                  f"(config '{self.config.name}')")
         return x, y, z
+
+    def _polar_end(self, vals: dict[str, float]) -> tuple[float, float, float]:
+        """The end point of a line with `@` or `^` (polar.py): X Y about the work origin, Z as
+        the line's Z word says."""
+        here = (self._program(0, self.modal.pos[0]), self._program(1, self.modal.pos[1]))
+        x, y = polar_xy(vals, *here, self.modal.absolute)
+        z_only = {k: v for k, v in vals.items() if k == "Z"}
+        z = self._end_point(z_only)[2]
+        return self._machine(0, x), self._machine(1, y), z
 
     def line_to(self, end: tuple[float, float, float], rapid: bool, lineno: int,
                 code: int) -> None:
@@ -182,6 +198,22 @@ class Moves:
         """A machine coordinate (mm) in the program's frame and units."""
         origin = self.offsets.origin
         return (mm if origin is None else mm - origin[axis]) / self.modal.scale
+
+    def _quadratic(self, vals: dict[str, float], lineno: int) -> None:
+        """G5.1: one quadratic B-spline, the NURBS of order 3 through the current point, the
+        control point start + I J and the end point (weights 1). As in LinuxCNC, G5.1 acts on
+        its own line only: the motion mode in force before it stays."""
+        self._need_feed(51, lineno)
+        start = self.modal.pos
+        control = quadratic_control(self.modal, vals)
+        end = self._end_point(vals)
+        if end == start and control[:2] == start[:2]:
+            return  # no motion, as a G1 to where the tool stands
+        block = quadratic_block(start, control, end, self.modal, self._pulse_mm(),
+                                self.config.interpolator.max_feed_mm_s,
+                                Source(self.path, lineno, lineno))
+        self.out.extend(split_at_corners(block))
+        self.modal.pos = end
 
     # ---- NURBS ------------------------------------------------------------------------------
     def _start_nurbs(self, mode: int, vals: dict[str, float], lineno: int) -> None:

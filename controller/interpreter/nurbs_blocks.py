@@ -67,10 +67,10 @@ class NurbsCollector:
                  feed_mm_s: float, path: PathControl, program: str, line: int,
                  min_gap_mm: float = 0.0) -> None:
         self.min_gap_mm = min_gap_mm  # two control points nearer than this must be the same
-        self.kind = kind  # "G5.2" or "G6.2"
+        self.kind = kind  # "G5.2", "G6.2" or "G5.1" (splines.py)
         self.order = order
         self.points: list[tuple[float, float]] = [(x, y)]
-        self.weights: list[float] = [_check_weight(weight, "P" if kind == "G5.2" else "R")]
+        self.weights: list[float] = [_check_weight(weight, "R" if kind == "G6.2" else "P")]
         self.weight_range = (weight, weight)
         self.knots: list[float] = []
         self.knot_lines: list[int] = []  # program line of each knot, for error messages
@@ -93,7 +93,7 @@ class NurbsCollector:
                                  f"nearer than the {self.min_gap_mm:g} mm pulse but not the same "
                                  "point, a hook no machine can follow (repeat the point exactly "
                                  "for a corner, or move it apart)")
-        self.weights.append(_check_weight(weight, "P" if self.kind == "G5.2" else "R",
+        self.weights.append(_check_weight(weight, "R" if self.kind == "G6.2" else "P",
                                           self.weight_range))
         self.weight_range = (min(self.weight_range[0], weight), max(self.weight_range[1], weight))
         self.points.append((x, y))
@@ -143,7 +143,7 @@ class NurbsCollector:
 
     def _knot_vector(self, last: int) -> np.ndarray:
         n, order = len(self.points), self.order
-        if self.kind == "G5.2":
+        if self.kind != "G6.2":  # G5.2, G5.1
             return uniform_clamped_knots(n, order)
         if len(self.knots) != n + order:
             raise self._fail(last, "K", f"NURBS knot count {len(self.knots)} must equal control "

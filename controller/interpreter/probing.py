@@ -32,7 +32,7 @@ class Probing:
 
     def probe(self, code10: int, vals: dict[str, float], lineno: int) -> None:
         name = g_name(code10)
-        if not {"X", "Y", "Z"} & vals.keys():
+        if not {"X", "Y", "Z", "@", "^"} & vals.keys():
             raise WordError(name, f"{name} needs an axis word: the probe's end point")
         if self.modal.feed_mm_s <= 0.0:
             raise WordError(name, f"{name} probe move with no feed rate: program F first")

@@ -38,7 +38,7 @@ from controller.offsets import OffsetTable, ProgramOffsets
 _G_CACHE: dict[str, int] = {}  # G number text -> code10, for supported/known codes only
 _G_BY_VALUE: dict[float, int] = {}  # the same by value (G01 and G1 alike)
 _M_CACHE: dict[str, int] = {}
-_VALUE_LETTERS = frozenset("XYZIJKRPQLFSTHE")
+_VALUE_LETTERS = frozenset("XYZIJKRPQLFSTHE@^")  # @ ^: polar radius and angle
 _CHUNK_CHARS = 1 << 16
 
 

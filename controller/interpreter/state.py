@@ -22,6 +22,7 @@ from controller.interpreter.modal_save import MODAL_SAVE_CODES, ModalContexts
 from controller.interpreter.moves import MAX_BLOCK_S, Moves
 from controller.interpreter.outputs import M_LETTERS, ProgramOutputs
 from controller.interpreter.params import Parameters
+from controller.interpreter.polar import POLAR_LETTERS, check_polar, has_polar
 from controller.interpreter.probing import PROBE_CODE10, Probing
 from controller.interpreter.system_params import SystemParams
 from controller.interpreter.tool_length import ToolState
@@ -33,16 +34,17 @@ MM_PER_INCH = 25.4
 # take 1e13 s of samples. grbl raises such feeds to the same minimum; refusing says so.
 MIN_FEED_MM_MIN = 1.0
 _AXES = frozenset("XYZ")
+_MOVE = _AXES | POLAR_LETTERS  # the words of an end point (@ ^: polar.py)
 MAX_WARNINGS = 10
 _STOPS = {0: StopKind.PAUSE, 1: StopKind.OPTIONAL_PAUSE, 2: StopKind.END, 30: StopKind.END_REWIND}
 # Letters each G code may use (besides F S T, allowed everywhere).
 _USES: dict[int, frozenset[str]] = {
-    0: _AXES, 10: _AXES, 20: _AXES | set("IJRP") | {"K"}, 30: _AXES | set("IJRP") | {"K"},
-    52: frozenset("XYZPL"), 62: frozenset("XYZRKPQ"), 40: frozenset("P"),
+    0: _MOVE, 10: _MOVE, 20: _MOVE | set("IJRP") | {"K"}, 30: _MOVE | set("IJRP") | {"K"},
+    51: _MOVE | set("IJ"), 52: frozenset("XYZPL"), 62: frozenset("XYZRKPQ"), 40: frozenset("P"),
     640: frozenset("PQ"), 430: frozenset("H"), 431: frozenset("Z"),
-    100: _AXES | set("LPR"), 920: _AXES, 382: _AXES, 383: _AXES, 384: _AXES, 385: _AXES,
+    100: _AXES | set("LPR"), 920: _AXES, 382: _MOVE, 383: _MOVE, 384: _MOVE, 385: _MOVE,
     280: _AXES, 300: _AXES,
-    **{code: _AXES | set("RLPQ") for code in CYCLES},
+    **{code: _MOVE | set("RLPQ") for code in CYCLES},
 }
 _ALWAYS = frozenset("FST")
 _FAST_MOTIONS = frozenset((0, 10, 20, 30))
@@ -118,6 +120,8 @@ class InterpState:
                           else 431)
             raise WordError(word, f"{word} and {g_name(motion)} both use axis words: put "
                                   f"them on separate lines")
+        if has_polar(vals):  # @ ^ name the end of a motion only
+            check_polar(vals, groups, self.modal, axis_code)
         _check_letters(groups, vals,
                        motion if motion is not None or axis_code else self.modal.motion, ms)
         self._modes(groups, vals)
@@ -133,9 +137,9 @@ class InterpState:
                 self.cycles.reset_level()
                 moves.move(motion, {}, lineno)  # G80: cancels the motion mode
         elif (motion if motion is not None else self.modal.motion) in CYCLES:
-            if motion is not None or not _AXES.isdisjoint(vals):
+            if motion is not None or not _MOVE.isdisjoint(vals):
                 self._cycle(motion if motion is not None else self.modal.motion, vals, lineno)
-        elif motion is not None or not _AXES.isdisjoint(vals):
+        elif motion is not None or not _MOVE.isdisjoint(vals):
             self.cycles.reset_level()
             if nonmodal == 530:
                 self._need_straight(motion)
@@ -274,8 +278,7 @@ class InterpState:
             self.tools.g43_1(vals)
         elif length == 490:
             self.tools.g49()
-        # G40, G94, G98/G99 and G97 change nothing in phcnc's model; they are accepted because
-        # CAM headers use them.
+        # G40, G94, G98/G99 and G97 change nothing in phcnc's model; accepted for CAM headers.
 
     def _tol(self, vals: dict[str, float], letter: str) -> float | None:
         if letter not in vals:
@@ -405,12 +408,12 @@ def _check_letters(groups: dict[str, int], vals: dict[str, float], motion: int |
         allowed |= M_LETTERS.get(m, frozenset())
     for code in groups.values():
         allowed |= _USES.get(code, frozenset())
-    if motion is not None and not _AXES.isdisjoint(vals):
+    if motion is not None and not _MOVE.isdisjoint(vals):
         allowed |= _USES.get(motion, frozenset())
     unused = vals.keys() - allowed
     if unused:
-        letter = min(unused, key="XYZIJKRPQELHFST".index)
-        if letter in _AXES:
+        letter = min(unused, key="XYZ@^IJKRPQELHFST".index)
+        if letter in _MOVE:
             raise WordError(letter, f"{letter} word with no motion mode (G0, G1, G2, G3) "
                                     f"in force")
         if letter == "E":  # most often X1e3: G-code numbers have no exponent

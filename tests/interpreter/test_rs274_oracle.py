@@ -71,6 +71,58 @@ def test_the_comparison_finds_a_two_micrometre_difference(tmp_path: Path) -> Non
     assert ORACLE.first_difference(theirs.moves, same.moves) is None
 
 
+@needs_rs274
+def test_g5_1_splines_end_where_linuxcnc_ends_them(tmp_path: Path) -> None:
+    """rs274 prints no spline geometry: every other move, among them G91 moves and offsets and
+    a G20 after the splines, shows where each side ends each G5.1 (control points: the unit
+    tests of test_polar_splines.py)."""
+    row = ORACLE.compare(str(DATA / "oracle" / "nurbs" / "g5_1.ngc"), XYZ_MILL, RS274,
+                         str(tmp_path))
+    assert row["status"] == "not-compared" and row["why"].startswith("NURBS: 5 NURBS"), row
+
+
+@needs_rs274
+def test_the_comparison_finds_a_spline_that_ends_elsewhere(tmp_path: Path) -> None:
+    """The NURBS comparison can fail: a G91 G5.1 ends 2 um further in our copy (the G91 move
+    after it shows where it ended)."""
+    text = (DATA / "oracle" / "nurbs" / "g5_1.ngc").read_text()
+    moved = tmp_path / "moved.ngc"
+    moved.write_text(text.replace("G91 G5.1 X-10 Y10", "G91 G5.1 X-9.998 Y10"))
+    theirs = ORACLE.run_rs274(RS274, str(DATA / "oracle" / "nurbs" / "g5_1.ngc"),
+                              str(tmp_path))
+    ours = ORACLE.run_ours(str(moved), XYZ_MILL)
+    assert theirs.accepted and ours.accepted
+    assert "end" in ORACLE.first_difference(theirs.moves, ours.moves)
+
+
+def test_a_zero_length_move_after_a_nurbs_is_passed_over_only_at_our_nurbs_end() -> None:
+    """rs274 prints the G0 to where its NURBS ended; we drop it, being there already."""
+    nan = (float("nan"),) * 3
+    theirs = [ORACLE.Move("NURBS", nan, 1.0), ORACLE.Move("G0", (1.0, 1.0, 0.0))]
+    assert ORACLE.first_difference(theirs, [ORACLE.Move("NURBS", (1.0, 1.0, 0.0), 1.0)]) is None
+    elsewhere = [ORACLE.Move("NURBS", (1.0, 1.002, 0.0), 1.0)]
+    assert "more moves" in ORACLE.first_difference(theirs, elsewhere)
+
+
+@needs_rs274
+def test_a_g5_2_program_reads_to_the_same_moves_around_its_nurbs(tmp_path: Path) -> None:
+    path = DATA / "linuxcnc" / "nurbs" / "G5" / "Curva_Delfino__1_1_G5.ngc"
+    row = ORACLE.compare(str(path), XYZ_MILL, RS274, str(tmp_path))
+    assert row["status"] == "not-compared" and row["why"].startswith("NURBS: 1 NURBS"), row
+
+
+def test_an_offset_is_read_in_the_units_it_was_printed_in() -> None:
+    """G10 in mm, then G20: rs274 does not print the offset again in inches."""
+    text = "\n".join([
+        "    1 N..... USE_LENGTH_UNITS(CANON_UNITS_MM)",
+        "    2 N..... SET_G5X_OFFSET(2, 5.0000, -5.0000, 0.0000, 0.0000, 0.0000, 0.0000)",
+        "    3 N..... USE_LENGTH_UNITS(CANON_UNITS_INCHES)",
+        "    4 N..... STRAIGHT_TRAVERSE(1.0000, 0.0000, 0.0000, 0.0000, 0.0000, 0.0000)",
+    ])
+    (move,) = ORACLE.parse_calls(text).moves
+    assert move.end_mm == pytest.approx((25.4 + 5.0, -5.0, 0.0))
+
+
 def test_canonical_calls_are_read_in_machine_mm() -> None:
     """rs274 prints the work frame in program units; offsets and inches are undone."""
     text = "\n".join([
