@@ -10,6 +10,8 @@ farthest it can go.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from controller.blocks import NcBlock, ProbeBlock, Source
 from controller.interpreter.codes import WordError, g_name
 from controller.interpreter.modal import Modal
@@ -58,3 +60,10 @@ class Probing:
         self.modal.pos = result.stop_mm
         origin = self.offsets.origin or (0.0, 0.0, 0.0)
         self.results.parameters.update(result.parameters(origin))
+
+    def set_parameters(self, set_number: Callable[[int, float], None]) -> bool:
+        """#5061-#5063 and #5070 for what follows the probe just read; whether a probing
+        run's stretch starts after it."""
+        for number, value in self.results.parameters.items():
+            set_number(number, value)
+        return self.resume_here

@@ -145,9 +145,7 @@ class InterpState:
                 self._need_straight(motion)
             if (motion if motion is not None else self.modal.motion) in PROBE_CODE10:
                 self.probing.probe(motion or self.modal.motion, vals, lineno)  # type: ignore
-                for number, value in self.probing.results.parameters.items():
-                    self.params.set(number, value)  # #5061-#5063, #5070 for what follows
-                if self.probing.resume_here:
+                if self.probing.set_parameters(self.params.set):
                     self.mark(lineno + 1)  # a probing run's stretch starts after it
             else:
                 moves.move(motion, vals, lineno, machine=nonmodal == 530)
