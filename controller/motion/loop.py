@@ -25,7 +25,8 @@ from controller.motion.model_watch import ModelWatch
 from controller.motion.outputs import OutputRunner
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter, counts_of
-from controller.motion.recall import HOLD_KEEP_MS, SendState, Sent
+from controller.motion.ramp_first import HOLD_KEEP_MS, PLAN_BUDGET_MS, take_back_planned
+from controller.motion.recall import SendState, Sent
 from controller.motion.requests import OperatorRequests
 from controller.motion.result import RunChecks, RunFigures, build_result
 from controller.motion.retime import Retimer
@@ -259,8 +260,9 @@ class MotionController:
 
     def _operator_requests(self, level: int) -> int:
         """Hold and override become the re-timer's target rate (resume: see _pause_step); a
-        slower one first takes back what the card has queued beyond HOLD_KEEP_MS. Returns the
-        FIFO level after it (the refill that follows fills the card again at once)."""
+        slower one is planned first, then what the card has queued beyond it is taken back
+        (motion/ramp_first.py). Returns the FIFO level after it (the refill that follows
+        writes the ramp at once)."""
         before = self.retimer.wanted
         if self.requests.hold and not self.holding:
             self.holding = True
@@ -272,7 +274,9 @@ class MotionController:
         rate = 0.0 if self.holding else override
         if rate < before and self.state is MotionState.RUNNING and not self.pausing \
                 and self.outcome is None:
-            level -= self.stream.take_back(self.drive, level, self._frames(HOLD_KEEP_MS))
+            level = take_back_planned(self.stream, self.drive, level, rate,
+                                      self._frames(HOLD_KEEP_MS), self._frames(PLAN_BUDGET_MS),
+                                      self._read_ahead)
         self.retimer.set_target(rate)
         return level
 

@@ -14,12 +14,6 @@ from controller.motion.pulses import PulseCounter
 from controller.motion.retime import Retimer
 from drivers.base import Drive
 
-# A hold or a lower override keeps this much queued when it takes frames back: the card runs
-# it while the loop plans the ramp (about a millisecond of CPU: the servo model's check) and
-# writes it, so the ramp starts this soon after the request, not behind the low-water mark
-# (20 ms). 5 ms was measured too little: with cncd's sim card on a 2-core PC at load 7, one
-# hold in about ten ran the card dry before the ramp was written (an underrun fault).
-HOLD_KEEP_MS = 10.0
 JOURNAL_ENTRIES = 512  # sends remembered; more than a FIFO's worth at two frames a cycle
 RETIMER_FIELDS = ("rate", "target", "wanted", "ramp", "frac", "back", "recent", "rows_passed",
                   "cap_at", "cap_goal", "cap_wanted")
@@ -116,12 +110,23 @@ class SendState:
                     self.pulses.counts, self.hist.count,
                     None if self.precomp is None else self.precomp.state())
 
-    def take_back(self, drive: Drive, level: int, keep_frames: int) -> int:
+    def backlog(self, level: int, keep_frames: int) -> list[Sent]:
+        """The sends a take-back keeping keep_frames of `level` queued would undo, newest
+        first (empty: none)."""
+        return self.journal.newest_within(level - keep_frames)
+
+    def held_after(self, undo: list[Sent]) -> np.ndarray:
+        """The held rows once `undo` is taken back: its rows read again, then those held."""
+        return np.vstack([e.consumed for e in reversed(undo)] + [self.held])
+
+    def take_back(self, drive: Drive, level: int, keep_frames: int,
+                  undo: list[Sent] | None = None) -> int:
         """A hold, a lower override or an e-stop: take back the frames queued beyond
         keep_frames (where the drive can), undoing their sends, so the new ramp starts there
         instead of behind the whole FIFO. The ramp is planned from the state restored.
-        Returns the frames taken back (0: none, nothing changed)."""
-        undo = self.journal.newest_within(level - keep_frames)
+        undo: the sends to undo (backlog(), found before), else those beyond keep_frames of
+        `level`. Returns the frames taken back (0: none, nothing changed)."""
+        undo = self.backlog(level, keep_frames) if undo is None else undo
         total = sum(e.frames for e in undo)
         if not undo or drive.recall_frames(total, keep_frames) != total:
             return 0
@@ -132,8 +137,8 @@ class SendState:
         self.hist.count = oldest.hist_count
         if self.precomp is not None:
             self.precomp.restore(oldest.precomp)  # type: ignore[arg-type]
+        self.held = self.held_after(undo)
         self.sent -= total
-        self.held = np.vstack([e.consumed for e in reversed(undo)] + [self.held])
         self.journal.drop(len(undo))
         self.recalled_frames += total
         return total

@@ -155,10 +155,7 @@ class Retimer:
             n = max(0, min(count, limit))
             self.passed(held[:n])
             return held[:n], n
-        if self.wanted > 1.0 or self.rate > 1.0 or (self.ramp and self.ramp.rate1 > 1.0):
-            self.target = self._governed(held)
-        if self.target != (self.ramp.rate1 if self.ramp else self.rate):
-            self.ramp = self._plan_ramp(held)
+        self.plan(held)
         if self.at_rest or count <= 0:
             return np.zeros((0, held.shape[1])), 0
         rates = self._rates(count)
@@ -186,6 +183,14 @@ class Retimer:
         # the journal of sends keeps it, and a view would keep all of `base` alive
         self.rows_passed += passed
         return out, passed
+
+    def plan(self, held: np.ndarray) -> None:
+        """What take() does first: a target above 1 governed by the rows ahead, the ramp to a
+        new target planned on the held rows (a hold plans it before taking frames back)."""
+        if self.wanted > 1.0 or self.rate > 1.0 or (self.ramp and self.ramp.rate1 > 1.0):
+            self.target = self._governed(held)
+        if self.target != (self.ramp.rate1 if self.ramp else self.rate):
+            self.ramp = self._plan_ramp(held)
 
     def _rows(self, base: np.ndarray, tau: np.ndarray, rates: np.ndarray) -> np.ndarray:
         """Positions at tau; the feed column scaled by the rate; lines (and marks) of the row

@@ -16,7 +16,7 @@ from controller.interpreter.program import read_program
 from controller.motion.hold_ramp import ACCEL_SHARE, hold_distances_mm, hold_steps
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer
-from controller.motion.recall import HOLD_KEEP_MS
+from controller.motion.ramp_first import HOLD_KEEP_MS, PLAN_BUDGET_MS
 from controller.motion.source import ChunkSource
 from controller.motion.types import MotionProgress, MotionSettings, MotionState, Outcome
 from controller.transition_shape import TransitionShape
@@ -109,9 +109,11 @@ def _frames_to_rest(xy: np.ndarray, k0: int) -> int:
 
 
 def _bound(v_mm_s: float) -> int:
-    """The request is seen at the next cycle (2 frames), the card runs what it kept, then the
-    ramp: the shape at Amax from v, and the sample at rest that ends it."""
-    return 2 * 2 + math.ceil(HOLD_KEEP_MS * 1e-3 / T) + _ramp_samples(v_mm_s) + 2
+    """The request is seen at the next cycle (2 frames), the card runs what it kept and what
+    it runs while the ramp is planned (virtual time: nothing runs then), then the ramp: the
+    shape at Amax from v, and the sample at rest that ends it."""
+    kept = math.ceil(HOLD_KEEP_MS * 1e-3 / T) + math.ceil(PLAN_BUDGET_MS * 1e-3 / T)
+    return 2 * 2 + kept + _ramp_samples(v_mm_s) + 2
 
 
 def test_a_hold_on_the_circle_starts_at_once_and_rests_after_the_shape() -> None:
