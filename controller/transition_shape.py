@@ -14,6 +14,10 @@ acceleration is still continuous and so is the jerk (a C3 position), the peak is
 p = 1 / (1 - 7 r / 15) times the mean, and r -> 0 is the trapezoid of Klipper and grbl. The
 jerk grows as r falls (peak 16 / (3 sqrt 3) p / r dV / T^2); the dynamics module's contour
 check is what bounds it on a machine.
+
+A feed hold's ramp to rest (StopShape) may rise and fall over different shares: a short rise
+(the ramp starts at once) and a long fall, so the jerk where the ramp ends, which the servo
+follows last and whose residual the tool shows at rest, is small.
 """
 
 from __future__ import annotations
@@ -107,6 +111,73 @@ class TransitionShape:
         h, p = 0.5 * self.ramp_share, self.peak_factor
         edge = np.minimum(np.minimum(tau, 1.0 - tau), h) / h
         return p * _q(edge)
+
+
+
+@dataclass(frozen=True)
+class StopShape:
+    """A transition whose acceleration rises along the first half of the quintic's bell over
+    rise_share of T, holds its peak, and falls the same way over fall_share of T; with
+    rise_share = fall_share = r / 2 it is TransitionShape(r). g as there (g(0) = 0,
+    g(1) = 1); G(1) = total_share, not 1/2 unless the two shares are equal."""
+
+    rise_share: float
+    fall_share: float
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.rise_share and 0.0 < self.fall_share
+                and self.rise_share + self.fall_share <= 1.0):
+            raise ValueError(f"rise and fall shares must be positive and add up to at most 1, "
+                             f"got {self.rise_share!r} and {self.fall_share!r}")
+
+    @cached_property
+    def peak_factor(self) -> float:
+        """Peak over mean acceleration."""
+        return 1.0 / (1.0 - (self.rise_share + self.fall_share) * (1.0 - _Q1))
+
+    @cached_property
+    def time_factor(self) -> float:
+        """T = time_factor |dV| / Amax (with PLATEAU_MARGIN, as TransitionShape)."""
+        return self.peak_factor / (1.0 - PLATEAU_MARGIN)
+
+    def _mid_distance(self, tau: np.ndarray) -> np.ndarray:
+        h, p = self.rise_share, self.peak_factor
+        return p * (h * h * _R1 + (h * _Q1 - h) * (tau - h) + 0.5 * (tau * tau - h * h))
+
+    @cached_property
+    def total_share(self) -> float:
+        """G(1): the transition's length to rest is T Vs (1 - G(1))."""
+        f = self.fall_share
+        edge = float(self._mid_distance(np.asarray(1.0 - f)))
+        return edge + f - self.peak_factor * f * f * _R1
+
+    def speed(self, tau: np.ndarray) -> np.ndarray:
+        """g(tau), the share of the speed change made by tau."""
+        tau = np.asarray(tau, float)
+        h1, h2, p = self.rise_share, self.fall_share, self.peak_factor
+        lo = np.minimum(tau, h1) / h1
+        hi = np.minimum(1.0 - tau, h2) / h2
+        mid = p * (h1 * _Q1 + tau - h1)
+        return np.where(tau <= h1, p * h1 * _big_q(lo),
+                        np.where(tau >= 1.0 - h2, 1.0 - p * h2 * _big_q(hi), mid))
+
+    def distance(self, tau: np.ndarray) -> np.ndarray:
+        """G(tau) = int_0^tau g."""
+        tau = np.asarray(tau, float)
+        h1, h2, p = self.rise_share, self.fall_share, self.peak_factor
+        lo = np.minimum(tau, h1) / h1
+        hi = np.minimum(1.0 - tau, h2) / h2
+        rise = p * h1 * h1 * _big_r(lo)
+        fall = self.total_share - (1.0 - tau) + p * h2 * h2 * _big_r(hi)
+        return np.where(tau <= h1, rise, np.where(tau >= 1.0 - h2, fall,
+                                                   self._mid_distance(tau)))
+
+    def accel(self, tau: np.ndarray) -> np.ndarray:
+        """g'(tau): the acceleration over the mean."""
+        tau = np.asarray(tau, float)
+        lo = np.minimum(tau, self.rise_share) / self.rise_share
+        hi = np.minimum(1.0 - tau, self.fall_share) / self.fall_share
+        return self.peak_factor * _q(np.minimum(lo, hi))
 
 
 QUINTIC = TransitionShape(1.0)

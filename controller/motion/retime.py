@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.motion.hold_ramp import PathRamp, hold_distances_mm, hold_steps
+from controller.motion.hold_ramp import PathRamp, hold_distances_mm, hold_shape, hold_steps
 from controller.servo.model import filter_block
 from controller.servo.prediction import (
     SETTLE_S,
@@ -17,7 +17,6 @@ from controller.servo.prediction import (
     rest_state,
 )
 from controller.servo.true_distance import distance_from_reference_mm
-from controller.transition_shape import TransitionShape
 
 ACCEL_MARGIN = 0.98  # first guess of a ramp: this share of Amax for the rate change alone
 MIN_RAMP_S = 0.01
@@ -93,7 +92,7 @@ class Retimer:
     points, rate^2 a + rate' v, stays within Amax on the rows it will cross, and until the
     servo model's distance of the tool from the points sent stays within the contour limit
     (a standstill's settling included), or no worse than the plan's own there. A ramp to
-    rest (a hold, 0 %) is the transition shape at Amax by arc length instead (_hold_ramp,
+    rest (a hold, 0 %) is a stop shape at Amax by arc length instead (_hold_ramp,
     motion/hold_ramp.py). At rate 1 with no ramp the rows pass through unchanged: a run
     without hold or override is the plan.
     """
@@ -114,7 +113,7 @@ class Retimer:
         self.cap_at: int | None = None  # when the rows ahead were last looked at
         self.cap_goal = 1.0
         self.cap_wanted = 1.0
-        self.shape = TransitionShape(config.interpolator.ramp_share)
+        self.shape = hold_shape(config.interpolator.ramp_share)  # a hold's ramp
         self.ramp: Ramp | PathRamp | None = None
         self.frac = 0.0  # position between the last row passed and the first held row
         self.back = np.zeros((0, self.n_axes + 2))  # the two last rows passed (interpolation)
@@ -243,7 +242,7 @@ class Retimer:
             ramp_s *= RAMP_GROWTH
 
     def _hold_ramp(self, base: np.ndarray) -> PathRamp:
-        """To rest from the path speed now: the transition shape at Amax along the rows by arc
+        """To rest from the path speed now: the hold's stop shape at Amax along the rows by arc
         length (so the plan's own acceleration there does not add to it), checked once on the
         servo model (the tool within the contour limit, or no worse than the plan's own there,
         through its standstill and settling). Only if that fails (without pre-compensation

@@ -1,6 +1,6 @@
-"""The feed hold's ramp: the transition shape at Amax by arc length along the rows, never faster
-than the plan, checked on the servo model; on the shipped config (pre-compensated, ramp_share
-0.1) in virtual time."""
+"""The feed hold's ramp: its stop shape at Amax by arc length along the rows, never faster than
+the plan, checked on the servo model; on the shipped config (pre-compensated, ramp_share 0.1)
+in virtual time."""
 
 from __future__ import annotations
 
@@ -13,32 +13,69 @@ from refgen import circle_chunks
 from controller.config import load_config
 from controller.generator.plan import generate_reference
 from controller.interpreter.program import read_program
-from controller.motion.hold_ramp import ACCEL_SHARE, hold_distances_mm, hold_steps
+from controller.motion.hold_ramp import (
+    ACCEL_SHARE,
+    HOLD_FALL_SHARE,
+    hold_distances_mm,
+    hold_shape,
+    hold_steps,
+)
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer
 from controller.motion.ramp_first import HOLD_KEEP_MS, PLAN_BUDGET_MS
 from controller.motion.source import ChunkSource
 from controller.motion.types import MotionProgress, MotionSettings, MotionState, Outcome
-from controller.transition_shape import TransitionShape
+from controller.transition_shape import StopShape, TransitionShape
 from drivers.sim.card import SimCard
 
 CFG = load_config("xy_table")
 T = CFG.sample_period_s
 AMAX = CFG.interpolator.max_accel_mm_s2
 SHAPE = TransitionShape(CFG.interpolator.ramp_share)
+HOLD = hold_shape(CFG.interpolator.ramp_share)
+TAU = np.linspace(0.0, 1.0, 100001)
 V_MM_S = 58.333  # the circle's feed (refgen.circle_chunks)
 BUTTERFLY = Path(__file__).resolve().parents[2] / "nc_programs" / "butterfly.nc"
 
 
-def _ramp_samples(v_mm_s: float, shape: TransitionShape = SHAPE) -> int:
+def _ramp_samples(v_mm_s: float, shape: TransitionShape | StopShape = HOLD) -> int:
     return math.ceil(shape.time_factor * v_mm_s / (ACCEL_SHARE * AMAX) / T - 1e-9)
 
 
+def test_the_hold_shape_rises_as_the_planner_and_falls_long() -> None:
+    assert isinstance(HOLD, StopShape) and HOLD.rise_share == 0.5 * CFG.interpolator.ramp_share
+    assert HOLD.fall_share == HOLD_FALL_SHARE
+    assert hold_shape(1.0) == TransitionShape(1.0)  # the quintic stays the quintic
+
+
+def test_a_stop_shape_with_equal_shares_is_the_transition_shape() -> None:
+    for share in (0.1, 0.5, 1.0):
+        stop, same = StopShape(share / 2, share / 2), TransitionShape(share)
+        for f in ("speed", "distance", "accel"):
+            assert np.abs(getattr(stop, f)(TAU) - getattr(same, f)(TAU)).max() < 1e-14
+        assert abs(stop.total_share - 0.5) < 1e-15
+
+
+def test_a_stop_shape_is_a_smooth_transition() -> None:
+    for rise, fall in ((0.05, 0.8), (0.02, 0.3), (0.3, 0.7)):
+        shape = StopShape(rise, fall)
+        g, big_g, a = shape.speed(TAU), shape.distance(TAU), shape.accel(TAU)
+        h = TAU[1]
+        assert g[0] == 0.0 and abs(g[-1] - 1.0) < 1e-12 and np.all(np.diff(g) >= -1e-15)
+        assert abs(big_g[-1] - shape.total_share) < 1e-12 and big_g[0] == 0.0
+        # G' = g, g' = a, a peaks at the factor, and G(1) is the integral of g.
+        assert np.abs(np.gradient(big_g, h) - g).max() < 1e-6
+        assert np.abs(np.gradient(g, h)[1:-1] - a[1:-1]).max() < 1e-3
+        assert abs(a.max() - shape.peak_factor) < 1e-9 and a[0] == 0.0 and a[-1] == 0.0
+        assert abs(np.trapezoid(g, TAU) - shape.total_share) < 1e-9
+
+
 def test_the_distances_are_the_shape_at_amax_to_rest() -> None:
-    for shape in (SHAPE, TransitionShape(1.0)):
+    for shape in (HOLD, SHAPE, TransitionShape(1.0)):
         d = hold_distances_mm(V_MM_S, AMAX, T, shape)
         assert len(d) == _ramp_samples(V_MM_S, shape)
-        assert d[-1] == np.float64(V_MM_S * len(d) * T / 2)  # (v0 + 0) / 2 over the ramp
+        total = 1.0 - (shape.total_share if isinstance(shape, StopShape) else 0.5)
+        assert abs(d[-1] - V_MM_S * len(d) * T * total) < 1e-12  # v0 T (1 - G(1))
         speed = np.diff(d, prepend=0.0) / T
         decel = -np.diff(np.r_[V_MM_S, speed]) / T
         assert decel.max() <= ACCEL_SHARE * AMAX * 1.02 and decel.min() >= -1e-6
