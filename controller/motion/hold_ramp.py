@@ -15,9 +15,9 @@ ACCEL_SHARE = 0.98  # the ramp's peak deceleration: this share of Amax (placing 
 #                     length on a polyline of the rows reads a little above it at curves)
 # The ramp's deceleration falls over this share of it (at most; never over less than it rises):
 # the servo's residual of a ramp that ends with a small jerk is gone sooner. Measured on the
-# shipped config (pre-compensated, ramp_share 0.1, bench/hold_feed.py): within 2 um of rest
-# after 42 ms median (41-43) with 0.8, 47 ms (46-59) with the rise's 0.05; 0.7 to 0.9 gave
-# 42-44 ms. The ramp itself is longer (40 against 26 ms from 58 mm/s), its last part slow.
+# shipped config (pre-compensated, ramp_share 0.1, bench/hold_feed.py): the tool within 2 um
+# of rest 44 ms median after the request with 0.8, 46 ms with 0.7, 49.5 ms with the rise's
+# own 0.05. The ramp itself is longer (40 against 26 ms from 58 mm/s), its last part slow.
 HOLD_FALL_SHARE = 0.8
 REST_STEP_MM = 5e-5  # a row closer than this to the next is the plan at rest (0.05 mm/s at 1 ms)
 
