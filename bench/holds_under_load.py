@@ -59,7 +59,7 @@ def one_hold(daemon: Any, program: Path, rng: random.Random) -> dict[str, Any]:
         held = daemon.cncctl("hold").returncode == 0 and wait_state(daemon, "HELD")
         if held:
             daemon.cncctl("resume")
-        out, _ = run.communicate(timeout=60)
+        out, err = run.communicate(timeout=60)
     finally:
         if run.poll() is None:
             run.kill()
@@ -70,7 +70,7 @@ def one_hold(daemon: Any, program: Path, rng: random.Random) -> dict[str, Any]:
         if events
         else {
             "event": "none",
-            "message": f"exit {run.returncode}: {run.stderr.read().strip() if run.stderr else ''}",
+            "message": f"exit {run.returncode}: {err.strip()}",
         }
     )
     return {

@@ -15,7 +15,7 @@ from drivers.base import Drive
 # the loop only interpolates the planned ramp and pre-compensates it (about 0.5 ms of CPU,
 # where planning it took 1-2 ms more); what is kept covers a descheduling there (and, on the
 # sim card, its clock thread catching up). Through cncd at load 7, 3 ms ran the card dry in 2
-# holds of 34 (bench/holds_under_load.py); 6 ms in none of 80 at load 3-5.
+# holds of 34 (bench/holds_under_load.py); 6 ms in none of 120 at load 3-7.
 HOLD_KEEP_MS = 6.0
 # The card runs this much while the ramp is planned (about a millisecond of CPU: the servo
 # model's check). The ramp is planned from the frame that far beyond what is kept; a plan
