@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from controller.errors import DriveError
 from controller.motion.recall import SendState, Sent, restore_retimer, retimer_state
 from drivers.base import Drive
 
@@ -48,7 +49,10 @@ def take_back_planned(
         if got:
             restore_retimer(stream.retimer, planned)
             return level - got
-        now = drive.fifo_level()
+        try:
+            now = drive.fifo_level()
+        except DriveError:  # the link lost: the cycle's next read faults on it
+            return level
         if now >= keep_frames + sum(e.frames for e in undo):
             return now  # they were queued: the drive cannot take them back
         level = now

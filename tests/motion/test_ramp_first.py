@@ -13,6 +13,7 @@ from controller.motion.pacing import VirtualPacer
 from controller.motion.ramp_first import HOLD_KEEP_MS, PLAN_BUDGET_MS, PLAN_TRIES
 from controller.motion.source import ChunkSource
 from controller.motion.types import MotionProgress, MotionSettings, MotionState, Outcome
+from drivers.errors import LostCommunicationError
 from drivers.sim.card import SimCard
 
 CFG = load_config("xy_table")
@@ -22,12 +23,28 @@ T = CFG.sample_period_s
 STALL_FRAMES = 2 * (math.ceil(HOLD_KEEP_MS * 1e-3 / T) + math.ceil(PLAN_BUDGET_MS * 1e-3 / T))
 
 
-def _hold_with_stalls(stalls: list[int]) -> tuple[object, MotionController, dict]:
+def _hold_with_stalls(
+    stalls: list[int], refuse: bool = False
+) -> tuple[object, MotionController, dict]:
     """The circle on the virtual sim card, a hold at 0.4 s, resumed once held; the card clocks
     stalls[i] frames during the i-th ramp planning after the request (the loop descheduled
-    there)."""
+    there). refuse: the card takes nothing back and its level cannot be read just after (a
+    link lost then; the cycle's next read finds it again)."""
     card = SimCard(CFG, realtime=False)
     card.open()
+    if refuse:
+        level = card.fifo_level
+
+        def refused(n: int, keep: int) -> int:
+            info["refused"] = info.get("refused", 0) + 1
+            card.fifo_level = lost  # type: ignore[method-assign]
+            return 0
+
+        def lost() -> int:
+            card.fifo_level = level  # type: ignore[method-assign]
+            raise LostCommunicationError("no reply")
+
+        card.recall_frames = refused  # type: ignore[method-assign]
     settings = MotionSettings.from_config(CFG, progress_every_s=T)
     pacer = VirtualPacer(settings.cycle_frames, T, card.advance)
     info: dict = {"plans": 0}
@@ -76,3 +93,9 @@ def test_a_plan_within_its_budget_takes_back_at_the_first_try() -> None:
     result, ctrl, info = _hold_with_stalls([budget])
     assert result.outcome is Outcome.DONE and result.underruns == 0  # type: ignore[attr-defined]
     assert info["held"] and info["plans"] == 1 and ctrl.stream.recalled_frames > 0
+
+
+def test_a_level_unreadable_after_a_refused_take_back_leaves_the_ramp_behind_the_queue() -> None:
+    result, ctrl, info = _hold_with_stalls([], refuse=True)
+    assert result.outcome is Outcome.DONE and result.underruns == 0  # type: ignore[attr-defined]
+    assert info["held"] and info["refused"] == 1 and ctrl.stream.recalled_frames == 0
