@@ -10,7 +10,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Literal, overload
 
-from controller.blocks import ArcBlock, HelixBlock, LineBlock, NurbsBlock, ProbeBlock
+from controller.blocks import ArcBlock, HelixBlock, LineBlock, NcBlock, NurbsBlock, ProbeBlock
 from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import ConfigError, DriveError, NcError, OffsetsError
 from controller.interpreter.extent import (
@@ -58,6 +58,9 @@ _GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
 # NURBS: from dense samples, 64 per knot span; G38: the whole move, the farthest it can go
 
 CHECK_BEAT_BLOCKS = 4096  # on_block is called every this many blocks
+# A check keeps up to this many blocks for its caller (simulate plans them without reading the
+# program again): some 10 MB of G1 blocks; a longer program is read twice, in bounded memory.
+KEEP_BLOCKS = 30_000
 
 
 @overload
@@ -65,8 +68,8 @@ def check_program(path: str, config: MachineConfig,
                   on_block: Callable[[int], None] | None = None,
                   start_mm: tuple[float, float, float] | None = None,
                   offsets: OffsetTable | None = None, from_line: int | None = None,
-                  track: ProgramOffsets | None = None, summary: Literal[True] = True
-                  ) -> CheckSummary: ...
+                  track: ProgramOffsets | None = None, summary: Literal[True] = True,
+                  keep: list[NcBlock] | None = None) -> CheckSummary: ...
 
 
 @overload
@@ -74,15 +77,16 @@ def check_program(path: str, config: MachineConfig,
                   on_block: Callable[[int], None] | None = None,
                   start_mm: tuple[float, float, float] | None = None,
                   offsets: OffsetTable | None = None, from_line: int | None = None,
-                  track: ProgramOffsets | None = None, *, summary: Literal[False]) -> None: ...
+                  track: ProgramOffsets | None = None, *, summary: Literal[False],
+                  keep: list[NcBlock] | None = None) -> None: ...
 
 
 def check_program(path: str, config: MachineConfig,
                   on_block: Callable[[int], None] | None = None,
                   start_mm: tuple[float, float, float] | None = None,
                   offsets: OffsetTable | None = None, from_line: int | None = None,
-                  track: ProgramOffsets | None = None, summary: bool = True
-                  ) -> CheckSummary | None:
+                  track: ProgramOffsets | None = None, summary: bool = True,
+                  keep: list[NcBlock] | None = None) -> CheckSummary | None:
     """Parse and check the whole program (from from_line, if given) with the work offsets in
     force; raise NcError at the first problem, travel in machine coordinates. on_block(n), if
     given, is called every CHECK_BEAT_BLOCKS blocks (the daemon's watchdog sees the check
@@ -90,7 +94,10 @@ def check_program(path: str, config: MachineConfig,
 
     summary=False (a check before motion, nothing printed): the same errors, but a NURBS whose
     control points lie inside the travel is not sampled for its length and extent (it lies in
-    their hull), which was a tenth of simulating a program of distinct NURBS; returns None."""
+    their hull), which was a tenth of simulating a program of distinct NURBS; returns None.
+
+    keep: the blocks are appended to it, up to KEEP_BLOCKS + 1 (more: the caller reads the
+    program again rather than hold a long one), so that a short one is not read twice."""
     kinds: Counter[type] = Counter()
     start = start_mm if start_mm is not None else (0.0, 0.0, 0.0)
     lo, hi = list(start), list(start)  # where the machine stands (X0 Y0 Z0 by default)
@@ -102,6 +109,8 @@ def check_program(path: str, config: MachineConfig,
     limits = travel.axes  # (index, axis, min, max) of each axis the machine has
     for block in read_program(path, config, start_mm, offsets, from_line, track):
         n += 1
+        if keep is not None and n <= KEEP_BLOCKS + 1:
+            keep.append(block)
         if on_block is not None and n % CHECK_BEAT_BLOCKS == 0:
             on_block(n)
         kind = type(block)

@@ -10,11 +10,12 @@ from typing import TextIO
 
 import numpy as np
 
+from controller.blocks import NcBlock
 from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import CncError, NcError
 from controller.generator.plan import Algorithm
 from controller.interpreter.program import read_program
-from controller.operator.check_cmd import check_program
+from controller.operator.check_cmd import KEEP_BLOCKS, check_program
 from controller.operator.outputs import OutputError, output_path, plot_path
 from controller.operator.simulate_plot import PlotSeries
 from controller.operator.simulate_view import SimulateView
@@ -50,18 +51,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="add how the plan was obtained: look-ahead windows, dynamics rounds")
 
 
-def _check_whole_program(path: str, config: MachineConfig) -> None:
+def _check_whole_program(path: str, config: MachineConfig) -> list[NcBlock] | None:
     """`cncctl check` first (syntax, travel limits, feeds): no planning on a program with an
-    error."""
-    check_program(path, config, summary=False)
+    error. The program's blocks if it has at most KEEP_BLOCKS (planned as they are), else None
+    (read again as it is planned, so a long program is never held whole)."""
+    kept: list[NcBlock] = []
+    check_program(path, config, summary=False, keep=kept)
+    return kept if len(kept) <= KEEP_BLOCKS else None
 
 
 def _one(path: str, config: MachineConfig, algorithm: str, trajectory: str | None = None,
          plot: PlotSeries | None = None, stats: bool = False,
-         view: SimulateView | None = None) -> dict:
+         view: SimulateView | None = None, checked: list[NcBlock] | None = None) -> dict:
     """Simulate one algorithm, streaming: the figures, and the trajectory CSV, the plot's
     series and the terminal's progress bar if asked for, are gathered sample block by sample
-    block (memory bounded)."""
+    block (memory bounded). checked: the program's blocks, if the check kept them."""
     figures = Figures(len(config.axis_names), config.sample_period_s)
     sinks = [figures.add] + ([plot.add] if plot is not None else [])
     if view is not None:
@@ -71,8 +75,8 @@ def _one(path: str, config: MachineConfig, algorithm: str, trajectory: str | Non
     if writer is not None:
         sinks.append(writer.add)
     try:
-        cpu = simulate_stream(read_program(path, config), config, algorithm, sinks,
-                              figures.runs.add)
+        blocks = iter(checked) if checked is not None else read_program(path, config)
+        cpu = simulate_stream(blocks, config, algorithm, sinks, figures.runs.add)
     except BaseException:
         if writer is not None:
             writer.abandon()
@@ -170,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
             args.trajectory = output_path(args.trajectory, "--trajectory")
         if args.plot is not None:
             args.plot = plot_path(args.plot)
-        _check_whole_program(args.program, config)
+        checked = _check_whole_program(args.program, config)
         algorithms = [a.value for a in Algorithm] if args.compare else [args.algorithm]
         chosen = args.algorithm if args.compare else algorithms[-1]
         series = {a: PlotSeries(config) for a in algorithms} if args.plot else {}
@@ -178,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
             if sys.stderr.isatty() else None
         try:
             reports = [_one(args.program, config, a, args.trajectory if a == chosen else None,
-                            series.get(a), args.stats, view) for a in algorithms]
+                            series.get(a), args.stats, view, checked) for a in algorithms]
         finally:
             if view is not None:
                 view.close()

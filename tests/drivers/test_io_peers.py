@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 import yaml
+from daemon_helpers import LOADED_LINK
 
 from drivers.io_peer import read_outputs
 
@@ -36,7 +37,7 @@ M5 M9
 M2
 """
 LONG = "G21 G90\nM3 S1000\nM8\nM64 P1\nG1 X80 F300\nM2\n"  # 16 s of cutting
-LINK = {"serial": ["--drive-option", "link_timeout_s=0.1"], "canopen": []}
+LINK = LOADED_LINK  # the subject here is the I/O, not the link
 PORT = {"serial": "port", "canopen": "channel"}
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from daemon_helpers import LOADED_LINK
 from homing_helpers import peer
 
 from controller.config import load_config
@@ -23,9 +24,7 @@ PROGRAM = "G21 G90 F2400\nG1 X20 Y5\nG1 X0 Y0\nM2\n"
 # of the model's, and the planner does not know it.
 SLOW_X = plant_text(mismatched(load_config("xy_table").axis("x").servo, -30.0))
 DRIVE_KEY = {"serial": "port", "canopen": "channel"}
-# The serial runs pass a link timeout of 100 ms as tests/drivers/test_serial_card.py does (a
-# loaded 2-core machine stalls the pty that long).
-EXTRA = {"serial": ["--drive-option", "link_timeout_s=0.1"], "canopen": []}
+EXTRA = LOADED_LINK  # the subject here is the I/O, not the link
 
 
 @pytest.fixture

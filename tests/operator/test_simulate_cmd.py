@@ -195,3 +195,35 @@ def test_a_plan_that_cannot_be_right_is_an_error_not_gigabytes(
     assert main(["simulate", str(program)]) == 2
     err = capsys.readouterr().err
     assert "the path could not be planned" in err and "Traceback" not in err
+
+
+def test_a_short_program_is_planned_from_its_check_a_long_one_read_again(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """simulate plans the blocks its check kept; past KEEP_BLOCKS it reads the program again
+    (memory bounded) and reports the same."""
+    from controller.interpreter import program as interp_program
+    from controller.operator import simulate_cmd
+
+    prog = tmp_path / "steps.nc"
+    prog.write_text("G21 F600\n" + "".join(f"G1 X{i % 7} Y{i % 5}\n" for i in range(1, 40))
+                    + "M2\n")
+    reads: list[str] = []
+    real_read = interp_program.read_program
+
+    def counted(path: str, *args: object, **kw: object):  # type: ignore[no-untyped-def]
+        reads.append(path)
+        return real_read(path, *args, **kw)  # type: ignore[arg-type]
+
+    monkeypatch.setattr("controller.operator.check_cmd.read_program", counted)
+    monkeypatch.setattr(simulate_cmd, "read_program", counted)
+    reports = []
+    for keep in (1000, 10):  # 41 blocks: kept, then over the limit
+        monkeypatch.setattr(simulate_cmd, "KEEP_BLOCKS", keep)
+        reads.clear()
+        assert main(["simulate", str(prog), "--json"]) == 0
+        reports.append(json.loads(capsys.readouterr().out))
+        assert len(reads) == (1 if keep == 1000 else 2)
+    for r in reports:
+        del r["planning_cpu_s"]
+    assert reports[0] == reports[1]
