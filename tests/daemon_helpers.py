@@ -22,10 +22,12 @@ CNCCTL = [sys.executable, "-m", "controller.operator.cli"]
 CNCD = [sys.executable, "-m", "controller.operator.daemon.main"]
 # Drive options for a run on a peer whose test is not about the link: a 2-core machine running
 # the suite's other workers (or two CPU hogs) stalls a pty or the SYNC thread for more than the
-# defaults (serial 100 ms, CANopen heartbeats 300 ms) at times; the link tests keep those.
+# defaults (serial 100 ms, CANopen heartbeats 300 ms, TPDOs 100 SYNCs) at times; the link
+# tests keep those.
+LOADED_CANOPEN = {"heartbeat_timeout_ms": 1000, "sdo_timeout_s": 1.0, "tpdo_timeout_cycles": 500}
 LOADED_LINK = {"serial": ["--drive-option", "link_timeout_s=0.5"],
-               "canopen": ["--drive-option", "heartbeat_timeout_ms=1000",
-                           "--drive-option", "sdo_timeout_s=1.0"]}
+               "canopen": [arg for key, value in LOADED_CANOPEN.items()
+                           for arg in ("--drive-option", f"{key}={value}")]}
 
 
 @dataclass

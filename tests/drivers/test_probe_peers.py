@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 import yaml
-from daemon_helpers import run_confirming_tools
+from daemon_helpers import LOADED_CANOPEN, LOADED_LINK, run_confirming_tools
 from test_canopen_process import peer as canopen_peer
 from test_io_peers import peer as io_peer
-from test_serial_card import CLI, LINK_S, REPO
+from test_serial_card import CLI, REPO
 from test_serial_card import peer as serial_peer
 
 from drivers.io_peer import read_outputs
@@ -24,8 +24,8 @@ def test_a_probe_on_the_serial_card_through_its_peer_process(tmp_path: Path) -> 
     program.write_text("G21 G90 F300\nG38.2 X20\nG91 G0 X-2\nG90 G0 X#5061\nM2\n")
     with serial_peer("probe_workpiece_mm=10,-50,-50,50,50,50") as (port, _):
         done = subprocess.run([*CLI, "run", str(program), "--config", "serial", "--json",
-                               "--drive-option", f"port={port}", "--drive-option",
-                               f"link_timeout_s={LINK_S}"], capture_output=True, text=True,
+                               "--drive-option", f"port={port}", *LOADED_LINK["serial"]],
+                              capture_output=True, text=True,
                               timeout=120, stdin=subprocess.DEVNULL, cwd=REPO)
     events = [json.loads(line) for line in done.stdout.splitlines()]
     assert done.returncode == 0, done.stderr
@@ -46,8 +46,8 @@ def test_a_serial_card_without_contact_ends_a_g38_2_as_an_error(tmp_path: Path) 
     program.write_text("G21 G90 F600\nG38.2 X5\nM2\n")
     with serial_peer() as (port, _):
         done = subprocess.run([*CLI, "run", str(program), "--config", "serial",
-                               "--drive-option", f"port={port}", "--drive-option",
-                               f"link_timeout_s={LINK_S}"], capture_output=True, text=True,
+                               "--drive-option", f"port={port}", *LOADED_LINK["serial"]],
+                              capture_output=True, text=True,
                               timeout=120, stdin=subprocess.DEVNULL, cwd=REPO)
     assert done.returncode == 4
     assert "line 2: G38.2: the probe move ended without making contact" in done.stderr \
@@ -57,7 +57,7 @@ def test_a_serial_card_without_contact_ends_a_g38_2_as_an_error(tmp_path: Path) 
 # Both ways (0x1016 on the drives, the host's check of theirs): a machine whose two cores are
 # shared with other work starves the host's SYNC thread of more than the default 300 ms at
 # times, and the drives then fault on the master's heartbeat, whatever the probe does.
-LOADED = ["--drive-option", "heartbeat_timeout_ms=1000"]
+LOADED = LOADED_LINK["canopen"]
 
 
 def canopen_run(path: str, program: Path) -> subprocess.CompletedProcess[str]:
@@ -109,7 +109,7 @@ def test_the_io_demo_runs_on_three_canopen_drives_with_their_touch_probe(tmp_pat
     mill = yaml.safe_load((REPO / "config" / "xyz_mill.yaml").read_text())
     mill["drive"] = yaml.safe_load((REPO / "config" / "canopen.yaml").read_text())["drive"]
     mill["drive"]["options"] |= {"node_ids": [1, 2, 3], "counts_per_mm": [1000.0] * 3,
-                                 "touch_probe": True, "heartbeat_timeout_ms": 1000}
+                                 "touch_probe": True, **LOADED_CANOPEN}
     mill["sample_period_s"] = 0.002  # 3 drives through a pty: half the frames of 1 ms
     config = tmp_path / "mill_canopen.yaml"
     config.write_text(yaml.safe_dump(mill))
