@@ -220,3 +220,12 @@ def run_confirming_tools(args: list[str]) -> list[dict[str, Any]]:
             proc.kill()
             proc.wait()
     return events
+
+
+def open_switch(path: Path, name: str) -> None:
+    """Trip the limit switch `name` ("y-") of a drive's limit_input_file: written whole, then
+    renamed, since the drive reads a file that exists but is still empty as X- (an input
+    whose name cannot be read is still open)."""
+    part = path.with_name(path.name + ".part")
+    part.write_text(f"{name}\n")
+    os.replace(part, path)

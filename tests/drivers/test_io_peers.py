@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 import yaml
-from daemon_helpers import LOADED_LINK
+from daemon_helpers import LOADED_LINK, open_switch
 
 from drivers.io_peer import read_outputs
 
@@ -150,7 +150,7 @@ def test_an_input_stops_the_job_names_itself_and_leaves_the_outputs_safe(
     def during(event: dict[str, Any]) -> None:
         if event["event"] == "progress" and event["line"] == 5 and event["executed_s"] > 1.5 \
                 and not tripped_at:
-            trip.write_text("y-\n")  # the limit switch's name (the e-stop input ignores it)
+            open_switch(trip, "y-")  # the limit switch's name (the e-stop input ignores it)
             tripped_at.append(event["executed_s"])
     with peer(backend, config, f"outputs_file={record}", f"{option}={trip}") as port:
         code, events, err = run(backend, config, port, LONG, tmp_path, during)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from daemon_helpers import Cncd, running_cncd, start_run, wait_moving
+from daemon_helpers import Cncd, open_switch, running_cncd, start_run, wait_moving
 from test_fault_states import _slow_program, _wait_state
 
 
@@ -23,7 +23,7 @@ def test_a_limit_switch_opening_while_idle_latches_a_fault_naming_it(tmp_path: P
     with running_cncd(tmp_path, "--drive-option", f"limit_input_file={trip}") as d:
         assert d.cncctl("reset").returncode == 0
         _still_idle_s(d, 0.3)
-        trip.write_text("y-\n")
+        open_switch(trip, "y-")
         status = _wait_state(d, "FAULT", timeout_s=10.0)
         assert status["fault"] == "hard limit: Y- limit switch tripped (machine at rest)"
         assert d.cncctl("jog", "X+1").returncode == 2  # latched until reset
@@ -32,7 +32,7 @@ def test_a_limit_switch_opening_while_idle_latches_a_fault_naming_it(tmp_path: P
         _still_idle_s(d, 0.5)
         trip.unlink()
         _still_idle_s(d, 0.3)
-        trip.write_text("x+\n")  # another switch (or the same one again) opens: a fault
+        open_switch(trip, "x+")  # another switch (or the same one again) opens: a fault
         status = _wait_state(d, "FAULT", timeout_s=10.0)
         assert status["fault"] == "hard limit: X+ limit switch tripped (machine at rest)"
 
@@ -46,7 +46,7 @@ def test_a_limit_switch_opening_during_a_hold_faults_the_held_job(tmp_path: Path
             wait_moving(run, after_s=0.2)
             assert d.cncctl("hold").returncode == 0
             _wait_state(d, "HELD", timeout_s=10.0)
-            trip.write_text("x-\n")
+            open_switch(trip, "x-")
             run.communicate(timeout=30)
         finally:
             run.kill()
