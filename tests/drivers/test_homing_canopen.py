@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from daemon_helpers import LOADED_CANOPEN
 from homing_helpers import homing_config, peer
 
 from controller.config import MachineConfig
@@ -31,7 +32,9 @@ def counts(mm: list[float]) -> list[int]:
 
 @contextmanager
 def opened(config: MachineConfig, **options: Any) -> Iterator[CanopenDrive]:
-    drive = CanopenDrive(config, realtime=True, **(dict(config.drive.options) | options))
+    # the subject is homing: a loaded machine's link timeouts (tests/daemon_helpers.py)
+    drive = CanopenDrive(config, realtime=True,
+                         **(dict(config.drive.options) | LOADED_CANOPEN | options))
     drive.open()
     try:
         yield drive
