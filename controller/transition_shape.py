@@ -53,6 +53,16 @@ def _big_r(u: np.ndarray) -> np.ndarray:
     return u4 * (1.0 / 3.0 + u * (-1.0 / 5.0 + u / 30.0))
 
 
+def _speed(tau: np.ndarray, h1: float, h2: float, p: float) -> np.ndarray:
+    """g(tau) of a transition whose acceleration rises over h1 and falls over h2 of it, with
+    peak p times the mean (TransitionShape: h1 = h2 = ramp_share / 2)."""
+    lo = np.minimum(tau, h1) / h1
+    hi = np.minimum(1.0 - tau, h2) / h2
+    mid = p * (h1 * _Q1 + tau - h1)
+    return np.where(tau <= h1, p * h1 * _big_q(lo),
+                    np.where(tau >= 1.0 - h2, 1.0 - p * h2 * _big_q(hi), mid))
+
+
 @dataclass(frozen=True)
 class TransitionShape:
     """One transition shape, by the share of the transition its acceleration is not constant."""
@@ -86,13 +96,8 @@ class TransitionShape:
 
     def speed(self, tau: np.ndarray) -> np.ndarray:
         """g(tau), the share of the speed change made by tau."""
-        tau = np.asarray(tau, float)
-        h, p = 0.5 * self.ramp_share, self.peak_factor
-        lo = np.minimum(tau, h) / h
-        hi = np.minimum(1.0 - tau, h) / h
-        mid = p * (h * _Q1 + tau - h)
-        return np.where(tau <= h, p * h * _big_q(lo),
-                        np.where(tau >= 1.0 - h, 1.0 - p * h * _big_q(hi), mid))
+        h = 0.5 * self.ramp_share
+        return _speed(np.asarray(tau, float), h, h, self.peak_factor)
 
     def distance(self, tau: np.ndarray) -> np.ndarray:
         """G(tau) = int_0^tau g; G(1) = 1/2."""
@@ -153,13 +158,8 @@ class StopShape:
 
     def speed(self, tau: np.ndarray) -> np.ndarray:
         """g(tau), the share of the speed change made by tau."""
-        tau = np.asarray(tau, float)
-        h1, h2, p = self.rise_share, self.fall_share, self.peak_factor
-        lo = np.minimum(tau, h1) / h1
-        hi = np.minimum(1.0 - tau, h2) / h2
-        mid = p * (h1 * _Q1 + tau - h1)
-        return np.where(tau <= h1, p * h1 * _big_q(lo),
-                        np.where(tau >= 1.0 - h2, 1.0 - p * h2 * _big_q(hi), mid))
+        return _speed(np.asarray(tau, float), self.rise_share, self.fall_share,
+                      self.peak_factor)
 
     def distance(self, tau: np.ndarray) -> np.ndarray:
         """G(tau) = int_0^tau g."""
