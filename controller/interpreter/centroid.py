@@ -63,12 +63,13 @@ class CentroidCodes:
     def _rapid_z(self, home_mm: float, lineno: int) -> None:
         state = self.state
         modal = state.modal
-        kept = (modal.motion, modal.absolute, state.moves.power_up_g0)
-        modal.absolute = True  # G53 is absolute (LinuxCNC refuses it in G91)
+        kept = (modal.motion, modal.absolute, modal.scale, state.moves.power_up_g0)
+        # G53 is absolute (LinuxCNC refuses it in G91); Z in mm lands on home_mm exactly
+        modal.absolute, modal.scale = True, 1.0
         try:
-            state.execute([_G53, _G0], [], {"Z": home_mm / modal.scale}, lineno)
+            state.execute([_G53, _G0], [], {"Z": home_mm}, lineno)
         finally:
-            modal.motion, modal.absolute, state.moves.power_up_g0 = kept
+            modal.motion, modal.absolute, modal.scale, state.moves.power_up_g0 = kept
 
 
 def z_home_mm(config: MachineConfig) -> float:
