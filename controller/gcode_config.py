@@ -1,4 +1,4 @@
-"""The `gcode` section of a machine config: subroutine folders and the dialect's start state."""
+"""The `gcode` section of a machine config: subroutine folders, start state, Centroid's rules."""
 
 from __future__ import annotations
 

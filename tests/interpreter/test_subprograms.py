@@ -47,9 +47,8 @@ def test_m99_in_the_main_program_runs_it_again_until_it_ends(tmp_path: Path) -> 
     counted.write_text("o2 if [EXISTS[#<_n>] EQ 0]\n#<_n> = 0\no2 endif\n" + text)
     xs = [b.end[0] for b in read_program(str(counted), XY_TABLE) if hasattr(b, "end")]
     assert xs[:4] == [1.0, 2.0, 3.0, 4.0]
-    assert any(
-        ":10: M99: M99 in the main program starts it again" in w for w in warnings_of(counted, XY_TABLE)
-    )
+    warned = warnings_of(counted, XY_TABLE)
+    assert any(":10: M99: M99 in the main program starts it again" in w for w in warned)
 
 
 def test_a_numbered_program_repeats_with_l_and_shares_numbered_parameters(tmp_path: Path) -> None:
