@@ -203,3 +203,12 @@ def test_cncctl_check_accepts_a_centroid_post_on_xyz_mill_and_refuses_it_by_defa
     )
     assert refused.returncode == 2
     assert f"{prog}:16:1: error: M25 is not supported" in refused.stderr
+
+
+@pytest.mark.parametrize(
+    "name", sorted(p.stem for p in (REPO / "config").glob("*.yaml") if p.stem != "xyz_mill")
+)
+def test_the_other_shipped_configs_keep_linuxcnc_rules(name: str) -> None:
+    """As docs/gcode.md says: only xyz_mill (the CAM corpus's config) reads Centroid's codes."""
+    gcode = load_config(name).gcode
+    assert (gcode.m25, gcode.main_program_m99) == ("refuse", "restart")
