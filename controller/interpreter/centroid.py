@@ -74,7 +74,8 @@ class CentroidCodes:
 
 def z_home_mm(config: MachineConfig) -> float:
     """Z's home position in machine mm: where its homing sequence leaves it (LinuxCNC's HOME),
-    else the machine origin (an axis without homing reads absolute positions)."""
+    else the top of Z's travel. +Z is away from the work, and a mill's Z homes up: Centroid's
+    M25 is the retract before a tool change, never a move toward the work."""
     if not config.has_axis("z"):
         raise WordError(
             "M25",
@@ -82,7 +83,7 @@ def z_home_mm(config: MachineConfig) -> float:
             f"axis (config '{config.name}')",
         )
     homing = config.axis("z").homing
-    return homing.final_mm if homing is not None else 0.0
+    return homing.final_mm if homing is not None else config.axis("z").travel_mm[1]
 
 
 def _alone(gs: list[int], ms: list[int], vals: dict[str, float]) -> None:

@@ -76,14 +76,14 @@ def test_m25_rapids_z_alone_to_machine_home_and_keeps_the_modes(tmp_path: Path) 
     blocks, warnings = run(tmp_path, text, CENTROID)
     assert lines(blocks) == [
         (True, (1.0, 2.0, -15.0)),  # Z5 in G54, whose Z is -20
-        (True, (1.0, 2.0, 0.0)),  # M25: machine Z0 (no homing on Z)
-        (False, (2.0, 2.0, 0.0)),  # X1: still G91, still G1
+        (True, (1.0, 2.0, 100.0)),  # M25: the top of Z's travel (no homing on Z)
+        (False, (2.0, 2.0, 100.0)),  # X1: still G91, still G1
     ]
     m25 = [b for b in blocks if isinstance(b, LineBlock)][1]
     assert m25.source.first_line == 5
     assert warnings == [
         f"{tmp_path / 'prog.nc'}:5: M25: Centroid's 'move Z to its home position': a rapid of "
-        "Z alone to machine Z0 (gcode.m25: z_home; LinuxCNC refuses M25)"
+        "Z alone to machine Z100 (gcode.m25: z_home; LinuxCNC refuses M25)"
     ]
 
 
