@@ -105,7 +105,9 @@ def run(chunks: tuple, at_s: float, action: str, value: float = 0.0) -> dict:
                 and start < sent[-1][0] + len(sent[-1][1]):
             info["ramp_start"] = start  # frames were taken back: the ramp starts here
         if pause and "asked_at" in info and "ramp_end" not in info:
-            info["ramp_end"] = start + len(rows)  # the hold's ramp at rest (before settling)
+            # The hold's ramp at rest: the last row that moves (then rows at rest, settling).
+            step = np.linalg.norm(np.diff(rows[:, :2], axis=0), axis=1)
+            info["ramp_end"] = start + 1 + int(np.flatnonzero(np.r_[1.0, step] > 1e-9)[-1])
         sent.append((start, rows[:, :2].copy()))
         send(rows, end, pause)
     ctrl._send = record  # type: ignore[method-assign]
