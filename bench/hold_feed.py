@@ -8,7 +8,10 @@ card runs) driven by the step counters the card actually clocked, frames taken b
 and the pre-compensation's lead included:
 
     python bench/hold_feed.py [--program nc_programs/butterfly.nc] [--points 10] [--markdown]
-                              [--config xy_table_paper]
+                              [--config xy_table_paper] [--holds-only] [--hold-fall SHARE]
+    python bench/hold_feed.py --floor [--hold-fall SHARE] [--stretch K]
+
+--floor prints what the servo model alone takes after a hold's ramp, by speed (model_floor).
 
 The tool is at rest from the first period after which it moves less than REST_STEP_MM a period
 and stays within REST_BAND_MM of where the hold leaves it. The physical minimum from tool
@@ -31,6 +34,7 @@ sys.path.insert(0, str(REPO))
 from controller.config import load_config  # noqa: E402
 from controller.generator.plan import generate_reference  # noqa: E402
 from controller.interpreter.program import read_program  # noqa: E402
+from controller.motion import hold_ramp  # noqa: E402
 from controller.motion.hold_ramp import hold_distances_mm, hold_shape  # noqa: E402
 from controller.motion.loop import MotionController  # noqa: E402
 from controller.motion.pacing import VirtualPacer  # noqa: E402
@@ -171,14 +175,14 @@ def hold_figures(chunks: tuple, at_s: float, path_xy: np.ndarray) -> dict:
             "ramp_to_ms": (info.get("ramp_end", info["asked_at"]) - info["asked_at"]) * T * 1e3}
 
 
-def model_floor(v0_mm_s: float) -> tuple[int, float, float]:
+def model_floor(v0_mm_s: float, stretch: float = 1.0) -> tuple[int, float, float]:
     """A hold from v0 on a straight line of the X axis without pulses: the hold's ramp (its
     samples), then when the servo model, driven by the pre-compensated frames (unrounded),
     is within QUANT_BAND_MM and REST_BAND_MM of the hold point for good, from the ramp's start
     (ms). What a hold takes at least once its ramp has reached the card."""
     servo = CFG.axes[0].servo
     shape = hold_shape(CFG.interpolator.ramp_share)
-    dist = hold_distances_mm(v0_mm_s, AMAX, T, shape)
+    dist = hold_distances_mm(v0_mm_s, AMAX, T, shape, stretch)
     lead_in = 400  # samples at v0 before the ramp: every filter at its steady state
     wanted = np.concatenate([np.arange(-lead_in, 1) * v0_mm_s * T, dist,
                              np.full(400, dist[-1])])
@@ -200,11 +204,11 @@ def model_floor(v0_mm_s: float) -> tuple[int, float, float]:
     return len(dist), settled_ms(QUANT_BAND_MM), settled_ms(REST_BAND_MM)
 
 
-def print_floor() -> None:
+def print_floor(stretch: float) -> None:
     print("| tool speed (mm/s) | minimum (ms) | 2 x minimum (ms) | ramp (ms) | "
           "within 2 um after the ramp's start (ms) | within 1 um (ms) |\n|---|---|---|---|---|---|")
     for v0 in (10.0, 20.0, 30.0, 40.0, 50.0, 58.0):
-        n, band_ms, rest_ms = model_floor(v0)
+        n, band_ms, rest_ms = model_floor(v0, stretch)
         print(f"| {v0:.0f} | {v0 / AMAX * 1e3:.1f} | {2 * v0 / AMAX * 1e3:.1f} | {n * T * 1e3:.0f} "
               f"| {band_ms:.0f} | {rest_ms:.0f} |")
 
@@ -255,12 +259,19 @@ def main() -> None:
     ap.add_argument("--holds-only", action="store_true", help="no feed override latency")
     ap.add_argument("--floor", action="store_true",
                     help="only the servo model's settling after a hold's ramp, by speed")
+    ap.add_argument("--hold-fall", type=float,
+                    help="the hold's ramp falls over this share of it (default: the shipped "
+                         f"{hold_ramp.HOLD_FALL_SHARE:g})")
+    ap.add_argument("--stretch", type=float, default=1.0,
+                    help="with --floor: the hold's ramp this many times longer")
     args = ap.parse_args()
+    if args.hold_fall is not None:
+        hold_ramp.HOLD_FALL_SHARE = args.hold_fall  # hold_shape() reads it for each run
     global CFG, T, AMAX
     CFG = load_config(args.config or "xy_table")
     T, AMAX = CFG.sample_period_s, CFG.interpolator.max_accel_mm_s2
     if args.floor:
-        print_floor()
+        print_floor(args.stretch)
         return
     chunks = tuple(generate_reference(read_program(args.program, CFG), CFG))
     total_s = sum(len(c) for c in chunks) * T
