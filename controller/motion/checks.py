@@ -8,7 +8,7 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.motion.stopping import REST_SPEED_MM_S
-from controller.numeric import segment_distance
+from controller.numeric import polyline_distance
 from drivers.base import Feedback
 
 
@@ -141,12 +141,7 @@ class ContourStats:
             return
         seq, counts = np.concatenate(self._seq), np.concatenate(self._counts)
         self._seq, self._counts, self._rows = [], [], 0
-        lo = max(0, hist.count - hist.capacity)
-        win = np.clip(seq[:, None] + np.arange(-NEAR_FRAMES, NEAR_FRAMES + 1),
-                      lo, hist.count - 1) % hist.capacity
-        poly = hist.pos_mm[win]  # every axis: a helix or a G18/G19 arc is a 3-D path
-        act = (counts * self.pulse_mm)[:, None, :]
-        eps = segment_distance(act, poly[:, :-1], poly[:, 1:]).min(axis=1)
+        eps = polyline_distance(counts * self.pulse_mm, *_windows(hist, seq))
         if eps.size:
             self.max_abs_mm = max(self.max_abs_mm, float(eps.max()))
             self.sum_abs_mm += float(eps.sum())
@@ -158,6 +153,21 @@ class ContourStats:
         n = max(1, self.n)
         return {"max": self.max_abs_mm * 1e3, "rms": float(np.sqrt(self.sum_sq_mm2 / n)) * 1e3,
                 "mean": self.sum_abs_mm / n * 1e3}
+
+
+def _windows(hist: RefHistory, seq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reference polyline of NEAR_FRAMES frames each side of each frame seq (clipped to
+    the frames kept), axis first (D, R, W), and its segments' lengths (R, W - 1): the windows
+    of a batch overlap, so the frames they span are gathered and measured once."""
+    lo, hi = max(0, hist.count - hist.capacity), hist.count - 1
+    first = min(max(lo, int(seq.min()) - NEAR_FRAMES), hi)
+    last = max(min(hi, int(seq.max()) + NEAR_FRAMES), first)
+    verts = np.ascontiguousarray(hist.pos_mm[np.arange(first, last + 1) % hist.capacity].T)
+    lens = np.append(np.sqrt(np.square(np.diff(verts, axis=1)).sum(axis=0)), 0.0)
+    at = np.clip(seq[:, None] + np.arange(-NEAR_FRAMES, NEAR_FRAMES + 1), lo, hi) - first
+    # Clipped windows repeat their end frame: a segment of no length there.
+    seg_len = np.where(at[:, 1:] > at[:, :-1], lens[at[:, :-1]], 0.0)
+    return verts[:, at], seg_len
 
 
 def start_gap(first_mm: np.ndarray, start_counts: np.ndarray, pulse_mm: np.ndarray,
