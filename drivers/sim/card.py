@@ -29,6 +29,7 @@ from drivers.io_peer import (
     switch_name,
     workpiece_option,
 )
+from drivers.sim.ahead import AheadClock
 from drivers.sim.axes import SimAxes, plant_of
 from drivers.sim.block_clock import BlockClock
 from drivers.sim.fifo import FrameFifo
@@ -42,7 +43,7 @@ REST_AFTER_S = 2.0  # idle this long, the Table II servo has settled (poles of ~
 WAKE_EVERY_S = 0.008
 
 
-class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
+class SimCard(BlockClock, AheadClock, Drive, FrameOutputs, AtSpeedInput):
     """Frames are clocked one per sample period T, in wall-clock time or virtual time.
 
     Options: realtime (bool, default True), fifo_frames (256), max_pulses_per_frame (127,
@@ -143,7 +144,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
 
     def _recall_frames(self, n: int, keep: int) -> int:
         with self._lock:
-            self._catch_up()
+            self._catch_up(ahead=False)
             got = self._fifo.recall(n, keep) if not self._status.halted else 0
             self._written -= got
             self.frame_outputs.taken_back(self._written)
@@ -160,6 +161,9 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
             raise BadFrameError(self._fault_message())
         with self._lock:
             self._catch_up()
+            room = self._fifo.capacity - len(self._fifo) - self.ahead_span()
+            if (not frames.shape[0] and end_of_stream) or frames.shape[0] > room:
+                self.take_back_ahead()  # its end marked, or its slots reached: as unclocked
             if self._status.halted:
                 raise self._error()
             if not frames.shape[0]:
@@ -175,7 +179,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         self._check_comm()
         with self._lock:
             self._catch_up()
-            return len(self._fifo)
+            return self.queued_frames()
 
     def _fifo_capacity(self) -> int:
         return self._fifo.capacity
@@ -188,12 +192,14 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         if not trace:
             empty = np.zeros((0, self.n_axes), dtype=np.int64)
             return Feedback(np.zeros(0, dtype=np.int64), empty, empty.copy())
+        if len(trace) == 1:  # a cycle's rows, from one block
+            return Feedback(*trace[0])
         return Feedback(*(np.concatenate(parts) for parts in zip(*trace, strict=True)))
 
     def _read_position(self) -> tuple[np.ndarray, np.ndarray]:
         self._check_comm()
         with self._lock:
-            self._catch_up()
+            self._catch_up(ahead=False)
             return self._axes.commanded.copy(), self._axes.encoder(self._axes.actual_mm)
 
     def _read_status(self) -> CardStatus:
@@ -213,7 +219,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     def _reset(self) -> None:
         self._check_comm()
         with self._lock:
-            self._catch_up()
+            self._catch_up(ahead=False)
             self._discarded += self._fifo.clear()
             self.frame_outputs.waiting.clear()
             self._status = CardStatus.OK
@@ -226,7 +232,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         where the stop left them: the simulated table has no load to pull it away)."""
         self._check_comm()
         with self._lock:
-            self._catch_up()
+            self._catch_up(ahead=False)
             self._discarded += self._fifo.clear()
             self.frame_outputs.waiting.clear()
             self._streaming = False
@@ -271,7 +277,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     def _stream_active(self) -> bool:
         with self._lock:
             self._catch_up()
-            return self._streaming or len(self._fifo) > 0
+            return self._streaming or self.queued_frames() > 0
 
     def _homed(self) -> tuple[bool, ...]:
         return tuple(h or self._switches.homed_at_start for h in super()._homed())
@@ -281,7 +287,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         run = self._switches.homing(self._axes, plans, self.period_s, self.config.axis_names)
         self._homing_done.clear()
         with self._lock:
-            self._catch_up()  # the periods before it are idle ones
+            self._catch_up(ahead=False)  # the periods before it are idle ones
             self._homing_run = run
         self._wake.set()
         if self.realtime:
@@ -323,7 +329,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     def true_position_mm(self) -> np.ndarray:
         """Where the simulated table really is (test hook): once homed, counts x pulse_mm."""
         with self._lock:
-            self._catch_up()
+            self._catch_up(ahead=False)
             return self._axes.actual_mm + self._switches.offset_mm
 
     # -- clocking -------------------------------------------------------------------------
@@ -343,16 +349,27 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     def frames_clocked(self, value: int) -> None:
         self._clocked = value
 
-    def _catch_up(self) -> None:
-        """Real time: clock every period due by now (the lock held). At rest they are
-        skipped (see _sleep_at_rest) while nothing is to be done: whatever gives the clock
-        work (a write, a homing, an injected lag) calls this first, so the periods before it
-        were idle ones."""
+    def _catch_up(self, ahead: bool = True) -> None:
+        """Real time: clock every period due by now (the lock held): the rows of the block
+        stepped ahead first (drivers/sim/ahead.py), then from the FIFO; then the next block
+        ahead, or (ahead=False, for what changes the card) none, taken back. At rest the
+        periods are skipped (see _sleep_at_rest) while nothing is to be done: whatever gives
+        the clock work (a write, a homing, an injected lag) calls this first, so the periods
+        before it were idle ones."""
         if self._thread is None or self._catching_up:
             return  # (an output set as its frame is clocked is a call too)
         due = int((time.monotonic() - self._t0_s) / self.period_s) - self._clocked
-        if due <= 0:
-            return
+        released = self.release_ahead(due)
+        if released:
+            due, self._quiet = due - released, 0
+        if due > 0:
+            self._clock_due(due)
+        if ahead:
+            self.clock_ahead()
+        else:
+            self.take_back_ahead()
+
+    def _clock_due(self, due: int) -> None:
         busy = self._busy()
         if self._resting and not busy:
             self._clocked += due
@@ -383,7 +400,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     def _busy(self) -> bool:
         """Anything for the clock to do: frames, a stream, a homing, an injected lag ramping."""
         lag = self._axes
-        return (self._streaming or len(self._fifo) > 0 or self._homing_run is not None
+        return (self._streaming or self.queued_frames() > 0 or self._homing_run is not None
                 or bool(np.any(lag.extra_lag_mm < lag.lag_target_mm)))
 
     def _sleep_at_rest(self) -> None:
@@ -427,7 +444,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
 
     def schedule_outputs(self, changes: Sequence[OutputChange], frames_back: int) -> None:
         with self._lock:
-            self._catch_up()
+            self._catch_up(ahead=False)
             self.frame_outputs.waiting.append((self._written - 1 - frames_back, changes))
 
     def _latch(self, flag: CardStatus, message: str) -> None:
@@ -459,7 +476,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         """Amplifier fault on one axis: that axis coasts (frozen), the card stops."""
         self._wake.set()
         with self._lock:
-            self._catch_up()
+            self._catch_up(ahead=False)
             self._axes.freeze(axis)
             self._fault_axis = axis
             name = self.config.axes[axis].name.upper()
@@ -469,21 +486,21 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         """Mechanical drag: the encoder reads a further lag_mm below the servo model (ramped in)."""
         self._wake.set()
         with self._lock:
-            self._catch_up()
+            self._catch_up(ahead=False)
             self._axes.add_lag(axis, abs(lag_mm), ramp_frames)
 
     def inject_stall(self, axis: int) -> None:
         """The axis stops moving while the card keeps stepping it."""
         self._wake.set()
         with self._lock:
-            self._catch_up()
+            self._catch_up(ahead=False)
             self._axes.freeze(axis)
 
     def inject_underrun(self) -> None:
         """Lose every queued frame (as if the host's frames never arrived)."""
         self._wake.set()
         with self._lock:
-            self._catch_up()
+            self._catch_up(ahead=False)
             self._discarded += self._fifo.clear()
 
     def inject_lost_comm(self) -> None:
