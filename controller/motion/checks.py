@@ -167,6 +167,11 @@ def _windows(hist: RefHistory, seq: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     last = max(min(hi, int(seq.max()) + NEAR_FRAMES), first)
     verts = np.ascontiguousarray(hist.pos_mm[np.arange(first, last + 1) % hist.capacity].T)
     lens = np.append(np.sqrt(np.square(np.diff(verts, axis=1)).sum(axis=0)), 0.0)
+    width = 2 * NEAR_FRAMES + 1
+    if len(seq) and seq[0] - NEAR_FRAMES == first and last - first == len(seq) + width - 2 \
+            and seq[-1] - seq[0] == len(seq) - 1:  # consecutive frames, none clipped: views
+        return (np.lib.stride_tricks.sliding_window_view(verts, width, axis=1),
+                np.lib.stride_tricks.sliding_window_view(lens[:-1], width - 1))
     at = np.clip(seq[:, None] + np.arange(-NEAR_FRAMES, NEAR_FRAMES + 1), lo, hi) - first
     # Clipped windows repeat their end frame: a segment of no length there.
     seg_len = np.where(at[:, 1:] > at[:, :-1], lens[at[:, :-1]], 0.0)
