@@ -80,14 +80,16 @@ class FerrorCheck:
         if not len(fb):
             return None
         cmd = fb.commanded_counts
-        # (Slices and ufuncs: np.diff and np.vstack cost more than the check on a cycle's rows.)
+        # On a cycle's rows the calls cost more than the work: slices rather than np.diff of a
+        # np.vstack, and counts made float before they meet mm (the same values: a mixed
+        # int * float ufunc casts them so, only slower).
         prev = np.concatenate((self.last_cmd[None, :], cmd[:-1]))
-        v = (cmd - prev) * self.pulse_mm / self.period_s
+        v = (cmd - prev).astype(float) * self.pulse_mm / self.period_s
         self.last_cmd = cmd[-1].copy()
-        ferr = (cmd - fb.encoder_counts) * self.pulse_mm
+        ferr = (cmd - fb.encoder_counts).astype(float) * self.pulse_mm
         if hist is not None and hist.count:
             idx = fb.seq % hist.capacity
-            ferr = ferr - (hist.cmd_counts[idx] * self.pulse_mm - hist.pos_mm[idx])
+            ferr = ferr - (hist.cmd_counts[idx].astype(float) * self.pulse_mm - hist.pos_mm[idx])
         self.last_mm = ferr[-1].copy()
         abs_mm = np.abs(ferr)
         self.max_abs_mm = max(self.max_abs_mm, float(abs_mm.max()))

@@ -155,7 +155,7 @@ class SimCard(BlockClock, AheadClock, Drive, FrameOutputs, AtSpeedInput):
         self._wake.set()
         if frames.size and int(np.abs(frames).max()) > self.max_pulses:
             with self._lock:
-                self._catch_up()  # the fault latched at the time of the write
+                self._catch_up(ahead=False)  # the fault latched at the time of the write
             self._latch(CardStatus.BAD_FRAME, f"bad frame: more than {self.max_pulses} "
                         "pulses in one sample")
             raise BadFrameError(self._fault_message())
@@ -449,6 +449,7 @@ class SimCard(BlockClock, AheadClock, Drive, FrameOutputs, AtSpeedInput):
 
     def _latch(self, flag: CardStatus, message: str) -> None:
         with self._lock:
+            self.take_back_ahead()  # a halted card clocks no frame after it
             self._status |= flag
             self._messages.append(message)
 

@@ -12,7 +12,7 @@ import pytest
 from runtime_helpers import virtual_card, xy_config
 
 from drivers.base import CardStatus, Feedback
-from drivers.errors import UnderrunError
+from drivers.errors import BadFrameError, UnderrunError
 from drivers.registry import make_drive
 from drivers.sim.card import SimCard
 
@@ -155,3 +155,21 @@ def test_frames_taken_back_inside_a_block_never_run() -> None:
     assert level > 100 and got == 100 and status == CardStatus.OK
     np.testing.assert_array_equal(cmd, [100 * 40, -100 * 40])
     assert_same_rows(fb, replayed(ramp_frames(100)))
+
+
+def test_a_halt_inside_a_block_clocks_no_frame_after_it() -> None:
+    card = realtime_card()
+    try:
+        card.write_frames(ramp_frames(200))
+        time.sleep(0.03)
+        with pytest.raises(BadFrameError):
+            card.write_frames(np.array([[500, 0]]))  # more pulses than a frame may hold
+        fb = card.feedback()
+        time.sleep(0.05)
+        later = card.feedback()
+        cmd, _ = card.position_counts()
+        level = card.fifo_level()
+    finally:
+        card.close()
+    assert len(later.seq) == 0 and level == 200 - len(fb.seq)
+    np.testing.assert_array_equal(cmd, fb.commanded_counts[-1])
