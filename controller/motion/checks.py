@@ -162,22 +162,20 @@ class ContourStats:
 
 def _windows(hist: RefHistory, seq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The reference polyline of NEAR_FRAMES frames each side of each frame seq (clipped to
-    the frames kept), axis first (D, R, W), and its segments' lengths (R, W - 1): the windows
-    of a batch overlap, so the frames they span are gathered and measured once."""
+    the frames kept: the end frame repeated), axis first (D, R, W), and its segments' lengths
+    (R, W - 1). The windows of a batch overlap: the frames they span are gathered and measured
+    once, and consecutive rows (a block's) take their windows as views of them."""
     lo, hi = max(0, hist.count - hist.capacity), hist.count - 1
-    first = min(max(lo, int(seq.min()) - NEAR_FRAMES), hi)
-    last = max(min(hi, int(seq.max()) + NEAR_FRAMES), first)
-    verts = np.ascontiguousarray(hist.pos_mm[np.arange(first, last + 1) % hist.capacity].T)
-    lens = np.append(np.sqrt(np.square(np.diff(verts, axis=1)).sum(axis=0)), 0.0)
+    first = int(seq.min()) - NEAR_FRAMES
+    span = np.clip(np.arange(first, int(seq.max()) + NEAR_FRAMES + 1), lo, hi)
+    verts = np.ascontiguousarray(hist.pos_mm[span % hist.capacity].T)
+    lens = np.sqrt(np.square(np.diff(verts, axis=1)).sum(axis=0))  # 0 where clipped
     width = 2 * NEAR_FRAMES + 1
-    if len(seq) and seq[0] - NEAR_FRAMES == first and last - first == len(seq) + width - 2 \
-            and seq[-1] - seq[0] == len(seq) - 1:  # consecutive frames, none clipped: views
+    if seq[-1] - seq[0] == len(seq) - 1 == len(span) - width:  # consecutive frames
         return (np.lib.stride_tricks.sliding_window_view(verts, width, axis=1),
-                np.lib.stride_tricks.sliding_window_view(lens[:-1], width - 1))
-    at = np.clip(seq[:, None] + np.arange(-NEAR_FRAMES, NEAR_FRAMES + 1), lo, hi) - first
-    # Clipped windows repeat their end frame: a segment of no length there.
-    seg_len = np.where(at[:, 1:] > at[:, :-1], lens[at[:, :-1]], 0.0)
-    return verts[:, at], seg_len
+                np.lib.stride_tricks.sliding_window_view(lens, width - 1))
+    at = (seq - (first + NEAR_FRAMES))[:, None] + np.arange(width)
+    return verts[:, at], lens[at[:, :-1]]
 
 
 def start_gap(first_mm: np.ndarray, start_counts: np.ndarray, pulse_mm: np.ndarray,
