@@ -130,7 +130,8 @@ class SimCard(BlockClock, AheadClock, Drive, FrameOutputs, AtSpeedInput):
         self._comm_ok = True  # a port opened again is a fresh link
         if self.realtime:
             self._stop.clear()
-            self._t0_s = time.monotonic()
+            # Period 0 is due at open, or (opened again) the periods go on from here.
+            self._t0_s = time.monotonic() - self._clocked * self.period_s
             self._thread = threading.Thread(target=self._clock_thread, name="simcard",
                                             daemon=True)
             self._thread.start()
@@ -267,8 +268,8 @@ class SimCard(BlockClock, AheadClock, Drive, FrameOutputs, AtSpeedInput):
 
     def _write_outputs(self, image: OutputImage) -> None:
         self._check_comm()
-        with self._lock:
-            self._catch_up()  # outputs due at frames clocked before this write are set first
+        # (No catch-up here: clocking sets the outputs due at their frames through
+        # set_outputs, which would land inside the write that called this one.)
         self.output_image = image
         self.spindle.written(image.bits, image.analog)
         record_outputs(self._outputs_file, image.bits, image.analog)

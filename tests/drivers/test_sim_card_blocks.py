@@ -173,3 +173,22 @@ def test_a_halt_inside_a_block_clocks_no_frame_after_it() -> None:
         card.close()
     assert len(later.seq) == 0 and level == 200 - len(fb.seq)
     np.testing.assert_array_equal(cmd, fb.commanded_counts[-1])
+
+
+def test_a_card_opened_again_clocks_from_then_on() -> None:
+    """Its periods go on from the reopening (they did not restart from 0 behind the periods
+    already clocked: the card stood still as long as it had been open)."""
+    card = realtime_card()
+    try:
+        card.write_frames(ramp_frames(100), end_of_stream=True)
+        time.sleep(1.0)
+        card.close()
+        card.open()
+        t0_s = time.monotonic()
+        card.write_frames(ramp_frames(100), end_of_stream=True)
+        fb = read_all(card, lambda: card.fifo_level() == 0, timeout_s=5.0)
+        took_s = time.monotonic() - t0_s
+    finally:
+        card.close()
+    np.testing.assert_array_equal(fb.seq, np.arange(200))
+    assert took_s < 0.9  # 100 periods of 1 ms (not after the 1 s clocked before)
