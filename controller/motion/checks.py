@@ -8,7 +8,7 @@ import numpy as np
 
 from controller.config import MachineConfig
 from controller.motion.stopping import REST_SPEED_MM_S
-from controller.numeric import segment_distance
+from controller.numeric import polyline_distance
 from drivers.base import Feedback
 
 
@@ -80,15 +80,20 @@ class FerrorCheck:
         if not len(fb):
             return None
         cmd = fb.commanded_counts
-        v = np.diff(np.vstack([self.last_cmd, cmd]), axis=0) * self.pulse_mm / self.period_s
+        # On a cycle's rows the calls cost more than the work: slices rather than np.diff of a
+        # np.vstack, and counts made float before they meet mm (the same values: a mixed
+        # int * float ufunc casts them so, only slower).
+        prev = np.concatenate((self.last_cmd[None, :], cmd[:-1]))
+        v = (cmd - prev).astype(float) * self.pulse_mm / self.period_s
         self.last_cmd = cmd[-1].copy()
-        ferr = (cmd - fb.encoder_counts) * self.pulse_mm
+        ferr = (cmd - fb.encoder_counts).astype(float) * self.pulse_mm
         if hist is not None and hist.count:
             idx = fb.seq % hist.capacity
-            ferr = ferr - (hist.cmd_counts[idx] * self.pulse_mm - hist.pos_mm[idx])
+            ferr = ferr - (hist.cmd_counts[idx].astype(float) * self.pulse_mm - hist.pos_mm[idx])
         self.last_mm = ferr[-1].copy()
-        self.max_abs_mm = max(self.max_abs_mm, float(np.abs(ferr).max()))
-        over = np.abs(ferr) > self.limits_mm(v)
+        abs_mm = np.abs(ferr)
+        self.max_abs_mm = max(self.max_abs_mm, float(abs_mm.max()))
+        over = abs_mm > self.limits_mm(v)
         if not over.any():
             return None
         row, axis = np.argwhere(over)[0]
@@ -141,12 +146,7 @@ class ContourStats:
             return
         seq, counts = np.concatenate(self._seq), np.concatenate(self._counts)
         self._seq, self._counts, self._rows = [], [], 0
-        lo = max(0, hist.count - hist.capacity)
-        win = np.clip(seq[:, None] + np.arange(-NEAR_FRAMES, NEAR_FRAMES + 1),
-                      lo, hist.count - 1) % hist.capacity
-        poly = hist.pos_mm[win]  # every axis: a helix or a G18/G19 arc is a 3-D path
-        act = (counts * self.pulse_mm)[:, None, :]
-        eps = segment_distance(act, poly[:, :-1], poly[:, 1:]).min(axis=1)
+        eps = polyline_distance(counts * self.pulse_mm, *_windows(hist, seq))
         if eps.size:
             self.max_abs_mm = max(self.max_abs_mm, float(eps.max()))
             self.sum_abs_mm += float(eps.sum())
@@ -158,6 +158,24 @@ class ContourStats:
         n = max(1, self.n)
         return {"max": self.max_abs_mm * 1e3, "rms": float(np.sqrt(self.sum_sq_mm2 / n)) * 1e3,
                 "mean": self.sum_abs_mm / n * 1e3}
+
+
+def _windows(hist: RefHistory, seq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reference polyline of NEAR_FRAMES frames each side of each frame seq (clipped to
+    the frames kept: the end frame repeated), axis first (D, R, W), and its segments' lengths
+    (R, W - 1). The windows of a batch overlap: the frames they span are gathered and measured
+    once, and consecutive rows (a block's) take their windows as views of them."""
+    lo, hi = max(0, hist.count - hist.capacity), hist.count - 1
+    first = int(seq.min()) - NEAR_FRAMES
+    span = np.clip(np.arange(first, int(seq.max()) + NEAR_FRAMES + 1), lo, hi)
+    verts = np.ascontiguousarray(hist.pos_mm[span % hist.capacity].T)
+    lens = np.sqrt(np.square(np.diff(verts, axis=1)).sum(axis=0))  # 0 where clipped
+    width = 2 * NEAR_FRAMES + 1
+    if seq[-1] - seq[0] == len(seq) - 1 == len(span) - width:  # consecutive frames
+        return (np.lib.stride_tricks.sliding_window_view(verts, width, axis=1),
+                np.lib.stride_tricks.sliding_window_view(lens, width - 1))
+    at = (seq - (first + NEAR_FRAMES))[:, None] + np.arange(width)
+    return verts[:, at], lens[at[:, :-1]]
 
 
 def start_gap(first_mm: np.ndarray, start_counts: np.ndarray, pulse_mm: np.ndarray,

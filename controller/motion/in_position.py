@@ -23,14 +23,18 @@ class InPosition:
 
     def _outside(self, encoder_counts: np.ndarray, target_counts: np.ndarray) -> np.ndarray:
         off_mm = (encoder_counts - target_counts) * self.pulse_mm
-        return np.sqrt(np.sum(off_mm * off_mm, axis=-1)) > self.tolerance_mm + 1e-12
+        return np.sqrt((off_mm * off_mm).sum(axis=-1)) > self.tolerance_mm + 1e-12
 
     def frames(self, seq: np.ndarray, encoder_counts: np.ndarray,
                target_counts: np.ndarray) -> None:
         """Executed frames (their numbers from 0 and encoder counts) against the end sent."""
         if not len(seq):
             return
-        outside = np.flatnonzero(self._outside(encoder_counts, target_counts))
+        out = self._outside(encoder_counts, target_counts)
+        if out[-1]:  # (moving, the end runs ahead: every row is outside)
+            self.frame, self.after_frames_s = None, None
+            return
+        outside = np.flatnonzero(out)
         if outside.size:
             last = int(outside[-1])
             self.frame = int(seq[last]) + 1 if last + 1 < len(seq) else None

@@ -29,6 +29,7 @@ from drivers.io_peer import (
     switch_name,
     workpiece_option,
 )
+from drivers.sim.ahead import AheadClock
 from drivers.sim.axes import SimAxes, plant_of
 from drivers.sim.block_clock import BlockClock
 from drivers.sim.fifo import FrameFifo
@@ -37,9 +38,12 @@ from drivers.sim.spindle import SimSpindle, spinup_option
 from drivers.sim.switches import SimSwitches, timeout_message
 
 REST_AFTER_S = 2.0  # idle this long, the Table II servo has settled (poles of ~100/s and up)
+# The real-time clock thread wakes this often (see _clock_thread); every call clocks what fell
+# due first, so a host reading each cycle sees the card as if clocked period by period.
+WAKE_EVERY_S = 0.008
 
 
-class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
+class SimCard(BlockClock, AheadClock, Drive, FrameOutputs, AtSpeedInput):
     """Frames are clocked one per sample period T, in wall-clock time or virtual time.
 
     Options: realtime (bool, default True), fifo_frames (256), max_pulses_per_frame (127,
@@ -60,6 +64,13 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     spindle_spinup_s (0; "never"): the at-speed input comes true that long after a start.
     Card rule (hostmot2 watchdog): an empty FIFO mid-program stops the card and latches
     UNDERRUN until reset(); an empty FIFO after an end-of-stream frame is simply idle.
+
+    In real time the frames are clocked in blocks: each call (and each inject_*) first clocks
+    every period that fell due by now, and a thread wakes every WAKE_EVERY_S (every period
+    while homing or while outputs wait for their frame) for those no call asked about.
+    Between two calls nothing the card holds changes, so a frame is clocked as it would have
+    been at its own period: one written after its period is as late as ever (an underrun at
+    that frame), and the host reads the same rows, status and level.
     """
 
     OPTIONS = frozenset({"realtime", "fifo_frames", "max_pulses_per_frame", "start_mm",
@@ -104,7 +115,12 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         self.output_image = OutputImage()  # what the card's outputs hold
         self.spindle = SimSpindle(config.io.spindle, spinup_option(
             options.get("spindle_spinup_s"), "sim: drive option"), self._card_s)
-        self.frames_clocked = 0  # every period since open, idle ones included
+        self._clocked = 0  # every period since open, idle ones included (frames_clocked)
+        self._t0_s = 0.0  # real time: the start of period 0 (periods are due from it)
+        self._quiet = 0  # periods clocked in a row with nothing to do (see _sleep_at_rest)
+        self._resting = False  # asleep at rest: the idle periods are skipped, not clocked
+        self._catching_up = False
+        self._wake_frames = max(1, round(WAKE_EVERY_S / self.period_s))
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._wake = threading.Event()  # work for a clock asleep at rest (see _clock_thread)
@@ -114,6 +130,8 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         self._comm_ok = True  # a port opened again is a fresh link
         if self.realtime:
             self._stop.clear()
+            # Period 0 is due at open, or (opened again) the periods go on from here.
+            self._t0_s = time.monotonic() - self._clocked * self.period_s
             self._thread = threading.Thread(target=self._clock_thread, name="simcard",
                                             daemon=True)
             self._thread.start()
@@ -127,6 +145,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
 
     def _recall_frames(self, n: int, keep: int) -> int:
         with self._lock:
+            self._catch_up(ahead=False)
             got = self._fifo.recall(n, keep) if not self._status.halted else 0
             self._written -= got
             self.frame_outputs.taken_back(self._written)
@@ -136,10 +155,16 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         self._check_comm()
         self._wake.set()
         if frames.size and int(np.abs(frames).max()) > self.max_pulses:
+            with self._lock:
+                self._catch_up(ahead=False)  # the fault latched at the time of the write
             self._latch(CardStatus.BAD_FRAME, f"bad frame: more than {self.max_pulses} "
                         "pulses in one sample")
             raise BadFrameError(self._fault_message())
         with self._lock:
+            self._catch_up()
+            room = self._fifo.capacity - len(self._fifo) - self.ahead_span()
+            if (not frames.shape[0] and end_of_stream) or frames.shape[0] > room:
+                self.take_back_ahead()  # its end marked, or its slots reached: as unclocked
             if self._status.halted:
                 raise self._error()
             if not frames.shape[0]:
@@ -154,7 +179,8 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     def _fifo_level(self) -> int:
         self._check_comm()
         with self._lock:
-            return len(self._fifo)
+            self._catch_up()
+            return self.queued_frames()
 
     def _fifo_capacity(self) -> int:
         return self._fifo.capacity
@@ -162,19 +188,25 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     def _read_feedback(self) -> Feedback:
         self._check_comm()
         with self._lock:
+            self._catch_up()
             trace, self._trace = self._trace, []
         if not trace:
             empty = np.zeros((0, self.n_axes), dtype=np.int64)
             return Feedback(np.zeros(0, dtype=np.int64), empty, empty.copy())
+        if len(trace) == 1:  # a cycle's rows, from one block
+            return Feedback(*trace[0])
         return Feedback(*(np.concatenate(parts) for parts in zip(*trace, strict=True)))
 
     def _read_position(self) -> tuple[np.ndarray, np.ndarray]:
         self._check_comm()
         with self._lock:
+            self._catch_up(ahead=False)
             return self._axes.commanded.copy(), self._axes.encoder(self._axes.actual_mm)
 
     def _read_status(self) -> CardStatus:
         self._check_comm()
+        with self._lock:
+            self._catch_up()
         if self._fault_file is not None and CardStatus.FAULT not in self._status \
                 and os.path.exists(str(self._fault_file)):
             self.inject_drive_fault(0)  # the test's fault, from another process
@@ -188,6 +220,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     def _reset(self) -> None:
         self._check_comm()
         with self._lock:
+            self._catch_up(ahead=False)
             self._discarded += self._fifo.clear()
             self.frame_outputs.waiting.clear()
             self._status = CardStatus.OK
@@ -200,6 +233,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         where the stop left them: the simulated table has no load to pull it away)."""
         self._check_comm()
         with self._lock:
+            self._catch_up(ahead=False)
             self._discarded += self._fifo.clear()
             self.frame_outputs.waiting.clear()
             self._streaming = False
@@ -230,10 +264,12 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         return self.spindle.at_speed()
 
     def _card_s(self) -> float:  # the card's clock: wall time, or the periods clocked
-        return time.monotonic() if self.realtime else self.frames_clocked * self.period_s
+        return time.monotonic() if self.realtime else self._clocked * self.period_s
 
     def _write_outputs(self, image: OutputImage) -> None:
         self._check_comm()
+        # (No catch-up here: clocking sets the outputs due at their frames through
+        # set_outputs, which would land inside the write that called this one.)
         self.output_image = image
         self.spindle.written(image.bits, image.analog)
         record_outputs(self._outputs_file, image.bits, image.analog)
@@ -241,7 +277,8 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     # -- homing ---------------------------------------------------------------------------
     def _stream_active(self) -> bool:
         with self._lock:
-            return self._streaming or len(self._fifo) > 0
+            self._catch_up()
+            return self._streaming or self.queued_frames() > 0
 
     def _homed(self) -> tuple[bool, ...]:
         return tuple(h or self._switches.homed_at_start for h in super()._homed())
@@ -251,6 +288,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         run = self._switches.homing(self._axes, plans, self.period_s, self.config.axis_names)
         self._homing_done.clear()
         with self._lock:
+            self._catch_up(ahead=False)  # the periods before it are idle ones
             self._homing_run = run
         self._wake.set()
         if self.realtime:
@@ -292,6 +330,7 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     def true_position_mm(self) -> np.ndarray:
         """Where the simulated table really is (test hook): once homed, counts x pulse_mm."""
         with self._lock:
+            self._catch_up(ahead=False)
             return self._axes.actual_mm + self._switches.offset_mm
 
     # -- clocking -------------------------------------------------------------------------
@@ -300,30 +339,72 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         with self._lock:
             self._clock(n_frames)
 
+    @property
+    def frames_clocked(self) -> int:
+        """Every period clocked since open, idle ones included (real time: up to now)."""
+        with self._lock:
+            self._catch_up()
+            return self._clocked
+
+    @frames_clocked.setter
+    def frames_clocked(self, value: int) -> None:
+        self._clocked = value
+
+    def _catch_up(self, ahead: bool = True) -> None:
+        """Real time: clock every period due by now (the lock held): the rows of the block
+        stepped ahead first (drivers/sim/ahead.py), then from the FIFO; then the next block
+        ahead, or (ahead=False, for what changes the card) none, taken back. At rest the
+        periods are skipped (see _sleep_at_rest) while nothing is to be done: whatever gives
+        the clock work (a write, a homing, an injected lag) calls this first, so the periods
+        before it were idle ones."""
+        if self._thread is None or self._catching_up:
+            return  # (an output set as its frame is clocked is a call too)
+        due = int((time.monotonic() - self._t0_s) / self.period_s) - self._clocked
+        released = self.release_ahead(due)
+        if released:
+            due, self._quiet = due - released, 0
+        if due > 0:
+            self._clock_due(due)
+        if ahead:
+            self.clock_ahead()
+        else:
+            self.take_back_ahead()
+
+    def _clock_due(self, due: int) -> None:
+        busy = self._busy()
+        if self._resting and not busy:
+            self._clocked += due
+            return
+        self._resting = False
+        self._catching_up = True
+        try:
+            self._clock(due)
+        finally:
+            self._catching_up = False
+        self._quiet = 0 if busy else self._quiet + due
+
     def _clock_thread(self) -> None:
-        t0 = time.monotonic()
-        quiet = 0  # periods clocked in a row with nothing to do
+        """Clocks what fell due every few periods (every period while homing or while an
+        output waits for its frame: their effects are seen from outside) and sleeps at rest."""
         while not self._stop.is_set():
-            due = int((time.monotonic() - t0) / self.period_s) - self.frames_clocked
-            if due > 0:  # a late wake-up clocks every frame that fell due, as hardware would
-                with self._lock:
-                    busy = self._busy()
-                    self._clock(due)
-                quiet = 0 if busy else quiet + due
-            if quiet >= self._rest_frames:
-                self._sleep_at_rest(t0)
-                quiet = 0
+            with self._lock:
+                self._catch_up()
+                per_period = self._homing_run is not None or self.frame_outputs.waiting
+                every = 1 if per_period else self._wake_frames
+                rest = self._quiet >= self._rest_frames
+            if rest:
+                self._sleep_at_rest()
                 continue
-            next_s = t0 + (self.frames_clocked + 1) * self.period_s
+            next_s = self._t0_s + (self._clocked + every) * self.period_s
             time.sleep(max(0.0, next_s - time.monotonic()))
 
     def _busy(self) -> bool:
         """Anything for the clock to do: frames, a stream, a homing, an injected lag ramping."""
         lag = self._axes
-        return (self._streaming or len(self._fifo) > 0 or self._homing_run is not None
+        return (self._streaming or self.queued_frames() > 0 or self._homing_run is not None
                 or bool(np.any(lag.extra_lag_mm < lag.lag_target_mm)))
 
-    def _sleep_at_rest(self, t0: float) -> None:
+    def _sleep_at_rest(self) -> None:
         """An idle cncd costs no CPU: a table at rest for REST_AFTER_S stays at rest (its servo
         has settled to far below a pulse), so the clock sleeps until a write, a homing, a reset
         or an injection wakes it, and skips the idle periods instead of stepping the servo
@@ -331,16 +412,19 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         self._wake.clear()  # before the check: a wake-up after it is not lost
         with self._lock:
             if self._busy():
+                self._quiet = 0
                 return
+            self._resting = True
         self._wake.wait()
         with self._lock:
-            self.frames_clocked = max(self.frames_clocked,
-                                      int((time.monotonic() - t0) / self.period_s))
+            self._catch_up()  # the idle periods skipped
+            self._resting = False
+            self._quiet = 0
 
     def _clock(self, n: int) -> None:
         if self._homing_run is not None:
             used = self._clock_homing(n)
-            self.frames_clocked += used
+            self._clocked += used
             n -= used
         frames = np.zeros((0, self.n_axes), dtype=np.int64)
         seq = np.zeros(0, dtype=np.int64)
@@ -357,14 +441,16 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         if len(frames):
             self._trace.append((seq, cmd[: len(frames)], enc[: len(frames)]))
             self.frame_outputs.due(int(seq[-1]), self.set_outputs)
-        self.frames_clocked += n
+        self._clocked += n
 
     def schedule_outputs(self, changes: Sequence[OutputChange], frames_back: int) -> None:
         with self._lock:
+            self._catch_up(ahead=False)
             self.frame_outputs.waiting.append((self._written - 1 - frames_back, changes))
 
     def _latch(self, flag: CardStatus, message: str) -> None:
         with self._lock:
+            self.take_back_ahead()  # a halted card clocks no frame after it
             self._status |= flag
             self._messages.append(message)
 
@@ -385,12 +471,14 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
     def discarded_counts(self) -> np.ndarray:
         """Pulses accepted but never executed (dropped by reset or an injected underrun)."""
         with self._lock:
+            self._catch_up()
             return self._discarded.copy()
 
     def inject_drive_fault(self, axis: int, code: int = 0x2310) -> None:
         """Amplifier fault on one axis: that axis coasts (frozen), the card stops."""
         self._wake.set()
         with self._lock:
+            self._catch_up(ahead=False)
             self._axes.freeze(axis)
             self._fault_axis = axis
             name = self.config.axes[axis].name.upper()
@@ -400,22 +488,27 @@ class SimCard(BlockClock, Drive, FrameOutputs, AtSpeedInput):
         """Mechanical drag: the encoder reads a further lag_mm below the servo model (ramped in)."""
         self._wake.set()
         with self._lock:
+            self._catch_up(ahead=False)
             self._axes.add_lag(axis, abs(lag_mm), ramp_frames)
 
     def inject_stall(self, axis: int) -> None:
         """The axis stops moving while the card keeps stepping it."""
         self._wake.set()
         with self._lock:
+            self._catch_up(ahead=False)
             self._axes.freeze(axis)
 
     def inject_underrun(self) -> None:
         """Lose every queued frame (as if the host's frames never arrived)."""
         self._wake.set()
         with self._lock:
+            self._catch_up(ahead=False)
             self._discarded += self._fifo.clear()
 
     def inject_lost_comm(self) -> None:
         """The board stops answering; it keeps clocking what it holds (then underruns)."""
+        with self._lock:
+            self._catch_up()
         self._comm_ok = False
 
     def restore_comm(self) -> None:

@@ -58,6 +58,12 @@ class FrameFifo:
         self._head += n
         return self._frames[idx].copy(), self._seq[idx].copy(), self._eos[idx].copy()
 
+    def before_end(self, n: int) -> int:
+        """How many of the next n frames (at most those queued) come before an end of stream."""
+        n = min(n, len(self))
+        ends = np.flatnonzero(self._eos[np.arange(self._head, self._head + n) % self.capacity])
+        return int(ends[0]) if ends.size else n
+
     def unpop(self, n: int) -> None:
         """Put the last n frames popped back at the head (their slots are not reused until a
         push, so a block stepped ahead can be taken back before the next write)."""

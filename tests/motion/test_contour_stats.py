@@ -1,5 +1,5 @@
 """The measured contour error (motion/checks.ContourStats), taken BATCH_ROWS encoder rows at a
-time: the same figures as one cycle's rows at a time."""
+time: the same figures as one cycle's rows at a time, and those of every segment measured."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import pytest
 
 from controller.motion import checks
 from controller.motion.checks import ContourStats, RefHistory
+from controller.numeric import segment_distance
 
 
 def _fed(batch_rows: int, monkeypatch: pytest.MonkeyPatch) -> dict[str, float]:
@@ -40,3 +41,29 @@ def test_batched_rows_give_the_figures_of_rows_one_cycle_at_a_time(
     assert batched["max"] == one["max"] and one["max"] > 5.0
     assert batched["rms"] == pytest.approx(one["rms"], rel=1e-12)
     assert batched["mean"] == pytest.approx(one["mean"], rel=1e-12)
+
+
+def test_measured_distance_is_the_least_over_every_segment_of_the_window() -> None:
+    """Against every segment measured, over a ring that wrapped, a stop (frames repeated) and
+    windows clipped at both ends of the frames kept."""
+    rng = np.random.default_rng(7)
+    pulse_mm = np.array([0.001, 0.001, 0.001])
+    steps = rng.normal(scale=0.02, size=(700, 3))
+    steps[300:340] = 0.0  # at rest: the same frame forty times
+    path = np.cumsum(steps, axis=0)
+    hist = RefHistory(256, 3, 0.001)
+    for lo in range(0, len(path), 50):
+        hist.append(path[lo:lo + 50], np.ones(50), np.ones(50, np.int64), path[max(lo - 1, 0)])
+    kept = np.arange(len(path) - hist.capacity, len(path))
+    seq = np.concatenate([kept[:30], kept[100:230], kept[-20:]])
+    counts = np.round((path[seq] + rng.normal(scale=0.01, size=(len(seq), 3))) / pulse_mm)
+    stats = ContourStats(pulse_mm)
+    stats.update_at(seq, counts, hist)
+    got = stats.summary_um()
+    win = np.clip(seq[:, None] + np.arange(-checks.NEAR_FRAMES, checks.NEAR_FRAMES + 1),
+                  kept[0], kept[-1])
+    poly = path[win]
+    want = segment_distance((counts * pulse_mm)[:, None], poly[:, :-1], poly[:, 1:]).min(axis=1)
+    assert got["max"] == pytest.approx(want.max() * 1e3, rel=1e-12, abs=1e-9)
+    assert got["mean"] == pytest.approx(want.mean() * 1e3, rel=1e-12, abs=1e-9)
+    assert got["rms"] == pytest.approx(np.sqrt(np.mean(want**2)) * 1e3, rel=1e-12, abs=1e-9)
