@@ -8,7 +8,7 @@ from enum import StrEnum
 import numpy as np
 
 from controller.geometry.curves import ConstantSpeedCurve, Curve
-from controller.numeric import clamp, sorted_unique
+from controller.numeric import cached_property, clamp, sorted_unique
 
 
 class PieceKind(StrEnum):
@@ -56,9 +56,12 @@ class Path:
         last = self.pieces[-1]
         return last.s0_mm + last.length_mm
 
-    @property
+    @cached_property
     def breaks_mm(self) -> np.ndarray:
-        return np.array([p.s0_mm for p in self.pieces])
+        """Where each piece starts (read-only: made once, every piece_index searches it)."""
+        breaks = np.array([p.s0_mm for p in self.pieces])
+        breaks.flags.writeable = False
+        return breaks
 
     def piece_index(self, s_mm: np.ndarray) -> np.ndarray:
         """Which piece each arc length falls in (the last piece owns the end point)."""

@@ -137,26 +137,44 @@ def _store(ps: list[Piece], n: int, u: np.ndarray, speed: np.ndarray, kappa: np.
            cache: PieceSamples) -> None:
     """_piece_samples' trapezoids of |C'| on each row, rescaled to its piece's length, into
     the cache with the row's curvature."""
+    s = _trapezoid_rows(ps, u, speed)
+    for p, row_s, row_k in zip(ps, s, np.broadcast_to(kappa, u.shape), strict=True):
+        cache[(p.curve, p.u0, p.u1, n)] = (row_s, row_k)
+
+
+def _line_rows(pieces: tuple[Piece, ...], index: list[int], counts: list[int]
+               ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """_piece_samples' s of the LINE pieces index, grouped by sample count: (pieces, rows),
+    the same operations on arrays of pieces with the same count (curvature 0; the trapezoids
+    of a constant speed, then rescaled to the piece length), so the same numbers, without
+    numpy's cost per call on every line of a G1 program. Not cached: made again, they cost
+    less than a look-up of their keys."""
+    by_count: dict[int, list[int]] = {}
+    for i in index:
+        by_count.setdefault(counts[i], []).append(i)
+    for n, group in by_count.items():
+        ps = [pieces[i] for i in group]
+        u0, u1 = np.array([p.u0 for p in ps]), np.array([p.u1 for p in ps])
+        if np.any(u1 == u0):  # linspace treats a zero step apart
+            for i, p in zip(group, ps, strict=True):
+                yield np.array([i]), _piece_samples(p, n)[0][None, :]
+            continue
+        u = np.linspace(u0, u1, n, axis=1)
+        dx = np.array([p.curve.p1[0] - p.curve.p0[0] for p in ps])  # type: ignore[attr-defined]
+        dy = np.array([p.curve.p1[1] - p.curve.p0[1] for p in ps])  # type: ignore[attr-defined]
+        speed = np.broadcast_to(np.sqrt(dx * dx + dy * dy)[:, None], u.shape)
+        yield np.array(group), _trapezoid_rows(ps, u, speed)
+
+
+def _trapezoid_rows(ps: list[Piece], u: np.ndarray, speed: np.ndarray) -> np.ndarray:
+    """_trapezoid_s on each row: the trapezoids of |C'|, rescaled to its piece's length."""
     s = np.zeros(u.shape)
     np.cumsum(0.5 * (speed[:, 1:] + speed[:, :-1]) * np.diff(u, axis=1), axis=1, out=s[:, 1:])
     length = np.array([p.length_mm for p in ps])
     last = s[:, -1].copy()
     scale = length / np.where(last > 0, last, 1.0)
     s[last > 0] *= scale[last > 0, None]
-    for p, row_s, row_k in zip(ps, s, np.broadcast_to(kappa, u.shape), strict=True):
-        cache[(p.curve, p.u0, p.u1, n)] = (row_s, row_k)
-
-
-def _line_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
-    """_piece_samples of many LINE pieces at once, into the cache: the same operations on
-    arrays of pieces with the same count (curvature 0; the trapezoids of a constant speed,
-    then rescaled to the piece length), so the same numbers, without numpy's cost per call
-    on every line of a G1 program."""
-    for n, ps, u in _batches(todo, cache):
-        dx = np.array([p.curve.p1[0] - p.curve.p0[0] for p in ps])  # type: ignore[attr-defined]
-        dy = np.array([p.curve.p1[1] - p.curve.p0[1] for p in ps])  # type: ignore[attr-defined]
-        speed = np.broadcast_to(np.sqrt(dx * dx + dy * dy)[:, None], u.shape)
-        _store(ps, n, u, speed, np.zeros(n), cache)
+    return s
 
 
 def _ph_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
@@ -191,23 +209,33 @@ def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.nda
     cache = {} if cache is None else cache
     pieces = path.pieces
     counts = [max(math.ceil(p.length_mm / spacing), 8) + 1 for p in pieces]
-    keys = [(p.curve, p.u0, p.u1, n) for p, n in zip(pieces, counts, strict=True)]
+    is_line = [p.kind == PieceKind.LINE for p in pieces]
+    others = [i for i, line in enumerate(is_line) if not line]
+    keys = {i: (pieces[i].curve, pieces[i].u0, pieces[i].u1, counts[i]) for i in others}
     # One look-up per key where it hits (hashing a key hashes its curve's fields).
-    rows = [cache.get(key) for key in keys]
-    missing = [i for i, row in enumerate(rows) if row is None]
-    for kind, batch in ((PieceKind.LINE, _line_samples), (PieceKind.PH, _ph_samples)):
-        batch([(pieces[i], counts[i]) for i in missing if pieces[i].kind == kind], cache)
+    rows = {i: cache.get(key) for i, key in keys.items()}
+    missing = [i for i, row in rows.items() if row is None]
+    _ph_samples([(pieces[i], counts[i]) for i in missing if pieces[i].kind == PieceKind.PH],
+                cache)
     for i in missing:
         if keys[i] not in cache:
             cache[keys[i]] = _piece_samples(pieces[i], counts[i])
         rows[i] = cache[keys[i]]
-    counts = [len(r[0]) for r in rows]  # a NURBS piece sampled by knot span has its own count
+    for i, row in rows.items():  # a NURBS piece sampled by knot span has its own count
+        counts[i] = len(row[0])  # type: ignore[index]
     # Each piece's samples moved to where it starts on the path, all at once (p.s0_mm + s).
-    s = np.repeat([p.s0_mm for p in pieces], counts) + np.concatenate([r[0] for r in rows])
-    kappa = np.concatenate([r[1] for r in rows])
+    ends = np.cumsum(counts)
+    start = ends - counts
+    local, kappa = np.empty(int(ends[-1])), np.zeros(int(ends[-1]))
+    for group, s_rows in _line_rows(pieces, [i for i, line in enumerate(is_line) if line],
+                                    counts):
+        local[start[group][:, None] + np.arange(s_rows.shape[1])] = s_rows
+    for i, row in rows.items():
+        local[start[i]:ends[i]], kappa[start[i]:ends[i]] = row  # type: ignore[misc]
+    s = np.repeat([p.s0_mm for p in pieces], counts) + local
     # The pieces follow each other: each one's first sample is the previous one's last point.
     # Keep the larger curvature there, drop the duplicate, then anything not strictly ahead.
-    first = np.cumsum(counts)[:-1]
+    first = ends[:-1]
     kappa[first - 1] = np.maximum(kappa[first - 1], kappa[first])
     s, kappa = np.delete(s, first), np.delete(kappa, first)
     if np.all(np.diff(s) > 1e-12):

@@ -73,30 +73,29 @@ def block_curve(block: MotionBlock, feed_cap_mm_s: float,
     if block.path.mode == PathMode.BLEND:
         tol = block.path.tolerance_mm if block.path.tolerance_mm is not None \
             else default_tolerance_mm
+    if isinstance(block, LineBlock):  # first: every G1 line of a program comes here
+        p0, p1 = block.start[:2], block.end[:2]
+        if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
+            return None
+        # LineCurve(p0, p1) and BlockCurve(...) without the frozen setattr per field.
+        curve = object.__new__(LineCurve)
+        curve.__dict__.update(p0=p0, p1=p1)
+        bc = object.__new__(BlockCurve)
+        bc.__dict__.update(curve=curve, feed_mm_s=feed, line=line, nurbs=False,
+                           blend_tolerance_mm=tol)
+        return bc
     if isinstance(block, NurbsBlock):
         if block.polygon_length_mm < MIN_LENGTH_MM:  # the curve is no longer than this
             return None
         return BlockCurve(Nurbs.from_block(block), feed, line, True, tol)
-    if isinstance(block, ArcBlock):
-        c = block.center
-        a0 = math.atan2(block.start[1] - c[1], block.start[0] - c[0])
-        # The end radius may differ from the start radius (LinuxCNC's rule): a spiral to the
-        # programmed end, not a circle that misses it.
-        change = block.radius_change_mm
-        return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad, change), feed, line,
-                          False, tol)
-    assert isinstance(block, LineBlock)
-    p0, p1 = block.start[:2], block.end[:2]
-    if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
-        return None
-    # LineCurve(p0, p1) and BlockCurve(...) without the frozen setattr per field: every G1
-    # line of a program comes here.
-    curve = object.__new__(LineCurve)
-    curve.__dict__.update(p0=p0, p1=p1)
-    bc = object.__new__(BlockCurve)
-    bc.__dict__.update(curve=curve, feed_mm_s=feed, line=line, nurbs=False,
-                       blend_tolerance_mm=tol)
-    return bc
+    assert isinstance(block, ArcBlock)
+    c = block.center
+    a0 = math.atan2(block.start[1] - c[1], block.start[0] - c[0])
+    # The end radius may differ from the start radius (LinuxCNC's rule): a spiral to the
+    # programmed end, not a circle that misses it.
+    change = block.radius_change_mm
+    return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad, change), feed, line,
+                      False, tol)
 
 
 def find_corners(curves: list[BlockCurve], kappa_th_per_mm: float) -> dict[int, list[CornerZone]]:
