@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 
 import numpy as np
@@ -207,10 +206,11 @@ def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.nda
     At a joint both sides are sampled and the larger curvature is kept (curvature may jump)."""
     spacing = grid_step_mm(path)
     cache = {} if cache is None else cache
-    pieces = path.pieces
-    counts = [max(math.ceil(p.length_mm / spacing), 8) + 1 for p in pieces]
-    is_line = [p.kind == PieceKind.LINE for p in pieces]
-    others = [i for i, line in enumerate(is_line) if not line]
+    pieces, cols = path.pieces, path.columns
+    # max(ceil(length / spacing), 8) + 1 per piece (the same numbers in floats: exact)
+    counts = (np.maximum(np.ceil(cols.length_mm / spacing), 8.0) + 1.0).astype(np.intp).tolist()
+    is_line = cols.of_kind(PieceKind.LINE)
+    others = np.flatnonzero(~is_line).tolist()
     keys = {i: (pieces[i].curve, pieces[i].u0, pieces[i].u1, counts[i]) for i in others}
     # One look-up per key where it hits (hashing a key hashes its curve's fields).
     rows = {i: cache.get(key) for i, key in keys.items()}
@@ -227,12 +227,11 @@ def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.nda
     ends = np.cumsum(counts)
     start = ends - counts
     local, kappa = np.empty(int(ends[-1])), np.zeros(int(ends[-1]))
-    for group, s_rows in _line_rows(pieces, [i for i, line in enumerate(is_line) if line],
-                                    counts):
+    for group, s_rows in _line_rows(pieces, np.flatnonzero(is_line).tolist(), counts):
         local[start[group][:, None] + np.arange(s_rows.shape[1])] = s_rows
     for i, row in rows.items():
         local[start[i]:ends[i]], kappa[start[i]:ends[i]] = row  # type: ignore[misc]
-    s = np.repeat([p.s0_mm for p in pieces], counts) + local
+    s = np.repeat(cols.s0_mm, counts) + local
     # The pieces follow each other: each one's first sample is the previous one's last point.
     # Keep the larger curvature there, drop the duplicate, then anything not strictly ahead.
     first = ends[:-1]
