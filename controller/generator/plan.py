@@ -27,6 +27,7 @@ from controller.errors import PlanningError
 from controller.generator.baselines import FORMULA_FEEDS, plan_formula_run
 from controller.generator.feed.planner import plan_feed
 from controller.generator.feed.shape import TransitionShape
+from controller.generator.helix_move import helix_move
 from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
 from controller.generator.output_marks import SyncMark, output_mark, with_synced
 from controller.generator.ph.construct import BlockCurve, block_curve
@@ -311,13 +312,6 @@ class LookAhead:
             yield from self.flush()
 
 
-def _helix_move(block: HelixBlock, config: MachineConfig) -> Iterator[tuple[RefChunk, bool]]:
-    """helix_move, imported when a program has a helix or an arc off the XY plane."""
-    from controller.generator.helix_move import helix_move
-
-    return helix_move(block, config, 0.0)
-
-
 def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
                  algorithm: Algorithm | str = Algorithm.PH_LOOKAHEAD) -> Iterator[PlannedStep]:
     """Group blocks into runs (rest to rest) and plan each; chunks follow each other in time.
@@ -348,7 +342,7 @@ def plan_program(blocks: Iterable[NcBlock], config: MachineConfig,
             # only once its result is known (controller/probe.py).
             block = block.as_line()
         moves = _straight_move(block, config, 0.0) if isinstance(block, LineBlock) else \
-            _helix_move(block, config) if isinstance(block, HelixBlock) else None
+            helix_move(block, config, 0.0) if isinstance(block, HelixBlock) else None
         if moves is not None:  # a line that moves Z, a rapid, a probe, a helix, a G18/G19 arc
             for chunk, last in moves:
                 rapid = isinstance(block, LineBlock) and block.rapid

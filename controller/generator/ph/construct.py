@@ -17,7 +17,14 @@ from controller.generator.corners.detection import (
 )
 from controller.generator.ph.blend import blend_joint
 from controller.generator.ph.fit import PhSegment, fit_zones
-from controller.generator.ph.line_blends import LineJoints, applies, blend_lines, line_joints
+from controller.generator.ph.line_blends import (
+    LineJoints,
+    applies,
+    applies_onto_line,
+    blend_lines,
+    blend_onto_line,
+    line_joints,
+)
 from controller.geometry.curves import ArcCurve, Curve, LineCurve
 from controller.geometry.nurbs import Nurbs
 from controller.geometry.path import Path, Piece, PieceKind, chain, end_tangent, make_piece
@@ -226,6 +233,28 @@ def _joint_angle_rad(a: Piece, b: Piece, line_row: tuple[LineJoints, int] | None
     return joint_angle_rad(end_tangent(a, True), end_tangent(b, False))
 
 
+def _blended_onto_line(pieces: list[Piece], own: list[bool], curves: list[BlockCurve], i: int,
+                       joints: LineJoints) -> bool:
+    """build_path's step for line i after a line blended into it (a G1 program's every joint):
+    the pieces appended as build_path's general step would (blend_onto_line), True; False
+    where that step is needed (no line joint, a smooth joint, a stop)."""
+    row = joints.row.get(i)
+    if row is None or not applies_onto_line(pieces[-1], joints, row) \
+            or joints.angle_rad[row] <= SMOOTH_JOINT_RAD:
+        return False
+    tol = curves[i - 1].blend_tolerance_mm  # i >= 1: a joint of two of the window's lines
+    bc = curves[i]
+    blended = blend_onto_line(pieces[-1], own[-1], bc.curve, bc.feed_mm_s,  # type: ignore[arg-type]
+                              bc.line, tol, joints, row) if tol else None
+    if blended is None:
+        return False
+    pieces[-1] = blended[0]
+    own[-1] = True
+    pieces += blended[1:]
+    own += [True, True]
+    return True
+
+
 def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
                error_limit_mm: float, use_ph: bool = True,
                cache: FitCache | None = None, prefix: tuple[Piece, ...] = (),
@@ -249,6 +278,9 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
     blends = 0
     joints = line_joints(curves) if repeats is not None else None
     for i, bc in enumerate(curves):
+        if joints is not None and pieces and _blended_onto_line(pieces, own, curves, i, joints):
+            blends += 1
+            continue
         if bc.nurbs:
             ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph,
                                     corner_base + len(infos), cache)
