@@ -16,7 +16,7 @@ from controller.geometry.curves import (
     curvature_derivative_from_derivatives,
     curvature_from_derivatives,
 )
-from controller.numeric import cached_property, clamp
+from controller.numeric import cached_property
 
 
 def _derivative_points(knots: np.ndarray, pts: np.ndarray, p: int) -> np.ndarray:
@@ -85,9 +85,15 @@ class Nurbs:
                                           out[-1], self.degree - j + 1))
         return out
 
+    @cached_property
+    def _inner_breaks(self) -> np.ndarray:
+        """knots[p+1:n]: the span of u is p plus how many of them are <= u."""
+        return np.ascontiguousarray(self.knots[self.degree + 1:self.control_points.shape[0]])
+
     def _spans(self, u: np.ndarray) -> np.ndarray:
-        n, p = self.control_points.shape[0], self.degree
-        return clamp(np.searchsorted(self.knots, u, side="right") - 1, p, n - 1)
+        """The knot span of each u (clamped to p .. n-1): searchsorted(knots, u, "right") - 1
+        clamped, counted on the inner breaks alone (no clamp needed)."""
+        return self._inner_breaks.searchsorted(u, side="right") + self.degree
 
     def de_boor_derivatives(self, u: ArrayLike, order: int = 2) -> np.ndarray:
         """[A, A', ..., A^(order)] of the homogeneous curve by de Boor, shape (order+1, N, 3)."""
