@@ -84,7 +84,8 @@ def test_pieces_sampled_together_are_sampled_as_one_by_one(
         data: list[tuple[complex, float, float]], n: int) -> None:
     """PH blends (a G1 program has one at every joint) and lines are sampled a batch at a
     time; the numbers are those of _piece_samples, bit for bit, cut pieces included."""
-    pieces, cache = [], {}
+    pieces: list = []
+    cache: dict = {}
     for k, (turn, u0, u1) in enumerate(data):
         d1 = complex(1.0, 0.0) + turn
         if abs(d1) < 1e-3:
@@ -93,11 +94,12 @@ def test_pieces_sampled_together_are_sampled_as_one_by_one(
         pieces.append(make_piece(PieceKind.PH, ph, u0, u1, 0.0, 50.0, 1))
         pieces.append(make_piece(PieceKind.LINE, LineCurve((0.0, k), (1.0 + u1, k)), u0, u1,
                                  0.0, 50.0, 1))
-    grid._ph_samples([(p, n) for p in pieces if p.kind == PieceKind.PH], cache)
-    lines = [i for i, p in enumerate(pieces) if p.kind == PieceKind.LINE]
-    for group, rows in grid._line_rows(tuple(pieces), lines, [n] * len(pieces)):
-        for i, row in zip(group.tolist(), rows, strict=True):
-            cache[(pieces[i].curve, pieces[i].u0, pieces[i].u1, n)] = (row, np.zeros(n))
+    for kind in (PieceKind.PH, PieceKind.LINE):
+        index = [i for i, p in enumerate(pieces) if p.kind == kind]
+        for group, rows, kappas in grid._batch_rows(tuple(pieces), index, [n] * len(pieces)):
+            for j, i in enumerate(group.tolist()):
+                kappa = np.zeros(n) if kappas is None else kappas[j]
+                cache[(pieces[i].curve, pieces[i].u0, pieces[i].u1, n)] = (rows[j], kappa)
     for p in pieces:
         s, kappa = cache[(p.curve, p.u0, p.u1, n)]
         one_s, one_kappa = grid._piece_samples(p, n)
