@@ -8,7 +8,10 @@ card runs) driven by the step counters the card actually clocked, frames taken b
 and the pre-compensation's lead included:
 
     python bench/hold_feed.py [--program nc_programs/butterfly.nc] [--points 10] [--markdown]
-                              [--config xy_table_paper]
+                              [--config xy_table_paper] [--holds-only] [--hold-fall SHARE]
+    python bench/hold_feed.py --floor [--hold-fall SHARE] [--stretch K]
+
+--floor prints what the servo model alone takes after a hold's ramp, by speed (model_floor).
 
 The tool is at rest from the first period after which it moves less than REST_STEP_MM a period
 and stays within REST_BAND_MM of where the hold leaves it. The physical minimum from tool
@@ -31,12 +34,15 @@ sys.path.insert(0, str(REPO))
 from controller.config import load_config  # noqa: E402
 from controller.generator.plan import generate_reference  # noqa: E402
 from controller.interpreter.program import read_program  # noqa: E402
+from controller.motion import hold_ramp  # noqa: E402
+from controller.motion.hold_ramp import hold_distances_mm, hold_shape  # noqa: E402
 from controller.motion.loop import MotionController  # noqa: E402
 from controller.motion.pacing import VirtualPacer  # noqa: E402
 from controller.motion.source import ChunkSource  # noqa: E402
 from controller.motion.types import MotionProgress, MotionSettings, MotionState  # noqa: E402
-from controller.servo.model import filter_block  # noqa: E402
+from controller.servo.model import discretise, filter_block  # noqa: E402
 from controller.servo.path_distance import path_distance  # noqa: E402
+from controller.servo.precompensation import compensation_filter  # noqa: E402
 from controller.servo.prediction import plant_servos, rest_state  # noqa: E402
 from drivers.sim.card import SimCard  # noqa: E402
 
@@ -51,6 +57,10 @@ REST_BAND_MM = 1e-3  # ... and staying within 1 um of where it stops
 # about 1 um in that period). This criterion ignores that wander; the one above does not.
 QUANT_BAND_MM = 2e-3
 HELD_S = 0.3  # the hold is resumed this long after the loop reports HELD
+# Holds at this share of the fastest one or more are summed up apart: a slower hold's minimum
+# (v / Amax) is short beside what every hold takes whatever its speed (the request reaching
+# the card, the servo settling), so its ratio says little about the ramp.
+FAST_SHARE = 0.9
 
 
 def run(chunks: tuple, at_s: float, action: str, value: float = 0.0) -> dict:
@@ -94,7 +104,15 @@ def run(chunks: tuple, at_s: float, action: str, value: float = 0.0) -> dict:
     send = ctrl._send
 
     def record(rows: np.ndarray, end: bool, pause: bool = False) -> None:
-        sent.append((ctrl.stream.sent, rows[:, :2].copy()))
+        start = ctrl.stream.sent
+        if sent and "asked_at" in info and "ramp_start" not in info \
+                and start < sent[-1][0] + len(sent[-1][1]):
+            info["ramp_start"] = start  # frames were taken back: the ramp starts here
+        if pause and "asked_at" in info and "ramp_end" not in info:
+            # The hold's ramp at rest: the last row that moves (then rows at rest, settling).
+            step = np.linalg.norm(np.diff(rows[:, :2], axis=0), axis=1)
+            info["ramp_end"] = start + 1 + int(np.flatnonzero(np.r_[1.0, step] > 1e-9)[-1])
+        sent.append((start, rows[:, :2].copy()))
         send(rows, end, pause)
     ctrl._send = record  # type: ignore[method-assign]
     ctrl.run()
@@ -152,7 +170,47 @@ def hold_figures(chunks: tuple, at_s: float, path_xy: np.ndarray) -> dict:
             "d_mm": float(step[k0:rest].sum()),
             "t_min_s": v0 / AMAX, "d_min_mm": v0 * v0 / (2 * AMAX),
             "contour_um": float(near.max()) * 1e3,
-            "fifo_ms": info["queued"] * T * 1e3, "recalled_ms": info["recalled"] * T * 1e3}
+            "fifo_ms": info["queued"] * T * 1e3, "recalled_ms": info["recalled"] * T * 1e3,
+            "ramp_from_ms": (info.get("ramp_start", info["asked_at"]) - info["asked_at"]) * T * 1e3,
+            "ramp_to_ms": (info.get("ramp_end", info["asked_at"]) - info["asked_at"]) * T * 1e3}
+
+
+def model_floor(v0_mm_s: float, stretch: float = 1.0) -> tuple[int, float, float]:
+    """A hold from v0 on a straight line of the X axis without pulses: the hold's ramp (its
+    samples), then when the servo model, driven by the pre-compensated frames (unrounded),
+    is within QUANT_BAND_MM and REST_BAND_MM of the hold point for good, from the ramp's start
+    (ms). What a hold takes at least once its ramp has reached the card."""
+    servo = CFG.axes[0].servo
+    shape = hold_shape(CFG.interpolator.ramp_share)
+    dist = hold_distances_mm(v0_mm_s, AMAX, T, shape, stretch)
+    lead_in = 400  # samples at v0 before the ramp: every filter at its steady state
+    wanted = np.concatenate([np.arange(-lead_in, 1) * v0_mm_s * T, dist,
+                             np.full(400, dist[-1])])
+    v = np.diff(wanted, prepend=wanted[0] - v0_mm_s * T) / T
+    frames = wanted
+    if CFG.interpolator.servo_precompensation:
+        comp = compensation_filter(servo, T)
+        warm = filter_block(comp, np.full(lead_in, v0_mm_s), np.zeros(comp.order))[1]
+        frames = wanted + filter_block(comp, v, warm)[0]
+    plant = discretise(servo, T)
+    warm = filter_block(plant, np.full(lead_in, v0_mm_s), np.zeros(plant.order))[1]
+    tool = frames - filter_block(plant, np.diff(frames, prepend=frames[0] - v0_mm_s * T) / T,
+                                 warm)[0]
+    off = np.abs(tool - dist[-1])
+
+    def settled_ms(band_mm: float) -> float:
+        return (int(np.flatnonzero(off > band_mm)[-1]) + 1 - lead_in) * T * 1e3
+
+    return len(dist), settled_ms(QUANT_BAND_MM), settled_ms(REST_BAND_MM)
+
+
+def print_floor(stretch: float) -> None:
+    print("| tool speed (mm/s) | minimum (ms) | 2 x minimum (ms) | ramp (ms) | "
+          "within 2 um after the ramp's start (ms) | within 1 um (ms) |\n|---|---|---|---|---|---|")
+    for v0 in (10.0, 20.0, 30.0, 40.0, 50.0, 58.0):
+        n, band_ms, rest_ms = model_floor(v0, stretch)
+        print(f"| {v0:.0f} | {v0 / AMAX * 1e3:.1f} | {2 * v0 / AMAX * 1e3:.1f} | {n * T * 1e3:.0f} "
+              f"| {band_ms:.0f} | {rest_ms:.0f} |")
 
 
 def arc_mm(xy: np.ndarray) -> np.ndarray:
@@ -185,16 +243,36 @@ def _ratios(r: list[float]) -> str:
     return f"{statistics.median(r):.2f} x the minimum (worst {max(r):.2f} x)"
 
 
+def _summary(holds: list[dict]) -> str:
+    ratio_t = [h["t_s"] / h["t_min_s"] for h in holds if h["t_min_s"] > 0]
+    band_t = [h["t_band_s"] / h["t_min_s"] for h in holds if h["t_min_s"] > 0]
+    return (f"tool at rest {_spread([h['t_s'] for h in holds])}, {_ratios(ratio_t)}; "
+            f"within 2 um {_spread([h['t_band_s'] for h in holds])}, {_ratios(band_t)}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--program", default=str(REPO / "nc_programs/butterfly.nc"))
     ap.add_argument("--points", type=int, default=10)
     ap.add_argument("--markdown", action="store_true")
     ap.add_argument("--config", help="machine configuration (default: xy_table)")
+    ap.add_argument("--holds-only", action="store_true", help="no feed override latency")
+    ap.add_argument("--floor", action="store_true",
+                    help="only the servo model's settling after a hold's ramp, by speed")
+    ap.add_argument("--hold-fall", type=float,
+                    help="the hold's ramp falls over this share of it (default: the shipped "
+                         f"{hold_ramp.HOLD_FALL_SHARE:g})")
+    ap.add_argument("--stretch", type=float, default=1.0,
+                    help="with --floor: the hold's ramp this many times longer")
     args = ap.parse_args()
+    if args.hold_fall is not None:
+        hold_ramp.HOLD_FALL_SHARE = args.hold_fall  # hold_shape() reads it for each run
     global CFG, T, AMAX
     CFG = load_config(args.config or "xy_table")
     T, AMAX = CFG.sample_period_s, CFG.interpolator.max_accel_mm_s2
+    if args.floor:
+        print_floor(args.stretch)
+        return
     chunks = tuple(generate_reference(read_program(args.program, CFG), CFG))
     total_s = sum(len(c) for c in chunks) * T
     times = np.linspace(0.1, total_s - 0.4, args.points)
@@ -204,20 +282,25 @@ def main() -> None:
           f"time, Amax {AMAX:g} mm/s^2, card FIFO high water "
           f"{CFG.runtime.card_fifo_high_water_ms:g} ms)\n")
     head = ["at t (s)", "tool speed (mm/s)", "tool at rest (ms)", "within 2 um (ms)",
-            "minimum (ms)",
+            "minimum (ms)", "ramp (ms)",
             "distance (mm)", "minimum (mm)", "contour (um)", "card FIFO (ms)",
             "taken back (ms)"]
     print("| " + " | ".join(head) + " |\n|" + "---|" * len(head))
     for h in holds:
         print(f"| {h['at_s']:.2f} | {h['v0']:.1f} | {h['t_s'] * 1e3:.0f} | "
               f"{h['t_band_s'] * 1e3:.0f} | "
-              f"{h['t_min_s'] * 1e3:.1f} | {h['d_mm']:.2f} | {h['d_min_mm']:.3f} | "
+              f"{h['t_min_s'] * 1e3:.1f} | {h['ramp_from_ms']:.0f}-{h['ramp_to_ms']:.0f} | "
+              f"{h['d_mm']:.2f} | {h['d_min_mm']:.3f} | "
               f"{h['contour_um']:.1f} | {h['fifo_ms']:.0f} | {h['recalled_ms']:.0f} |")
-    ratio_t = [h["t_s"] / h["t_min_s"] for h in holds if h["t_min_s"] > 0]
-    band_t = [h["t_band_s"] / h["t_min_s"] for h in holds if h["t_min_s"] > 0]
-    print(f"\ntool at rest: {_spread([h['t_s'] for h in holds])}, {_ratios(ratio_t)}; "
-          f"within 2 um: {_spread([h['t_band_s'] for h in holds])}, {_ratios(band_t)}; "
+    print(f"\nall holds: {_summary(holds)}; "
           f"contour worst {max(h['contour_um'] for h in holds):.1f} um")
+    top = max(h["v0"] for h in holds)
+    fast = [h for h in holds if h["v0"] >= FAST_SHARE * top]
+    if len(fast) < len(holds):
+        print(f"at {FAST_SHARE:.0%} of the top speed or more ({len(fast)} holds): "
+              f"{_summary(fast)}")
+    if args.holds_only:
+        return
     lat = [feed_latency(chunks, float(t), 30.0) for t in times[1:-1:2]]
     print("\nfeed 100 -> 30 %: latency from the request\n")
     print("| at t (s) | first change (ms) | within 1 % of 30 % (ms) | card FIFO (ms) |\n"

@@ -1,4 +1,4 @@
-"""The `gcode` section of a machine config: subroutine folders and the dialect's start state."""
+"""The `gcode` section of a machine config: subroutine folders, start state, Centroid's rules."""
 
 from __future__ import annotations
 
@@ -9,6 +9,8 @@ from typing import Any
 from controller.errors import ConfigError
 
 POWER_UP_MOTIONS = ("none", "G0")
+MAIN_PROGRAM_M99 = ("restart", "end")
+M25_RULES = ("refuse", "z_home")
 
 
 @dataclass(frozen=True, slots=True)
@@ -21,11 +23,19 @@ class GcodeConfig:
     Marlin's rule); None refuses such a move, as LinuxCNC and grbl do.
 
     power_up_motion: the motion mode an axis word follows before the program's first motion
-    code: "none" refuses it (LinuxCNC), "G0" moves at rapid (grbl's power-up state)."""
+    code: "none" refuses it (LinuxCNC), "G0" moves at rapid (grbl's power-up state).
+
+    main_program_m99: "restart" starts the main program again at an M99 (LinuxCNC's task,
+    Fanuc), "end" ends the job there like M2 (Centroid).
+
+    m25: "refuse" refuses M25 (LinuxCNC does not know it), "z_home" reads it as Centroid's
+    "move Z to its home position": a rapid of Z alone, as G53 G0 Z<home>."""
 
     subroutine_path: tuple[str, ...] = ()
     default_feed_mm_min: float | None = None
     power_up_motion: str = "none"
+    main_program_m99: str = "restart"
+    m25: str = "refuse"
 
 
 def read_gcode_section(sec: Any) -> GcodeConfig:
@@ -33,8 +43,10 @@ def read_gcode_section(sec: Any) -> GcodeConfig:
     folders = _subroutine_path(sec)
     feed = _default_feed(sec)
     motion = sec.str("power_up_motion", "none", choices=POWER_UP_MOTIONS)
+    m99 = sec.str("main_program_m99", "restart", choices=MAIN_PROGRAM_M99)
+    m25 = sec.str("m25", "refuse", choices=M25_RULES)
     sec.finish()
-    return GcodeConfig(folders, feed, motion)
+    return GcodeConfig(folders, feed, motion, m99, m25)
 
 
 def _subroutine_path(sec: Any) -> tuple[str, ...]:

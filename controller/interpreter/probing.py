@@ -1,11 +1,11 @@
 """G38.2-G38.5 in the interpreter (LinuxCNC's straight probe): checks, the ProbeBlock, and
 reading on from the probe's result.
 
-LinuxCNC's errors: a probe needs a feed (G94), at least one axis word and a move of non-zero
-length; it is one straight move in the program's frame. After it the position is where the
-machine stopped, and #5061-#5063 and #5070 hold the result (controller/probe.py). Without a
-result (`check`) the probe is taken to go the whole way: the travel check then covers the
-farthest it can go.
+LinuxCNC's errors: a probe needs a feed (G94) and at least one axis word; it is one straight
+move in the program's frame. A probe of zero length does not run (Probing._zero_length).
+After it the position is where the machine stopped, and #5061-#5063 and #5070 hold the
+result (controller/probe.py). Without a result (`check`) the probe is taken to go the whole
+way: the travel check then covers the farthest it can go.
 """
 
 from __future__ import annotations
@@ -42,8 +42,8 @@ class Probing:
         start = self.modal.pos
         end = self.moves._end_point(vals)
         if end == start:
-            raise WordError(name, f"{name}: the probe's end point is where it stands "
-                                  "(a move of zero length)")
+            self._zero_length(code10, name, start)
+            return
         self.out.append(ProbeBlock(name, start, end, self.modal.feed_mm_s,
                                    Source(self.path, lineno, lineno)))
         self.results.seen[lineno] = name
@@ -60,6 +60,17 @@ class Probing:
         self.modal.pos = result.stop_mm
         origin = self.offsets.origin or (0.0, 0.0, 0.0)
         self.results.parameters.update(result.parameters(origin))
+
+    def _zero_length(self, code10: int, name: str, here: tuple[float, float, float]) -> None:
+        """A probe to where it stands (smartprobe.ngc's G38.5 at its safe height): no move can
+        make or lose contact, so it does not run. G38.2/G38.4 would fail; G38.3/G38.5 end at
+        once without contact (#5070 = 0, #5061-#5063 where the machine stands), as in LinuxCNC."""
+        if code10 in (382, 384):
+            raise WordError(name, f"{name}: the probe's end point is where it stands (a move "
+                                  f"of zero length cannot {'make' if code10 == 382 else 'lose'}"
+                                  " contact)")
+        origin = self.offsets.origin or (0.0, 0.0, 0.0)  # `here` is machine mm, as modal.pos
+        self.results.parameters.update(ProbeResult(0, False, here, here).parameters(origin))
 
     def set_parameters(self, set_number: Callable[[int, float], None]) -> bool:
         """#5061-#5063 and #5070 for what follows the probe just read; whether a probing

@@ -16,6 +16,7 @@ from controller.blocks import NcBlock, NurbsBlock, Source
 from controller.config import MachineConfig, load_config
 from controller.errors import NcError
 from controller.geometry.nurbs import Nurbs
+from controller.interpreter.centroid import M25_CODE, CentroidCodes
 from controller.interpreter.codes import (
     G_GROUP,
     G_UNSUPPORTED,
@@ -115,6 +116,7 @@ class Interpreter:
         self.ended_by_percent = False
         self.words_seen = False
         self.mach3 = Mach3Probing(path, self.state.warn_word)
+        self.centroid = CentroidCodes(self.state)  # M25, M99 ending the main program
 
     def run(self, handle: TextIO, from_line: int | None = None) -> Iterator[NcBlock]:
         """The blocks of the program; from `from_line` on only (see read_program)."""
@@ -130,7 +132,9 @@ class Interpreter:
         self.state.locate = lambda n: cursor.locate(self.path, n)
         flow = self.flow = Flow(self.path, cursor, self.params,
                                 self.state.config.gcode.subroutine_path)
-        self.subprograms = Subprograms(flow, self.state.warn_word)
+        centroid = self.centroid
+        self.subprograms = Subprograms(flow, self.state.warn_word,
+                                       centroid.end_job if centroid.ends_job else None)
         for raw in cursor:
             lineno = cursor.next_line - 1
             if not emitting and from_line and first <= lineno < EXTERNAL_LINE_BASE:
@@ -257,10 +261,13 @@ class Interpreter:
                 if ms and (98 in ms or 99 in ms):
                     self._subprogram(line, gs, ms, vals, lineno)
                     return
-                if ms and (40 in ms or 41 in ms):
-                    ms = self.mach3.probe_log(ms, lineno)
-                self.state.execute(gs, ms, vals, lineno)
-                self.mach3.after_line(lineno, self.params)
+                if ms and M25_CODE in ms:
+                    self.centroid.m25(gs, ms, vals, lineno)
+                else:
+                    if ms and (40 in ms or 41 in ms):
+                        ms = self.mach3.probe_log(ms, lineno)
+                    self.state.execute(gs, ms, vals, lineno)
+                    self.mach3.after_line(lineno, self.params)
             except WordError as exc:
                 raise self._error(line, lineno, exc.word, exc.message) from None
         if line.assigns:
@@ -330,8 +337,8 @@ class Interpreter:
         if code is not None:
             return code
         number = float(text)
-        if number in (98.0, 99.0, 40.0, 41.0):
-            return int(number)  # M98/M99: _subprogram runs them; M40/M41: see Mach3Probing
+        if number in (98.0, 99.0, 40.0, 41.0, 25.0):  # M98/M99: _subprogram runs them;
+            return int(number)  # M40/M41: see Mach3Probing; M25: CentroidCodes
         if number != int(number) or int(number) not in M_GROUP:
             raise NcError(self.path, lineno, line.col(i), "M" + text, m_refusal(number))
         _M_CACHE[text] = int(number)

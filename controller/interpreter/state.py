@@ -41,7 +41,7 @@ _STOPS = {0: StopKind.PAUSE, 1: StopKind.OPTIONAL_PAUSE, 2: StopKind.END, 30: St
 _USES: dict[int, frozenset[str]] = {
     0: _MOVE, 10: _MOVE, 20: _MOVE | set("IJRP") | {"K"}, 30: _MOVE | set("IJRP") | {"K"},
     51: _MOVE | set("IJ"), 52: frozenset("XYZPL"), 62: frozenset("XYZRKPQ"), 40: frozenset("P"),
-    640: frozenset("PQ"), 430: frozenset("H"), 431: frozenset("Z"),
+    640: frozenset("PQ"), 430: frozenset("H"), 431: frozenset("Z"), 490: frozenset("H"),
     100: _AXES | set("LPR"), 920: _AXES, 382: _MOVE, 383: _MOVE, 384: _MOVE, 385: _MOVE,
     280: _AXES, 300: _AXES,
     **{code: _MOVE | set("RLPQ") for code in CYCLES},
@@ -71,8 +71,8 @@ class InterpState:
         self.offsets = WorkOffsets(offsets if offsets is not None else OffsetTable(), track,
                                    config.has_axis("z"), config.name)
         self.moves = Moves(self.modal, self.offsets, config, path, self.out)
-        self.moves.warn_word = self.warn_word
         self.tools = ToolState(config, self.modal, self.offsets, path, self.out)
+        self.moves.warn_word = self.tools.warn_word = self.warn_word
         if track is not None:
             self.tools.events = track.io_events  # the caller reads them after the program
         self.probing = Probing(self.modal, self.offsets, self.moves, path, self.out,
@@ -124,7 +124,7 @@ class InterpState:
             check_polar(vals, groups, self.modal, axis_code)
         _check_letters(groups, vals,
                        motion if motion is not None or axis_code else self.modal.motion, ms)
-        self._modes(groups, vals)
+        self._modes(groups, vals, lineno)
         self._feed_speed_tool(vals, ms, mgroups, lineno)
         if nonmodal == 40:
             self._dwell(vals, lineno)
@@ -242,7 +242,7 @@ class InterpState:
                        f"cannot run from line {line}: it is inside the {nurbs.kind} NURBS "
                        f"block that starts at line {first}; run from line {first}")
 
-    def _modes(self, groups: dict[str, int], vals: dict[str, float]) -> None:
+    def _modes(self, groups: dict[str, int], vals: dict[str, float], lineno: int) -> None:
         if "canned return" in groups:
             self.cycles.retract_to_r = groups["canned return"] == 990
         if "units" in groups:
@@ -275,7 +275,7 @@ class InterpState:
         elif length == 431:
             self.tools.g43_1(vals)
         elif length == 490:
-            self.tools.g49()
+            self.tools.g49(vals.get("H"), lineno)
         # G40, G94, G98/G99 and G97 change nothing in phcnc's model; accepted for CAM headers.
 
     def _tol(self, vals: dict[str, float], letter: str) -> float | None:

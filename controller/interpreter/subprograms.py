@@ -6,7 +6,8 @@ remembers it once found). #1-#30 stay shared with the caller (an `o100 call` sav
 parameters set in the program are its own. `M99` in the main program goes back to the first
 line and runs the program again with the state it has (LinuxCNC's endless program, as its task
 runs it; its standalone rs274 ends the program there instead): the program must end within
-MAX_PROGRAM_PASSES passes, else an error names the M99 line. The two styles do not mix: an
+MAX_PROGRAM_PASSES passes, else an error names the M99 line. With `gcode.main_program_m99: end`
+it ends the job there instead, as M2 (Centroid's rule: centroid.py). The two styles do not mix: an
 `O100 sub` is called with `O100 call` and ends with `O100 endsub`, an `O100` with `M98` and `M99`.
 """
 
@@ -35,9 +36,11 @@ _LOOP_COUNT_TOLERANCE = 1e-4  # LinuxCNC's tolerance for a whole number (its "in
 class Subprograms:
     """The M98 calls and M99 returns of a program, on the flow of its O-word lines."""
 
-    def __init__(self, flow: Flow, warn_word: Callable[[int, str, str], None]) -> None:
+    def __init__(self, flow: Flow, warn_word: Callable[[int, str, str], None],
+                 end_main: Callable[[int], None] | None = None) -> None:
         self.flow = flow
         self.warn_word = warn_word
+        self.end_main = end_main  # M99 in the main program ends the job (Centroid), not restarts
         self.program_passes = 0
 
     def m98(self, vals: dict[str, float], lineno: int) -> None:
@@ -74,7 +77,10 @@ class Subprograms:
         flow = self.flow
         frame = flow.frames[-1]
         if frame.label is None:
-            self._to_start(lineno)
+            if self.end_main is not None:
+                self.end_main(lineno)
+            else:
+                self._to_start(lineno)
             return
         if not frame.fanuc:
             raise WordError(

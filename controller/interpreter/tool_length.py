@@ -1,4 +1,4 @@
-"""Tools in the interpreter: T, M6 (a manual tool change), G43 H, G43.1 Z and G49 on Z.
+"""Tools in the interpreter: T, M6 (a manual tool change), G43 H, G43.1 Z and G49 (H0) on Z.
 
 LinuxCNC's model: T selects a tool, M6 loads it; G43 Hn puts tool n's length in force (H
 missing: the loaded tool), G43.1 Z a length given in the program, G49 none. The length offsets
@@ -9,6 +9,8 @@ T words are then unchecked and every length is zero, as before tools existed.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 from controller.blocks import AuxBlock, LineBlock, NcBlock, PathControl, Source, StopBlock, StopKind
 from controller.config import MachineConfig
@@ -35,6 +37,9 @@ class ToolState:
         self.follows_loaded = False  # G43 without H, or H = the loaded tool: M6 changes it
         self.length_mm = 0.0  # the tool length offset in force
         self.events: list[dict[str, object]] = []  # tool changes, for the run's event stream
+        # (lineno, word, message): a word accepted beyond LinuxCNC; InterpState's warn_word
+        self.warn_word: Callable[[int, str, str], None] = lambda lineno, word, message: None
+        self._g49_h0_said = False
 
     def select(self, value: float) -> None:
         """A T word: the tool must be in the table (when one is in force)."""
@@ -105,9 +110,22 @@ class ToolState:
         self.follows_loaded = False
         self._put_length(vals["Z"] * self.modal.scale, "Z")
 
-    def g49(self) -> None:
+    def g49(self, h: float | None = None, lineno: int = 0) -> None:
+        """G49: no length in force. `G49 H0` (FreeCAD's Centroid post) is G49: H0 names no
+        tool in Fanuc's and Centroid's G43/G49; LinuxCNC refuses H with G49, so it warns."""
+        if h is not None:
+            self._g49_h(h, lineno)
         self.follows_loaded = False
         self._put_length(0.0, "G49")
+
+    def _g49_h(self, h: float, lineno: int) -> None:
+        if h != 0:
+            raise WordError("H", f"H{h:g} with G49, which puts no tool length in force (only "
+                                 "H0, no tool, is read with it)")
+        if not self._g49_h0_said:
+            self._g49_h0_said = True
+            self.warn_word(lineno, "H0", "G49 H0 read as G49: H0 is no tool (Fanuc's and "
+                                         "Centroid's rule; LinuxCNC refuses H with G49)")
 
     def _length_of(self, number: int, word: str) -> float:
         if self.table is None or number == 0:

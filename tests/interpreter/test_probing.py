@@ -99,10 +99,32 @@ def test_a_probe_line_run_again_in_a_loop_has_a_result_per_pass(tmp_path: Path) 
     assert [blk.end for blk in b if isinstance(blk, LineBlock)][-1][2] == 20.0
 
 
+ZERO_LENGTH = ("G21 G90 G10 L2 P1 X10 Y10\nG54 G0 X1 Y2 Z5\nF100\nG38.5 Z5\nG38.3 X1 Y2\n"
+               "G38.2 Z-10\nG0 Z5\nM2\n")
+
+
+def test_a_zero_length_g38_3_or_g38_5_ends_at_once_without_contact(tmp_path: Path) -> None:
+    """smartprobe.ngc's G38.5 at its safe height: no move, #5070 = 0, #5061-#5063 where the
+    machine stands; it takes no result of the machine's (the next probe takes the first)."""
+    probes = ProbeResults(barrier=True)
+    b = read(tmp_path, ZERO_LENGTH, probes)
+    assert [x.source.first_line for x in b if isinstance(x, ProbeBlock)] == [6]
+    assert probes.stopped_at == 6 and probes.ran == 1
+    probes = ProbeResults(barrier=True)
+    read(tmp_path, ZERO_LENGTH.replace("G38.2 Z-10\n", ""), probes)
+    assert probes.parameters == {5061: 1.0, 5062: 2.0, 5063: 5.0, 5070: 0.0}
+    first = ProbeResult(6, True, (11, 12, -1), (11, 12, -1.1))
+    probes = ProbeResults([first], barrier=True)
+    b = read(tmp_path, ZERO_LENGTH, probes)
+    last = [x for x in b if isinstance(x, LineBlock)][-1]
+    assert last.end == pytest.approx((11, 12, 5)) and probes.parameters[5070] == 1.0
+
+
 @pytest.mark.parametrize(("text", "says"), [
     ("G38.2 Z-5\n", "no feed rate"),
     ("F100 G38.2\n", "needs an axis word"),
-    ("F100 G38.4 Z0\n", "zero length"),
+    ("F100 G38.4 Z0\n", "zero length cannot lose contact"),
+    ("F100 G38.2 X1\n", "zero length cannot make contact"),
     ("F100 G38.2 Z-5 G0\n", "both in the motion modal group"),
 ])
 def test_bad_probes_are_errors_naming_the_line(tmp_path: Path, text: str, says: str) -> None:

@@ -8,6 +8,7 @@ import pytest
 from nc_helpers import XY_TABLE, XYZ_MILL, blocks_of
 
 from controller.blocks import ProbeBlock
+from controller.config import MachineConfig
 from controller.errors import NcError
 from controller.interpreter.flow import MAX_CALL_DEPTH
 from controller.interpreter.program import read_program
@@ -23,31 +24,31 @@ def ends(tmp_path: Path, text: str) -> list[tuple[float, ...]]:
     ]
 
 
-def warnings_of(path: Path) -> list[str]:
+def warnings_of(path: Path, config: MachineConfig = XYZ_MILL) -> list[str]:
     track = ProgramOffsets()
-    for _ in read_program(str(path), XYZ_MILL, track=track):
+    for _ in read_program(str(path), config, track=track):
         pass
     return track.warnings
 
 
 def test_m99_in_the_main_program_runs_it_again_until_it_ends(tmp_path: Path) -> None:
     """The lines before the first O-word or M98 are read again from the file on each pass;
-    the parameters keep their values (LinuxCNC's task seeks back to the first line)."""
+    the parameters keep their values (LinuxCNC's task seeks back to the first line). xy_table
+    keeps LinuxCNC's rule (xyz_mill ends the job there: test_centroid)."""
     text = "G21 G90 F600\n#<_n> = [#<_n> + 1]\nG1 X#<_n>\no1 if [#<_n> GE 4]\nM2\no1 endif\nM99\n"
     path = tmp_path / "p.ngc"
     path.write_text("#<_n> = 0\n" + text)
     # the first line sets the counter again on every pass: that program never ends
     with pytest.raises(NcError) as info:
-        list(read_program(str(path), XYZ_MILL))
+        list(read_program(str(path), XY_TABLE))
     assert info.value.line == 8 and info.value.word == "M99"
     assert f"did not end within {MAX_PROGRAM_PASSES} passes" in info.value.message
     counted = tmp_path / "q.ngc"
     counted.write_text("o2 if [EXISTS[#<_n>] EQ 0]\n#<_n> = 0\no2 endif\n" + text)
-    xs = [b.end[0] for b in read_program(str(counted), XYZ_MILL) if hasattr(b, "end")]
+    xs = [b.end[0] for b in read_program(str(counted), XY_TABLE) if hasattr(b, "end")]
     assert xs[:4] == [1.0, 2.0, 3.0, 4.0]
-    assert any(
-        ":10: M99: M99 in the main program starts it again" in w for w in warnings_of(counted)
-    )
+    warned = warnings_of(counted, XY_TABLE)
+    assert any(":10: M99: M99 in the main program starts it again" in w for w in warned)
 
 
 def test_a_numbered_program_repeats_with_l_and_shares_numbered_parameters(tmp_path: Path) -> None:
