@@ -235,9 +235,10 @@ def _joint_angle_rad(a: Piece, b: Piece, line_row: tuple[LineJoints, int] | None
 
 def _blended_onto_line(pieces: list[Piece], own: list[bool], curves: list[BlockCurve], i: int,
                        joints: LineJoints) -> bool:
-    """build_path's step for line i after a line blended into it (a G1 program's every joint):
-    the pieces appended as build_path's general step would (blend_onto_line), True; False
-    where that step is needed (no line joint, a smooth joint, a stop)."""
+    """build_path's step for line i where the piece before it is a line that blends into it
+    (every joint of a G1 program): the pieces appended as build_path's general step would
+    append them (blend_onto_line), True; False where that step is needed (not a joint of two
+    lines, a smooth joint, a stop)."""
     row = joints.row.get(i)
     if row is None or not applies_onto_line(pieces[-1], joints, row) \
             or joints.angle_rad[row] <= SMOOTH_JOINT_RAD:
