@@ -45,11 +45,14 @@ def _unit_tangent(curve: LineCurve) -> complex:
 
 def line_joints(curves: list[object]) -> LineJoints:
     """Every joint of two lines in a window's block curves (BlockCurve: .curve)."""
-    index = [i for i in range(1, len(curves))
-             if isinstance(curves[i - 1].curve, LineCurve)  # type: ignore[attr-defined]
-             and isinstance(curves[i].curve, LineCurve)]  # type: ignore[attr-defined]
-    t0 = np.array([_unit_tangent(curves[i - 1].curve) for i in index], complex)  # type: ignore[attr-defined]
-    t1 = np.array([_unit_tangent(curves[i].curve) for i in index], complex)  # type: ignore[attr-defined]
+    is_line = [isinstance(c.curve, LineCurve) for c in curves]  # type: ignore[attr-defined]
+    index = [i for i in range(1, len(curves)) if is_line[i - 1] and is_line[i]]
+    # Each line's tangent once (a line between two others is in two joints); block_curve
+    # makes no line shorter than a micrometre, so none has a zero tangent.
+    tangent = [_unit_tangent(c.curve) if line else 0j  # type: ignore[attr-defined]
+               for c, line in zip(curves, is_line, strict=True)]
+    t0 = np.array([tangent[i - 1] for i in index], complex)
+    t1 = np.array([tangent[i] for i in index], complex)
     w, deviation, canonical = unit_blends(t0, t1, MAX_BLEND_ANGLE_RAD)
     return LineJoints({i: k for k, i in enumerate(index)},
                       np.abs(np.angle(t1 * np.conj(t0))).tolist(), deviation.tolist(),
