@@ -33,12 +33,22 @@ def contour_parts(block: LineBlock | ArcBlock, max_feed_mm_s: float
     """The block itself when short, else equal parts of at most PART_NOMINAL_S each, made as
     they are taken (a list of the two million half turns of `G2 P1000000` filled memory)."""
     feed = max(min(block.feed_mm_s, max_feed_mm_s), 1e-9)
+    if isinstance(block, LineBlock) and _manhattan_mm(block) < 0.5 * PART_NOMINAL_S * feed:
+        # Far inside the limit by a bound of its length, so its exact length (a numpy norm,
+        # costly on every line of a G1 program) is not needed.
+        return iter([block])
     n = math.ceil(block.length_mm / feed / PART_NOMINAL_S)
     if n <= 1:
         return iter([block])
     if isinstance(block, LineBlock):
         return _line_parts(block, n)
     return _arc_parts(block, max(n, math.ceil(abs(block.sweep_rad) / MAX_PART_SWEEP_RAD)))
+
+
+def _manhattan_mm(block: LineBlock) -> float:
+    """|dx| + |dy| + |dz|: at least the line's length."""
+    (x0, y0, z0), (x1, y1, z1) = block.start, block.end
+    return abs(x1 - x0) + abs(y1 - y0) + abs(z1 - z0)
 
 
 def _line_parts(block: LineBlock, n: int) -> Iterator[LineBlock]:

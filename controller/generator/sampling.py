@@ -100,10 +100,9 @@ def _points_on_lines(path: Path, pieces: np.ndarray, idx: np.ndarray,
     ends = np.array([(*p.curve.p0, *p.curve.p1) for p in ps])  # type: ignore[attr-defined]
     d = np.column_stack((ends[:, 2] - ends[:, 0], ends[:, 3] - ends[:, 1]))
     length = np.array([p.curve.length_mm for p in ps])
-    u0 = np.array([p.u0 for p in ps])
-    u1 = np.array([p.u1 for p in ps])
-    start = np.array([p.s0_mm for p in ps])
-    piece_len = np.array([p.length_mm for p in ps])
+    cols = path.columns
+    u0, u1 = cols.u0[pieces], cols.u1[pieces]
+    start, piece_len = cols.s0_mm[pieces], cols.length_mm[pieces]
     local = clamp(s - start[k], 0.0, piece_len[k])
     u = (local + (u0 * length)[k]) / length[k]
     u = clamp(u, np.minimum(u0, u1)[k], np.maximum(u0, u1)[k])
@@ -140,20 +139,21 @@ def interpolate(path: Path, profile: FeedProfile, sample_period_s: float,
     xy = np.empty((s.size, 2))
     phi = np.empty(s.size)
     present = sorted_unique(idx)
-    kinds = np.array([path.pieces[i].kind == PieceKind.PH for i in present.tolist()], bool)
+    cols = path.columns
+    kinds = cols.of_kind(PieceKind.PH)[present]
     ph_pieces = present[kinds]
     if ph_pieces.size:  # every PH corner's samples in one vectorised Newton iteration
         rows = np.flatnonzero(is_in_sorted(idx, ph_pieces))
         which = np.searchsorted(ph_pieces, idx[rows])
         ph = [path.pieces[i] for i in ph_pieces.tolist()]
-        s0 = np.array([p.s0_mm for p in ph])
+        s0 = cols.s0_mm[ph_pieces]
         local = s[rows] - s0[which]
-        if any(p.u0 != 0.0 for p in ph):  # a PH piece trimmed by a look-ahead window's cut
+        if np.any(cols.u0[ph_pieces] != 0.0):  # a PH piece trimmed by a window's cut
             local = local + np.array([p.curve_s0_mm if p.u0 != 0.0 else 0.0 for p in ph])[which]
         xy[rows], phi[rows] = ph_interpolate_many(
             [p.curve for p in ph], which, local)  # type: ignore[misc]
     others = present[~kinds]
-    lines = np.array([path.pieces[i].kind == PieceKind.LINE for i in others.tolist()], bool)
+    lines = cols.of_kind(PieceKind.LINE)[others]
     if lines.any():
         rows = np.flatnonzero(is_in_sorted(idx, others[lines]))
         xy[rows], phi[rows] = _points_on_lines(path, others[lines], idx[rows], s[rows])
@@ -166,5 +166,4 @@ def interpolate(path: Path, profile: FeedProfile, sample_period_s: float,
     if method == Interpolation.SEQUENTIAL_TAYLOR:
         _sequential_taylor(path, idx, v, a, xy, sample_period_s)
     xy[-1] = path.end_xy
-    lines = np.array([p.line for p in path.pieces], np.int32)  # path.line_at(s), gathered
-    return Samples(t, s, v, a, xy, phi, lines[idx])
+    return Samples(t, s, v, a, xy, phi, cols.line[idx])  # path.line_at(s), gathered

@@ -16,7 +16,7 @@ from controller.geometry.curves import (
     curvature_derivative_from_derivatives,
     curvature_from_derivatives,
 )
-from controller.numeric import cached_property, clamp
+from controller.numeric import cached_property
 
 
 def _derivative_points(knots: np.ndarray, pts: np.ndarray, p: int) -> np.ndarray:
@@ -85,9 +85,15 @@ class Nurbs:
                                           out[-1], self.degree - j + 1))
         return out
 
+    @cached_property
+    def _inner_breaks(self) -> np.ndarray:
+        """knots[p+1:n]: the span of u is p plus how many of them are <= u."""
+        return np.ascontiguousarray(self.knots[self.degree + 1:self.control_points.shape[0]])
+
     def _spans(self, u: np.ndarray) -> np.ndarray:
-        n, p = self.control_points.shape[0], self.degree
-        return clamp(np.searchsorted(self.knots, u, side="right") - 1, p, n - 1)
+        """The knot span of each u (clamped to p .. n-1): searchsorted(knots, u, "right") - 1
+        clamped, counted on the inner breaks alone (no clamp needed)."""
+        return self._inner_breaks.searchsorted(u, side="right") + self.degree
 
     def de_boor_derivatives(self, u: ArrayLike, order: int = 2) -> np.ndarray:
         """[A, A', ..., A^(order)] of the homogeneous curve by de Boor, shape (order+1, N, 3)."""
@@ -116,12 +122,12 @@ class Nurbs:
         return table
 
     @cached_property
-    def _taylor_rows(self) -> np.ndarray:
-        """_taylor_table as (n, (p+1)*3), x and y only, (n, (p+1)*2), when the curve is
-        polynomial: gathering whole rows by span is several times faster than gathering along a
-        last axis."""
+    def _taylor_columns(self) -> np.ndarray:
+        """_taylor_table as ((p+1)*3, n), x and y only, ((p+1)*2, n), when the curve is
+        polynomial: gathered by span along the last axis, the coefficients of each row come out
+        contiguous, shaped (p+1, dims, N) without a copy."""
         table = self._taylor_table[:, :, :2] if self._polynomial else self._taylor_table
-        return np.ascontiguousarray(table.reshape(table.shape[0], -1))
+        return np.ascontiguousarray(table.reshape(table.shape[0], -1).T)
 
     def _homogeneous_rows(self, u: ArrayLike, order: int) -> np.ndarray:
         """[A, A', ..., A^(order)] as (order+1, 3, N): x, y and w rows, each contiguous (x and y
@@ -129,13 +135,14 @@ class Nurbs:
 
         One pass of Horner's scheme over the span's Taylor coefficients carries the value and
         the derivatives divided by j! (the scheme derivatives_scalar uses): d_j = d_j h + d_(j-1)
-        for all j at once, each row starting as a copy of the one below when first reached
-        (0 h + d exactly, so no zero-filled array is needed)."""
+        for all j, from the highest down so that each uses the row below from before this step,
+        in place (no temporaries), each row starting as a copy of the one below when first
+        reached (0 h + d exactly, so no zero-filled array is needed)."""
         uu = np.atleast_1d(np.asarray(u, dtype=float))
         span = self._spans(uu)
         p = self.degree
         dims = 2 if self._polynomial else 3
-        coef = self._taylor_rows.take(span, axis=0).T.reshape(p + 1, dims, uu.size)
+        coef = self._taylor_columns.take(span, axis=1).reshape(p + 1, dims, uu.size)
         h = uu - self.knots.take(span)
         top = min(order, p)
         out = np.empty((order + 1, dims, uu.size))
@@ -146,10 +153,13 @@ class Nurbs:
             if m == p - k:
                 out[m] = out[m - 1]
                 m -= 1
-            if m >= 1:  # one expression: the right side uses the rows before this step
-                out[1:m + 1] = out[1:m + 1] * h + out[0:m]
-            out[0] *= h
-            out[0] += coef[k]
+            for j in range(m, 0, -1):
+                row = out[j]
+                row *= h
+                row += out[j - 1]
+            row = out[0]
+            row *= h
+            row += coef[k]
         for j in range(2, top + 1):
             out[j] *= factorial(j)
         return out

@@ -6,7 +6,7 @@ import argparse
 import json
 import os
 import sys
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
@@ -17,12 +17,14 @@ from controller.generator.plan import Algorithm
 from controller.interpreter.program import read_program
 from controller.operator.check_cmd import KEEP_BLOCKS, check_program
 from controller.operator.outputs import OutputError, output_path, plot_path
-from controller.operator.simulate_plot import PlotSeries
-from controller.operator.simulate_view import SimulateView
 from controller.runtime.simulate_figures import Figures
 from controller.runtime.simulate_stream import SampleBlock
 from controller.runtime.simulation import limit_um, simulate_stream
 from controller.servo.precompensation import Precompensator
+
+if TYPE_CHECKING:  # imported where used: a run without --plot or a terminal needs neither
+    from controller.operator.simulate_plot import PlotSeries
+    from controller.operator.simulate_view import SimulateView
 
 TABLE_ROWS = (
     ("X tracking error max (um)", lambda r: r["tracking_error_um"]["x"]["max"]),
@@ -149,6 +151,18 @@ class TrajectoryWriter:
             pass
 
 
+def _plot_series(config: MachineConfig, algorithms: list[str]) -> dict[str, PlotSeries]:
+    from controller.operator.simulate_plot import PlotSeries
+
+    return {a: PlotSeries(config) for a in algorithms}
+
+
+def _view(program: str, config: MachineConfig) -> SimulateView:
+    from controller.operator.simulate_view import SimulateView
+
+    return SimulateView(program, config.sample_period_s, sys.stderr)
+
+
 def format_table(program: str, results: list[dict]) -> str:
     """Table IV's layout: rows of errors and time, one column per algorithm."""
     names = [r["algorithm"] for r in results]
@@ -177,9 +191,8 @@ def run(args: argparse.Namespace) -> int:
         checked = _check_whole_program(args.program, config)
         algorithms = [a.value for a in Algorithm] if args.compare else [args.algorithm]
         chosen = args.algorithm if args.compare else algorithms[-1]
-        series = {a: PlotSeries(config) for a in algorithms} if args.plot else {}
-        view = SimulateView(args.program, config.sample_period_s, sys.stderr) \
-            if sys.stderr.isatty() else None
+        series = _plot_series(config, algorithms) if args.plot else {}
+        view = _view(args.program, config) if sys.stderr.isatty() else None
         try:
             reports = [_one(args.program, config, a, args.trajectory if a == chosen else None,
                             series.get(a), args.stats, view, checked) for a in algorithms]

@@ -43,15 +43,16 @@ def _path(kind: PieceKind, curve: LineCurve | ArcCurve) -> Path:
 
 
 def test_the_sample_cache_holds_its_curves_so_their_ids_cannot_be_recycled() -> None:
-    line = _path(PieceKind.LINE, LineCurve((0.0, 0.0), (10.0, 0.0)))
-    fresh_s, fresh_kappa = limit_samples(line)
+    # (Lines are not cached at all: made again, they cost less than a look-up.)
+    other = _path(PieceKind.ARC, ArcCurve((0.0, 2.0), 2.0, -np.pi / 2, np.pi / 3))
+    fresh_s, fresh_kappa = limit_samples(other)
     cache: dict = {}
     limit_samples(_path(PieceKind.ARC, ArcCurve((0.0, 5.0), 5.0, -np.pi / 2, np.pi / 2)), cache)
     # The arc's path is gone; its curve lives on as the cache's key, so no new curve can take
-    # its id, and the line gets samples of its own.
+    # its id, and the other arc gets samples of its own.
     ((arc_curve, *_),) = cache.keys()
     assert isinstance(arc_curve, ArcCurve)
-    s, kappa = limit_samples(line, cache)
+    s, kappa = limit_samples(other, cache)
     np.testing.assert_array_equal(s, fresh_s)
     np.testing.assert_array_equal(kappa, fresh_kappa)
     assert len(cache) == 2
@@ -83,7 +84,8 @@ def test_pieces_sampled_together_are_sampled_as_one_by_one(
         data: list[tuple[complex, float, float]], n: int) -> None:
     """PH blends (a G1 program has one at every joint) and lines are sampled a batch at a
     time; the numbers are those of _piece_samples, bit for bit, cut pieces included."""
-    pieces, cache = [], {}
+    pieces: list = []
+    cache: dict = {}
     for k, (turn, u0, u1) in enumerate(data):
         d1 = complex(1.0, 0.0) + turn
         if abs(d1) < 1e-3:
@@ -92,8 +94,12 @@ def test_pieces_sampled_together_are_sampled_as_one_by_one(
         pieces.append(make_piece(PieceKind.PH, ph, u0, u1, 0.0, 50.0, 1))
         pieces.append(make_piece(PieceKind.LINE, LineCurve((0.0, k), (1.0 + u1, k)), u0, u1,
                                  0.0, 50.0, 1))
-    grid._ph_samples([(p, n) for p in pieces if p.kind == PieceKind.PH], cache)
-    grid._line_samples([(p, n) for p in pieces if p.kind == PieceKind.LINE], cache)
+    for kind in (PieceKind.PH, PieceKind.LINE):
+        index = [i for i, p in enumerate(pieces) if p.kind == kind]
+        for group, rows, kappas in grid._batch_rows(tuple(pieces), index, [n] * len(pieces)):
+            for j, i in enumerate(group.tolist()):
+                kappa = np.zeros(n) if kappas is None else kappas[j]
+                cache[(pieces[i].curve, pieces[i].u0, pieces[i].u1, n)] = (rows[j], kappa)
     for p in pieces:
         s, kappa = cache[(p.curve, p.u0, p.u1, n)]
         one_s, one_kappa = grid._piece_samples(p, n)

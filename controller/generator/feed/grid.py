@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 
 import numpy as np
@@ -116,66 +115,62 @@ def _knot_span_samples(p: Piece, inner: np.ndarray, peak: np.ndarray,
     return s, kappa
 
 
-def _batches(todo: list[tuple[Piece, int]], cache: PieceSamples
-             ) -> Iterator[tuple[int, list[Piece], np.ndarray]]:
-    """The pieces to sample grouped by sample count, each group with its parameters (one row
-    per piece); a group with a zero parameter step is sampled piece by piece into the cache
-    instead (linspace treats a zero step apart)."""
-    by_count: dict[int, list[Piece]] = {}
-    for p, n in todo:
-        by_count.setdefault(n, []).append(p)
-    for n, ps in by_count.items():
+def _batch_rows(pieces: tuple[Piece, ...], index: list[int], counts: list[int]
+                ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray | None]]:
+    """_piece_samples of the pieces index (all LINE or all PH), grouped by sample count:
+    (indices, s rows, kappa rows or None where it is 0), the same operations on arrays of pieces
+    with the same count, so the same numbers (tests/generator/test_plan_caches.py compares them
+    bit for bit), without numpy's cost per call on every line and blend of a G1 program. Not
+    cached: made again, they cost less than a look-up of their keys (a path whose pieces did not
+    change has its whole grid cached by plan_path_feed)."""
+    by_count: dict[int, list[int]] = {}
+    for i in index:
+        by_count.setdefault(counts[i], []).append(i)
+    for n, group in by_count.items():
+        ps = [pieces[i] for i in group]
         u0, u1 = np.array([p.u0 for p in ps]), np.array([p.u1 for p in ps])
-        if np.any(u1 == u0):
-            for p in ps:
-                cache[(p.curve, p.u0, p.u1, n)] = _piece_samples(p, n)
+        if np.any(u1 == u0):  # linspace treats a zero step apart
+            for i, p in zip(group, ps, strict=True):
+                row_s, row_k = _piece_samples(p, n)
+                yield np.array([i]), row_s[None, :], row_k[None, :]
             continue
-        yield n, ps, np.linspace(u0, u1, n, axis=1)
+        u = np.linspace(u0, u1, n, axis=1)
+        speed, kappa = _line_speed(ps, u) if ps[0].kind == PieceKind.LINE else _ph_speed(ps, u)
+        yield np.array(group), _trapezoid_rows(ps, u, speed), kappa
 
 
-def _store(ps: list[Piece], n: int, u: np.ndarray, speed: np.ndarray, kappa: np.ndarray,
-           cache: PieceSamples) -> None:
-    """_piece_samples' trapezoids of |C'| on each row, rescaled to its piece's length, into
-    the cache with the row's curvature."""
+def _line_speed(ps: list[Piece], u: np.ndarray) -> tuple[np.ndarray, None]:
+    """|C'| of lines at parameters u (one row per line; constant), curvature 0."""
+    dx = np.array([p.curve.p1[0] - p.curve.p0[0] for p in ps])  # type: ignore[attr-defined]
+    dy = np.array([p.curve.p1[1] - p.curve.p0[1] for p in ps])  # type: ignore[attr-defined]
+    return np.broadcast_to(np.sqrt(dx * dx + dy * dy)[:, None], u.shape), None
+
+
+def _ph_speed(ps: list[Piece], x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """|C'| and curvature of PH quintics at parameters x (one row per quintic):
+    PhQuintic.evaluate's operations (w, w^2, 2 w w'), then _speed_and_kappa's."""
+    w0, w1, w2 = (np.array([getattr(p.curve, k) for p in ps])[:, None]
+                  for k in ("w0", "w1", "w2"))
+    w = w0 * (1 - x) ** 2 + 2 * w1 * (1 - x) * x + w2 * x * x
+    d1 = w ** 2
+    d2 = 2 * w * (2 * ((w1 - w0) * (1 - x) + (w2 - w1) * x))
+    dx, dy, ddx, ddy = d1.real, d1.imag, d2.real, d2.imag
+    speed2 = dx * dx + dy * dy
+    speed = np.sqrt(speed2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kappa = np.abs(dx * ddy - dy * ddx) / (speed2 * speed)
+    return speed, np.where(np.isfinite(kappa), kappa, 0.0)
+
+
+def _trapezoid_rows(ps: list[Piece], u: np.ndarray, speed: np.ndarray) -> np.ndarray:
+    """_trapezoid_s on each row: the trapezoids of |C'|, rescaled to its piece's length."""
     s = np.zeros(u.shape)
     np.cumsum(0.5 * (speed[:, 1:] + speed[:, :-1]) * np.diff(u, axis=1), axis=1, out=s[:, 1:])
     length = np.array([p.length_mm for p in ps])
     last = s[:, -1].copy()
     scale = length / np.where(last > 0, last, 1.0)
     s[last > 0] *= scale[last > 0, None]
-    for p, row_s, row_k in zip(ps, s, np.broadcast_to(kappa, u.shape), strict=True):
-        cache[(p.curve, p.u0, p.u1, n)] = (row_s, row_k)
-
-
-def _line_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
-    """_piece_samples of many LINE pieces at once, into the cache: the same operations on
-    arrays of pieces with the same count (curvature 0; the trapezoids of a constant speed,
-    then rescaled to the piece length), so the same numbers, without numpy's cost per call
-    on every line of a G1 program."""
-    for n, ps, u in _batches(todo, cache):
-        dx = np.array([p.curve.p1[0] - p.curve.p0[0] for p in ps])  # type: ignore[attr-defined]
-        dy = np.array([p.curve.p1[1] - p.curve.p0[1] for p in ps])  # type: ignore[attr-defined]
-        speed = np.broadcast_to(np.sqrt(dx * dx + dy * dy)[:, None], u.shape)
-        _store(ps, n, u, speed, np.zeros(n), cache)
-
-
-def _ph_samples(todo: list[tuple[Piece, int]], cache: PieceSamples) -> None:
-    """_piece_samples of many PH pieces at once, into the cache: PhQuintic.evaluate's
-    operations (w, w^2, 2 w w') on an array of pieces with the same count, then the same
-    speed, curvature and trapezoids, so the same numbers (tests/generator/test_plan_caches.py
-    compares them bit for bit); a G1 program has a PH blend at every joint."""
-    for n, ps, x in _batches(todo, cache):
-        w0, w1, w2 = (np.array([getattr(p.curve, k) for p in ps])[:, None]
-                      for k in ("w0", "w1", "w2"))
-        w = w0 * (1 - x) ** 2 + 2 * w1 * (1 - x) * x + w2 * x * x
-        d1 = w ** 2
-        d2 = 2 * w * (2 * ((w1 - w0) * (1 - x) + (w2 - w1) * x))
-        dx, dy, ddx, ddy = d1.real, d1.imag, d2.real, d2.imag
-        speed2 = dx * dx + dy * dy
-        speed = np.sqrt(speed2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            kappa = np.abs(dx * ddy - dy * ddx) / (speed2 * speed)
-        _store(ps, n, x, speed, np.where(np.isfinite(kappa), kappa, 0.0), cache)
+    return s
 
 
 def grid_step_mm(path: Path) -> float:
@@ -186,28 +181,38 @@ def grid_step_mm(path: Path) -> float:
 def limit_samples(path: Path, cache: PieceSamples | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(s, kappa) on a fine grid, each piece sampled in its own parameter (no inversion needed).
 
-    At a joint both sides are sampled and the larger curvature is kept (curvature may jump)."""
+    At a joint both sides are sampled and the larger curvature is kept (curvature may jump).
+    Lines and PH blends are sampled in batches (_batch_rows), NURBS parts and arcs one by one
+    through the cache (a dynamics round that widens a corner zone keeps the others' samples)."""
     spacing = grid_step_mm(path)
     cache = {} if cache is None else cache
-    pieces = path.pieces
-    counts = [max(math.ceil(p.length_mm / spacing), 8) + 1 for p in pieces]
-    keys = [(p.curve, p.u0, p.u1, n) for p, n in zip(pieces, counts, strict=True)]
-    # One look-up per key where it hits (hashing a key hashes its curve's fields).
-    rows = [cache.get(key) for key in keys]
-    missing = [i for i, row in enumerate(rows) if row is None]
-    for kind, batch in ((PieceKind.LINE, _line_samples), (PieceKind.PH, _ph_samples)):
-        batch([(pieces[i], counts[i]) for i in missing if pieces[i].kind == kind], cache)
-    for i in missing:
-        if keys[i] not in cache:
-            cache[keys[i]] = _piece_samples(pieces[i], counts[i])
-        rows[i] = cache[keys[i]]
-    counts = [len(r[0]) for r in rows]  # a NURBS piece sampled by knot span has its own count
+    pieces, cols = path.pieces, path.columns
+    # max(ceil(length / spacing), 8) + 1 per piece (the same numbers in floats: exact)
+    counts = (np.maximum(np.ceil(cols.length_mm / spacing), 8.0) + 1.0).astype(np.intp).tolist()
+    is_line, is_ph = cols.of_kind(PieceKind.LINE), cols.of_kind(PieceKind.PH)
+    rows = {}
+    for i in np.flatnonzero(~(is_line | is_ph)).tolist():
+        key = (pieces[i].curve, pieces[i].u0, pieces[i].u1, counts[i])
+        if key not in cache:
+            cache[key] = _piece_samples(pieces[i], counts[i])
+        rows[i] = cache[key]
+        counts[i] = len(rows[i][0])  # a NURBS piece sampled by knot span has its own count
     # Each piece's samples moved to where it starts on the path, all at once (p.s0_mm + s).
-    s = np.repeat([p.s0_mm for p in pieces], counts) + np.concatenate([r[0] for r in rows])
-    kappa = np.concatenate([r[1] for r in rows])
+    ends = np.cumsum(counts)
+    start = ends - counts
+    local, kappa = np.empty(int(ends[-1])), np.zeros(int(ends[-1]))
+    for kind in (is_line, is_ph):
+        for group, s_rows, k_rows in _batch_rows(pieces, np.flatnonzero(kind).tolist(), counts):
+            at = start[group][:, None] + np.arange(s_rows.shape[1])
+            local[at] = s_rows
+            if k_rows is not None:
+                kappa[at] = k_rows
+    for i, row in rows.items():
+        local[start[i]:ends[i]], kappa[start[i]:ends[i]] = row
+    s = np.repeat(cols.s0_mm, counts) + local
     # The pieces follow each other: each one's first sample is the previous one's last point.
     # Keep the larger curvature there, drop the duplicate, then anything not strictly ahead.
-    first = np.cumsum(counts)[:-1]
+    first = ends[:-1]
     kappa[first - 1] = np.maximum(kappa[first - 1], kappa[first])
     s, kappa = np.delete(s, first), np.delete(kappa, first)
     if np.all(np.diff(s) > 1e-12):

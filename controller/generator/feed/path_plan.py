@@ -82,7 +82,7 @@ def feed_limit_mm_s(path: Path, s: np.ndarray, kappa: np.ndarray, inp: FeedInput
     A reduction by factor f scales the normal acceleration kappa v^2, and with it the servo's
     contour error, by f: the feed limit is scaled by sqrt(f)."""
     # path.feed_cap(s), gathered in one go (it masks the grid once per piece)
-    feeds = np.array([p.feed_mm_s for p in path.pieces])
+    feeds = path.columns.feed_mm_s
     index = path.piece_index(s)
     if ending:
         index = np.maximum(np.searchsorted(path.breaks_mm, s, side="left") - 1, 0)
@@ -93,7 +93,7 @@ def feed_limit_mm_s(path: Path, s: np.ndarray, kappa: np.ndarray, inp: FeedInput
             budget = min(inp.max_accel_mm_s2, inp.centripetal_accel_mm_s2)
             vlim = np.minimum(vlim, np.sqrt(budget / kappa))
     else:
-        corner_of = np.array([p.corner for p in path.pieces])[path.piece_index(s)]
+        corner_of = path.columns.corner[path.piece_index(s)]
         for c in sorted_unique(corner_of[corner_of >= 0]):
             mask = corner_of == c
             v_sp = corner_feed_mm_s(kappa[mask], inp.sample_period_s, inp.chord_tolerance_mm,
@@ -152,7 +152,7 @@ def spike_stops_mm(path: Path, s: np.ndarray, vlim: np.ndarray,
                    max_feed_mm_s: float) -> tuple[float, ...]:
     """Path positions of lone samples where vlim is under SPIKE_SHARE of the programmed feed
     (not the path's ends, which are at rest or continue a window)."""
-    feeds = np.array([p.feed_mm_s for p in path.pieces])
+    feeds = path.columns.feed_mm_s
     cap = np.minimum(feeds, max_feed_mm_s)
     if len(s) < 3 or float(vlim.min()) >= SPIKE_SHARE * float(cap.min()):
         return ()  # nothing is that low: the usual case, at the cost of one min()

@@ -17,7 +17,14 @@ from controller.generator.corners.detection import (
 )
 from controller.generator.ph.blend import blend_joint
 from controller.generator.ph.fit import PhSegment, fit_zones
-from controller.generator.ph.line_blends import LineJoints, applies, blend_lines, line_joints
+from controller.generator.ph.line_blends import (
+    LineJoints,
+    applies,
+    applies_onto_line,
+    blend_lines,
+    blend_onto_line,
+    line_joints,
+)
 from controller.geometry.curves import ArcCurve, Curve, LineCurve
 from controller.geometry.nurbs import Nurbs
 from controller.geometry.path import Path, Piece, PieceKind, chain, end_tangent, make_piece
@@ -73,30 +80,29 @@ def block_curve(block: MotionBlock, feed_cap_mm_s: float,
     if block.path.mode == PathMode.BLEND:
         tol = block.path.tolerance_mm if block.path.tolerance_mm is not None \
             else default_tolerance_mm
+    if isinstance(block, LineBlock):  # first: every G1 line of a program comes here
+        p0, p1 = block.start[:2], block.end[:2]
+        if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
+            return None
+        # LineCurve(p0, p1) and BlockCurve(...) without the frozen setattr per field.
+        curve = object.__new__(LineCurve)
+        curve.__dict__.update(p0=p0, p1=p1)
+        bc = object.__new__(BlockCurve)
+        bc.__dict__.update(curve=curve, feed_mm_s=feed, line=line, nurbs=False,
+                           blend_tolerance_mm=tol)
+        return bc
     if isinstance(block, NurbsBlock):
         if block.polygon_length_mm < MIN_LENGTH_MM:  # the curve is no longer than this
             return None
         return BlockCurve(Nurbs.from_block(block), feed, line, True, tol)
-    if isinstance(block, ArcBlock):
-        c = block.center
-        a0 = math.atan2(block.start[1] - c[1], block.start[0] - c[0])
-        # The end radius may differ from the start radius (LinuxCNC's rule): a spiral to the
-        # programmed end, not a circle that misses it.
-        change = block.radius_change_mm
-        return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad, change), feed, line,
-                          False, tol)
-    assert isinstance(block, LineBlock)
-    p0, p1 = block.start[:2], block.end[:2]
-    if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
-        return None
-    # LineCurve(p0, p1) and BlockCurve(...) without the frozen setattr per field: every G1
-    # line of a program comes here.
-    curve = object.__new__(LineCurve)
-    curve.__dict__.update(p0=p0, p1=p1)
-    bc = object.__new__(BlockCurve)
-    bc.__dict__.update(curve=curve, feed_mm_s=feed, line=line, nurbs=False,
-                       blend_tolerance_mm=tol)
-    return bc
+    assert isinstance(block, ArcBlock)
+    c = block.center
+    a0 = math.atan2(block.start[1] - c[1], block.start[0] - c[0])
+    # The end radius may differ from the start radius (LinuxCNC's rule): a spiral to the
+    # programmed end, not a circle that misses it.
+    change = block.radius_change_mm
+    return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad, change), feed, line,
+                      False, tol)
 
 
 def find_corners(curves: list[BlockCurve], kappa_th_per_mm: float) -> dict[int, list[CornerZone]]:
@@ -227,6 +233,29 @@ def _joint_angle_rad(a: Piece, b: Piece, line_row: tuple[LineJoints, int] | None
     return joint_angle_rad(end_tangent(a, True), end_tangent(b, False))
 
 
+def _blended_onto_line(pieces: list[Piece], own: list[bool], curves: list[BlockCurve], i: int,
+                       joints: LineJoints) -> bool:
+    """build_path's step for line i where the piece before it is a line that blends into it
+    (every joint of a G1 program): the pieces appended as build_path's general step would
+    append them (blend_onto_line), True; False where that step is needed (not a joint of two
+    lines, a smooth joint, a stop)."""
+    row = joints.row.get(i)
+    if row is None or not applies_onto_line(pieces[-1], joints, row) \
+            or joints.angle_rad[row] <= SMOOTH_JOINT_RAD:
+        return False
+    tol = curves[i - 1].blend_tolerance_mm  # i >= 1: a joint of two of the window's lines
+    bc = curves[i]
+    blended = blend_onto_line(pieces[-1], own[-1], bc.curve, bc.feed_mm_s,  # type: ignore[arg-type]
+                              bc.line, tol, joints, row) if tol else None
+    if blended is None:
+        return False
+    pieces[-1] = blended[0]
+    own[-1] = True
+    pieces += blended[1:]
+    own += [True, True]
+    return True
+
+
 def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
                error_limit_mm: float, use_ph: bool = True,
                cache: FitCache | None = None, prefix: tuple[Piece, ...] = (),
@@ -250,6 +279,9 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
     blends = 0
     joints = line_joints(curves) if repeats is not None else None
     for i, bc in enumerate(curves):
+        if joints is not None and pieces and _blended_onto_line(pieces, own, curves, i, joints):
+            blends += 1
+            continue
         if bc.nurbs:
             ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph,
                                     corner_base + len(infos), cache)

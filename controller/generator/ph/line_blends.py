@@ -45,11 +45,14 @@ def _unit_tangent(curve: LineCurve) -> complex:
 
 def line_joints(curves: list[object]) -> LineJoints:
     """Every joint of two lines in a window's block curves (BlockCurve: .curve)."""
-    index = [i for i in range(1, len(curves))
-             if isinstance(curves[i - 1].curve, LineCurve)  # type: ignore[attr-defined]
-             and isinstance(curves[i].curve, LineCurve)]  # type: ignore[attr-defined]
-    t0 = np.array([_unit_tangent(curves[i - 1].curve) for i in index], complex)  # type: ignore[attr-defined]
-    t1 = np.array([_unit_tangent(curves[i].curve) for i in index], complex)  # type: ignore[attr-defined]
+    is_line = [isinstance(c.curve, LineCurve) for c in curves]  # type: ignore[attr-defined]
+    index = [i for i in range(1, len(curves)) if is_line[i - 1] and is_line[i]]
+    # Each line's tangent once (a line between two others is in two joints); block_curve
+    # makes no line shorter than a micrometre, so none has a zero tangent.
+    tangent = [_unit_tangent(c.curve) if line else 0j  # type: ignore[attr-defined]
+               for c, line in zip(curves, is_line, strict=True)]
+    t0 = np.array([tangent[i - 1] for i in index], complex)
+    t1 = np.array([tangent[i] for i in index], complex)
     w, deviation, canonical = unit_blends(t0, t1, MAX_BLEND_ANGLE_RAD)
     return LineJoints({i: k for k, i in enumerate(index)},
                       np.abs(np.angle(t1 * np.conj(t0))).tolist(), deviation.tolist(),
@@ -60,26 +63,63 @@ def blend_lines(a: Piece, b: Piece, tolerance_mm: float, joints: LineJoints,
                 row: int) -> tuple[Piece, Piece, Piece] | None:
     """(a trimmed, PH blend, b trimmed) at the joint's largest cut within tolerance_mm and
     MAX_SHARE of each line, or None to stop there (as blend.blend_joint)."""
-    cut = MAX_SHARE * min(a.length_mm, b.length_mm)
+    cut = _cut(a.length_mm, b.length_mm, tolerance_mm, joints, row)
+    if cut is None:
+        return None
+    la, lb = a.curve.length_mm, b.curve.length_mm
+    u_a, blend = _trim_and_blend(a, la, cut, b.feed_mm_s, b.line, joints, row)
+    u_b = cut / lb
+    return (new_piece(a.kind, a.curve, a.u0, u_a, 0.0, u_a * la - a.u0 * la, a.feed_mm_s,
+                      a.line, a.corner),
+            blend,
+            new_piece(b.kind, b.curve, u_b, b.u1, 0.0, b.u1 * lb - u_b * lb, b.feed_mm_s,
+                      b.line, b.corner))
+
+
+def blend_onto_line(a: Piece, a_own: bool, line: LineCurve, feed_mm_s: float, source_line: int,
+                    tolerance_mm: float, joints: LineJoints,
+                    row: int) -> tuple[Piece, Piece, Piece] | None:
+    """blend_lines(a, b) for b the whole line (make_piece(LINE, line, 0, 1, ...)), without
+    making b first, and with a trimmed in place when a_own (a was made for this path alone):
+    the same pieces, two fewer made per joint of a G1 program."""
+    lb = line.length_mm  # make_piece's length: 1 lb - 0 lb
+    cut = _cut(a.length_mm, lb, tolerance_mm, joints, row)
+    if cut is None:
+        return None
+    la = a.curve.length_mm
+    u_a, blend = _trim_and_blend(a, la, cut, feed_mm_s, source_line, joints, row)
+    u_b = cut / lb
+    if a_own:
+        a.__dict__.update(u1=u_a, length_mm=u_a * la - a.u0 * la)
+    else:
+        a = new_piece(a.kind, a.curve, a.u0, u_a, 0.0, u_a * la - a.u0 * la, a.feed_mm_s,
+                      a.line, a.corner)
+    return a, blend, new_piece(PieceKind.LINE, line, u_b, 1.0, 0.0, 1.0 * lb - u_b * lb,
+                               feed_mm_s, source_line)
+
+
+def _cut(a_mm: float, b_mm: float, tolerance_mm: float, joints: LineJoints,
+         row: int) -> float | None:
+    """The largest cut within the tolerance and MAX_SHARE of each line (None: under
+    MIN_CUT_MM, a stop)."""
+    cut = MAX_SHARE * min(a_mm, b_mm)
     deviation = joints.unit_deviation[row]
     if deviation * cut > tolerance_mm:
         cut = tolerance_mm / deviation * _SAFETY
-    if cut < MIN_CUT_MM:
-        return None
-    la, lb = a.curve.length_mm, b.curve.length_mm
+    return None if cut < MIN_CUT_MM else cut
+
+
+def _trim_and_blend(a: Piece, la: float, cut: float, feed_mm_s: float, line: int,
+                    joints: LineJoints, row: int) -> tuple[float, Piece]:
+    """Where a ends once cut (its line's parameter) and the PH blend piece from there."""
     u_a = (a.length_mm - cut + a.u0 * la) / la
-    u_b = cut / lb
     (x0, y0), (x1, y1) = a.curve.p0, a.curve.p1  # type: ignore[attr-defined]
     p0 = complex(x0 + u_a * (x1 - x0), y0 + u_a * (y1 - y0))
     w0, w1, w2 = joints.w_unit[row]
     root = math.sqrt(cut)
     ph = object.__new__(PhQuintic)  # PhQuintic(p0, ...) without the frozen setattr per field
     ph.__dict__.update(p0=p0, w0=w0 * root, w1=w1 * root, w2=w2 * root)
-    return (new_piece(a.kind, a.curve, a.u0, u_a, 0.0, u_a * la - a.u0 * la, a.feed_mm_s,
-                      a.line, a.corner),
-            new_piece(PieceKind.PH, ph, 0.0, 1.0, 0.0, ph.length_mm, b.feed_mm_s, b.line),
-            new_piece(b.kind, b.curve, u_b, b.u1, 0.0, b.u1 * lb - u_b * lb, b.feed_mm_s,
-                      b.line, b.corner))
+    return u_a, new_piece(PieceKind.PH, ph, 0.0, 1.0, 0.0, ph.length_mm, feed_mm_s, line)
 
 
 def applies(a: Piece, b: Piece, joints: LineJoints, row: int) -> bool:
@@ -87,3 +127,9 @@ def applies(a: Piece, b: Piece, joints: LineJoints, row: int) -> bool:
     b starts at its line's start) and the canonical interpolant is the right one."""
     return (joints.canonical[row] and a.kind == PieceKind.LINE and b.kind == PieceKind.LINE
             and a.u1 == 1.0 and b.u0 == 0.0 and a.u0 < 1.0 and b.u1 > 0.0)
+
+
+def applies_onto_line(a: Piece, joints: LineJoints, row: int) -> bool:
+    """applies(a, b) for b a whole line."""
+    return (joints.canonical[row] and a.kind == PieceKind.LINE and a.u1 == 1.0
+            and a.u0 < 1.0)
