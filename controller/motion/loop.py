@@ -53,7 +53,7 @@ from drivers.errors import LostCommunicationError, UnderrunError
 SETTLE_HOLD_S = 0.02  # encoder equal to the step counter for this long = settled
 ESTOP_INPUT = "e-stop input on the drive tripped"
 LIMIT_INPUT = "hard limit: {} tripped"
-ESTOP_KEEP_FRAMES = 2  # frames left in the card when the e-stop takes the rest back
+ESTOP_KEEP_MS = HOLD_KEEP_MS  # left in the card by the e-stop's take-back: a descheduling
 
 
 class MotionController:
@@ -552,9 +552,9 @@ class MotionController:
             return
         ends_at_rest = self.sent_eos or self.pausing or self.pending_tail is not None
         if self.state in (MotionState.WAITING, MotionState.RUNNING) and not ends_at_rest:
-            # The frames queued beyond a couple are taken back (where the drive can): the stop
-            # starts 2 ms out instead of behind the whole FIFO.
-            st.take_back(self.drive, level, ESTOP_KEEP_FRAMES)
+            # The frames queued beyond ESTOP_KEEP_MS are taken back (where the drive can): the
+            # stop starts 6 ms out, not behind the whole FIFO (2 ms ran a loaded card dry).
+            st.take_back(self.drive, level, self._frames(ESTOP_KEEP_MS))
             self.pending_stop = stop_along_path(st.prev_mm, st.last_mm, st.held[:, : self.n],
                                                 accel, self.period_s, amax_stop_distances_mm)
             st.held = st.held[:0]

@@ -11,7 +11,7 @@ from refgen import circle_chunks
 from runtime_helpers import Recorder, assert_smooth, virtual_card
 
 from controller.config import MachineConfig, load_config
-from controller.motion.loop import MotionController
+from controller.motion.loop import ESTOP_KEEP_MS, MotionController
 from controller.motion.pacing import VirtualPacer
 from controller.motion.source import ChunkSource
 from controller.motion.types import MotionProgress, MotionResult, MotionSettings, Outcome
@@ -123,7 +123,7 @@ def test_an_implausible_reading_inside_a_block_stops_from_its_own_cycle() -> Non
 
 @pytest.mark.parametrize("name", ["xy_table_paper", "xy_table"])
 def test_an_estop_after_blocks_takes_back_all_but_two_frames(name: str) -> None:
-    """Blocks go out as cycle-sized sends in the journal: the e-stop keeps two frames queued,
+    """Blocks go out as cycle-sized sends in the journal: the e-stop keeps ESTOP_KEEP_MS queued,
     as after cycle-sized refills, so the stop starts as soon (pre-compensated: its lead's
     settling follows the stop, as cycle by cycle)."""
     config = load_config(name)
@@ -134,6 +134,7 @@ def test_an_estop_after_blocks_takes_back_all_but_two_frames(name: str) -> None:
     if not config.interpolator.servo_precompensation:
         v_mm_s, accel = 58.333, config.interpolator.max_accel_mm_s2
         stop_frames = int(np.ceil(v_mm_s / accel / config.sample_period_s))
-        # The cycle's own 2 frames, the 2 kept, the stop at Amax (as tests/motion/test_estop).
-        assert len(frames_b) - clock_b[-1] <= 2 + 2 + stop_frames + 3
+        # The cycle's own 2 frames, those kept, the stop at Amax (as tests/motion/test_estop).
+        kept = int(np.ceil(ESTOP_KEEP_MS * 1e-3 / config.sample_period_s - 1e-9))
+        assert len(frames_b) - clock_b[-1] <= 2 + kept + stop_frames + 3
         assert_smooth(frames_b, np.zeros(2), config)  # the lead is not within Amax

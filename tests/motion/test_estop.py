@@ -10,7 +10,7 @@ from runtime_helpers import assert_smooth
 from test_motion import CFG, on_circle, run
 
 from controller.errors import DriveError
-from controller.motion.loop import ESTOP_INPUT, MotionController
+from controller.motion.loop import ESTOP_INPUT, ESTOP_KEEP_MS, MotionController
 from controller.motion.types import Outcome
 
 V_MM_S = 58.333  # the circle's feed (refgen.circle_chunks)
@@ -42,8 +42,9 @@ def test_the_estop_stops_at_amax_on_the_path_then_disables_the_drive(ask: str) -
     assert result.message == ("e-stop by operator" if ask == "estop" else ESTOP_INPUT)  # type: ignore[attr-defined]
     on_circle(result, tol_mm=0.002)  # type: ignore[arg-type]
     assert_smooth(executed, np.zeros(2), CFG)  # within Amax (and no position jump)
-    # At most: the cycle's own 2 frames, the 2 kept in the card, the stop at Amax (24 ms).
-    assert frames <= 2 + 2 + int(np.ceil(V_MM_S / AMAX / T)) + 3
+    # At most: the cycle's own 2 frames, those kept in the card, the stop at Amax (24 ms).
+    kept = int(np.ceil(ESTOP_KEEP_MS * 1e-3 / T - 1e-9))
+    assert frames <= 2 + kept + int(np.ceil(V_MM_S / AMAX / T)) + 3
     assert card.disabled  # type: ignore[attr-defined]
     with pytest.raises(DriveError, match="disabled"):
         card.write_frames(np.zeros((1, 2), dtype=np.int64))  # type: ignore[attr-defined]
