@@ -103,9 +103,15 @@ class ProbeWatch:
         ctrl.request_abort(message)
 
     def _encoder_mm(self, ctrl: Any) -> tuple[float, float, float]:
-        """Where the encoders were when the trip was seen (machine mm, Z of the start on a
-        table without Z)."""
-        return self._xyz_mm(ctrl.figures.last_enc)
+        """Where the encoders are as the trip is seen (machine mm, Z of the start on a table
+        without Z): read just after the probe input, not the cycle's feedback from before it
+        (the card may have clocked on in between, and the input then showed contact where
+        that feedback stood short of the face). A failed read keeps the cycle's."""
+        try:
+            _, enc = self.drive.position_counts()
+        except DriveError:
+            enc = ctrl.figures.last_enc
+        return self._xyz_mm(enc)
 
     def _xyz_mm(self, pulses: Any) -> tuple[float, float, float]:
         xyz = list(self.start_mm)
