@@ -35,24 +35,29 @@ class FeedbackCheck:
                                 / self.pulse_mm + JUMP_SLACK_PULSES)
         slack_mm = np.array([max(a.ferror_mm, a.min_ferror_mm) for a in config.axes])
         travel = np.array([a.travel_mm for a in config.axes])
+        # A halted card's frame counter stops while its motors still close their following
+        # error: rows it reports then may move that much more than the frames say.
+        self.settle_counts = slack_mm / self.pulse_mm
         self.lo_counts = (travel[:, 0] - slack_mm) / self.pulse_mm
         self.hi_counts = (travel[:, 1] + slack_mm) / self.pulse_mm
         self.last = np.asarray(start_counts, dtype=np.int64).copy()
         self.corrupt = False
         self.last_seq = -1  # the start counts stand before the run's first frame (seq 0)
 
-    def believed(self, fb: Feedback) -> tuple[Feedback, ImplausibleFeedback | None]:
+    def believed(self, fb: Feedback, settling: bool = False
+                 ) -> tuple[Feedback, ImplausibleFeedback | None]:
         """The rows before the first implausible one, and what was wrong with it; after one,
-        no row is believed (a drive that read garbage once cannot be trusted on)."""
+        no row is believed (a drive that read garbage once cannot be trusted on). settling:
+        the card has halted (its motors may still move by their following error)."""
         if self.corrupt:
             return _rows(fb, 0), None
-        bad = self.check(fb)
+        bad = self.check(fb, settling)
         if bad is None:
             return fb, None
         self.corrupt = True
         return _rows(fb, int(np.searchsorted(fb.seq, bad.seq))), bad
 
-    def check(self, fb: Feedback) -> ImplausibleFeedback | None:
+    def check(self, fb: Feedback, settling: bool = False) -> ImplausibleFeedback | None:
         if not len(fb):
             return None
         enc = fb.encoder_counts
@@ -64,7 +69,8 @@ class FeedbackCheck:
         frames = np.maximum(seq - np.concatenate(((self.last_seq,), seq[:-1])), 1)[:, None]
         self.last, self.last_seq = enc[-1].copy(), int(seq[-1])
         mm = self.pulse_mm
-        jumps = step > self.max_step_counts * frames
+        allowed = self.max_step_counts * frames + (self.settle_counts if settling else 0.0)
+        jumps = step > allowed
         off = (enc < self.lo_counts) | (enc > self.hi_counts)
         if not (jumps | off).any():
             return None
@@ -72,8 +78,7 @@ class FeedbackCheck:
             row, axis = (int(v) for v in np.argwhere(jumps)[0])
             return self._bad(axis, int(seq[row]), (
                 f"jumped {step[row, axis] * mm[axis]:.3f} mm in {frames[row, 0]} period(s) (at "
-                f"most {self.max_step_counts[axis] * frames[row, 0] * mm[axis]:.3f} mm is "
-                "possible)"))
+                f"most {allowed[row, axis] * mm[axis]:.3f} mm is possible)"))
         if off.any():
             row, axis = (int(v) for v in np.argwhere(off)[0])
             return self._bad(axis, int(seq[row]), (

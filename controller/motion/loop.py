@@ -192,7 +192,7 @@ class MotionController:
             self.position_known = False
             self._finish(Outcome.FAULT, str(exc))
             return
-        fb, bad = self.checks.fbcheck.believed(self._own_numbers(fb))
+        fb, bad = self.checks.fbcheck.believed(self._own_numbers(fb), settling=status.halted)
         if bad is not None:  # a reading no drive could give: none believed from then on
             self.position_known = False
             self._begin_stop(Outcome.FAULT, bad.message)

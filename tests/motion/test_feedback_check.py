@@ -63,3 +63,17 @@ def test_readings_frames_apart_are_allowed_the_motion_of_those_frames() -> None:
     assert check.check(Feedback(np.array([9, 19]), enc.copy(), enc)) is None
     enc = np.array([[1200, 0]], dtype=np.int64)
     assert check.check(Feedback(np.array([20]), enc.copy(), enc)) is not None
+
+
+def test_a_halted_cards_motors_may_close_their_following_error_in_one_row() -> None:
+    """A card halted mid-motion (a bad frame) stops its frame counter, but its motors still
+    close their following error: the serial card's next report moved 0.241 mm one frame on.
+    That is believed while the card is halted (settling); a bit flip is not."""
+    ferror_counts = max(CONFIG.axes[0].ferror_mm, CONFIG.axes[0].min_ferror_mm) / 0.001
+    check = FeedbackCheck(CONFIG, np.array([1000, 2000]))
+    settle = int(check.max_step_counts[0] + 0.5 * ferror_counts)
+    assert check.check(_fb([[1000 + settle, 2000]])) is not None  # running: a jump
+    check = FeedbackCheck(CONFIG, np.array([1000, 2000]))
+    assert check.check(_fb([[1000 + settle, 2000]]), settling=True) is None
+    flip = check.believed(_fb([[1000 + settle, 2000 + (1 << 23)]], seq0=1), settling=True)
+    assert flip[1] is not None and flip[1].axis == "y" and len(flip[0]) == 0
