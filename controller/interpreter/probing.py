@@ -42,7 +42,7 @@ class Probing:
         start = self.modal.pos
         end = self.moves._end_point(vals)
         if end == start:
-            self._zero_length(code10, name, start)
+            self._read_on(_zero_length(code10, name, lineno, start))
             return
         self.out.append(ProbeBlock(name, start, end, self.modal.feed_mm_s,
                                    Source(self.path, lineno, lineno)))
@@ -57,20 +57,13 @@ class Probing:
             return
         if result is None:  # check: as if the probe went the whole way and tripped there
             result = ProbeResult(lineno, True, end, end)
+        self._read_on(result)
+
+    def _read_on(self, result: ProbeResult) -> None:
+        """The program goes on where the probe stopped, with #5061-#5063 and #5070 its."""
         self.modal.pos = result.stop_mm
         origin = self.offsets.origin or (0.0, 0.0, 0.0)
         self.results.parameters.update(result.parameters(origin))
-
-    def _zero_length(self, code10: int, name: str, here: tuple[float, float, float]) -> None:
-        """A probe to where it stands (smartprobe.ngc's G38.5 at its safe height): no move can
-        make or lose contact, so it does not run. G38.2/G38.4 would fail; G38.3/G38.5 end at
-        once without contact (#5070 = 0, #5061-#5063 where the machine stands), as in LinuxCNC."""
-        if code10 in (382, 384):
-            raise WordError(name, f"{name}: the probe's end point is where it stands (a move "
-                                  f"of zero length cannot {'make' if code10 == 382 else 'lose'}"
-                                  " contact)")
-        origin = self.offsets.origin or (0.0, 0.0, 0.0)  # `here` is machine mm, as modal.pos
-        self.results.parameters.update(ProbeResult(0, False, here, here).parameters(origin))
 
     def set_parameters(self, set_number: Callable[[int, float], None]) -> bool:
         """#5061-#5063 and #5070 for what follows the probe just read; whether a probing
@@ -78,3 +71,14 @@ class Probing:
         for number, value in self.results.parameters.items():
             set_number(number, value)
         return self.resume_here
+
+
+def _zero_length(code10: int, name: str, lineno: int,
+                 here: tuple[float, float, float]) -> ProbeResult:
+    """A probe to where it stands (smartprobe.ngc's G38.5 at its safe height): no move can make
+    or lose contact, so it does not run. G38.2/G38.4 would fail; G38.3/G38.5 end at once
+    without contact (#5070 = 0, #5061-#5063 where the machine stands), as in LinuxCNC."""
+    if code10 in (382, 384):
+        raise WordError(name, f"{name}: the probe's end point is where it stands (a move of "
+                              f"zero length cannot {'make' if code10 == 382 else 'lose'} contact)")
+    return ProbeResult(lineno, False, here, here)
