@@ -35,10 +35,12 @@ class InverseTable:
     base_s: np.ndarray
     built: np.ndarray = field(init=False)
     rows: np.ndarray = field(init=False)  # (n, 9): u0 u1 s0 s1 d0 c0 d1 c1 checked, by s0
+    _s0: np.ndarray = field(init=False)  # rows[:, 2], contiguous
 
     def __post_init__(self) -> None:
         self.built = np.zeros(self.base_u.size - 1, bool)
         self.rows = np.empty((0, 9))
+        self._s0 = np.empty(0)
 
     def ensure(self, s: np.ndarray) -> None:
         """Build the sub-intervals covering every arc length in s (in place)."""
@@ -50,6 +52,7 @@ class InverseTable:
                       self.base_s[need + 1] - self.base_s[need])
         rows = np.concatenate((self.rows, new))
         self.rows = rows[np.argsort(rows[:, 2], kind="stable")]
+        self._s0 = np.ascontiguousarray(self.rows[:, 2])  # searched on every hermite call
         self.built[need] = True
 
     def interval(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -63,8 +66,8 @@ class InverseTable:
     def hermite(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(u, sub-interval index) of arc lengths s (ensured) by quintic Hermite."""
         r = self.rows
-        idx = clamp(np.searchsorted(r[:, 2], s, side="right") - 1, 0, len(r) - 1)
-        u0, u1, s0, s1, d0, c0, d1, c1 = (r[idx, j] for j in range(8))
+        idx = clamp(np.searchsorted(self._s0, s, side="right") - 1, 0, len(r) - 1)
+        u0, u1, s0, s1, d0, c0, d1, c1 = r.take(idx, axis=0)[:, :8].T  # one gather of the rows
         h = np.where(s1 > s0, s1 - s0, 1.0)
         return clamp(_quintic(clamp((s - s0) / h, 0.0, 1.0), h, u0, u1, d0, c0, d1, c1),
                        u0, u1), idx

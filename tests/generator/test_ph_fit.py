@@ -84,3 +84,17 @@ def test_foot_distances_settled_early_equal_fully_converged(seed: int,
         full = foot_distances(curve, z.u_start, z.u_end, pts, guess)
         monkeypatch.undo()
         np.testing.assert_allclose(early, full, rtol=0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_all_zones_points_at_once_equal_each_quintics_own(seed: int) -> None:
+    """_fit_all measures every zone's quintic at its samples in one Horner scheme over all of
+    them: bit for bit PhQuintic.point of each (the fit error and so the splits unchanged)."""
+    from controller.geometry.ph_quintic import PhQuintic
+
+    rng = np.random.default_rng(seed)
+    phs = [PhQuintic.hermite(complex(*rng.normal(0, 20, 2)), complex(*rng.normal(0, 20, 2)),
+                             complex(*rng.normal(0, 10, 2)), complex(*rng.normal(0, 10, 2)))
+           for _ in range(int(rng.integers(1, 12)))]
+    xi = np.linspace(0.0, 1.0, ph_fit._ERROR_SAMPLES)
+    assert np.array_equal(ph_fit._points(phs, xi), np.array([ph.point(xi) for ph in phs]))

@@ -122,6 +122,32 @@ def test_scalar_inverse_without_the_inverse_table(c: Nurbs, share: float) -> Non
     assert "_inverse" not in vars(table)
 
 
+@settings(max_examples=25, deadline=None)
+@given(random_nurbs(), st.integers(0, 2**32 - 1))
+def test_small_arrays_remembered_give_the_numbers_of_a_fresh_call(c: Nurbs, seed: int) -> None:
+    """evaluate and s_of_u on a few parameters are remembered by value (an interned curve is
+    asked the same points on every copy of a long program): asked again, in any order, with
+    any derivative order, they give the numbers of a curve that never remembered them, and
+    each answer is a copy of its own."""
+    import controller.geometry.nurbs as nurbs_module
+
+    rng = np.random.default_rng(seed)
+    fresh = Nurbs(c.degree, c.knots.copy(), c.control_points.copy(), c.weights.copy())
+    asks = [(rng.uniform(c.u_start, c.u_end, rng.integers(1, 5)), int(rng.integers(-1, 4)))
+            for _ in range(6)]
+    for u, order in asks + asks[::-1] + asks:
+        got = c.s_of_u(u) if order < 0 else c.evaluate(u, order)
+        ref = fresh.arc_length_table.s_of_u(u) if order < 0 else fresh._evaluate(u, order)
+        assert np.array_equal(got, ref)
+        got += 1.0  # the caller's own array: the next answer is untouched
+    big = np.linspace(c.u_start, c.u_end, nurbs_module.MEMO_POINTS + 1)
+    assert np.array_equal(c.evaluate(big, 2), fresh._evaluate(big, 2))
+    assert len(c._memo) <= 2 * len(asks)  # the large array was not remembered
+    for k in range(nurbs_module.MEMO_ENTRIES + 5):
+        c.evaluate(np.array([c.u_start + (c.u_end - c.u_start) * k / 1000.0]), 1)
+    assert len(c._memo) <= nurbs_module.MEMO_ENTRIES
+
+
 def quarter_circle(radius: float) -> Nurbs:
     """Exact rational quadratic quarter circle: kappa = 1/R everywhere."""
     pts = np.array([[radius, 0.0], [radius, radius], [0.0, radius]])

@@ -68,11 +68,22 @@ def foot_distances(curve: Curve, u_start: ArrayLike, u_end: ArrayLike, pts: np.n
     return np.linalg.norm(curve.evaluate(u, 0)[0] - pts, axis=1)
 
 
+def _points(phs: list[PhQuintic], xi: np.ndarray) -> np.ndarray:
+    """Every PH's points at xi, (len(phs), xi.size): PhQuintic.point's Horner scheme run on
+    all of them at once, the same operations on each element (the same numbers)."""
+    c = np.array([ph._r_power for ph in phs])  # noqa: SLF001 (lowest power first)
+    acc = c[:, -1, None] * xi + c[:, -2, None]
+    for k in range(c.shape[1] - 3, -1, -1):
+        acc *= xi
+        acc += c[:, k, None]
+    return acc
+
+
 def _fit_all(curve: Curve, u_start: np.ndarray, u_end: np.ndarray) -> list[PhSegment]:
     """fit_single for many zones at once: one batch of foot-point sweeps for all their samples."""
     phs = _hermite_all(curve, u_start, u_end)
     xi = np.linspace(0.0, 1.0, _ERROR_SAMPLES)
-    z = np.concatenate([ph.point(xi) for ph in phs])
+    z = _points(phs, xi).ravel()
     lo, hi = np.repeat(u_start, xi.size), np.repeat(u_end, xi.size)
     dist = foot_distances(curve, lo, hi, np.column_stack((z.real, z.imag)),
                           lo + np.tile(xi, len(phs)) * (hi - lo)).reshape(len(phs), xi.size)
