@@ -205,9 +205,14 @@ class Nurbs:
         return self._remembered(order, u, lambda uu: self._evaluate(uu, order))
 
     def _evaluate(self, u: np.ndarray, order: int) -> np.ndarray:
+        return self.evaluate_rows(u, order).transpose(0, 2, 1)
+
+    def evaluate_rows(self, u: ArrayLike, order: int = 2) -> np.ndarray:
+        """evaluate as (order+1, 2, N): each derivative's x and y rows contiguous (the array
+        evaluate returns a view of), for arithmetic on x and y without strided reads."""
         a = self._homogeneous_rows(u, order)
         if self._polynomial:  # w = 1, w' = w'' = ... = 0: C^(k) = A^(k)
-            return a.transpose(0, 2, 1)
+            return a
         w = a[:, 2]
         inv_w = 1.0 / w[0]
         c = np.empty((order + 1, 2, a.shape[2]))
@@ -217,7 +222,7 @@ class Nurbs:
                 acc -= (comb(k, i) * w[i]) * c[k - i]
             acc *= inv_w
             c[k] = acc
-        return c.transpose(0, 2, 1)
+        return c
 
     def curvature(self, u: ArrayLike) -> np.ndarray:
         """Eq. 14 (unsigned), 1/mm."""
@@ -230,8 +235,8 @@ class Nurbs:
     def speed(self, u: np.ndarray) -> np.ndarray:
         """|C'(u)|, never remembered: the arc-length tables and their Newton steps ask it at
         points that seldom come back."""
-        d1 = self._evaluate(u, 1)[1]
-        return np.hypot(d1[:, 0], d1[:, 1])
+        d1 = self.evaluate_rows(u, 1)[1]
+        return np.hypot(d1[0], d1[1])
 
     @cached_property
     def arc_length_table(self) -> ArcLengthTable:

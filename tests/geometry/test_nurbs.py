@@ -148,6 +148,28 @@ def test_small_arrays_remembered_give_the_numbers_of_a_fresh_call(c: Nurbs, seed
     assert len(c._memo) <= nurbs_module.MEMO_ENTRIES
 
 
+@settings(max_examples=25, deadline=None)
+@given(random_nurbs())
+def test_rows_and_the_joint_curvature_give_the_numbers_of_evaluate(c: Nurbs) -> None:
+    """evaluate_rows is evaluate's array with x and y as rows, and the corner detector's
+    curvature with its slope from those rows equals the two (N, 2) functions bit for bit,
+    stops of the curve (kappa undefined) included."""
+    from controller.geometry.curves import (
+        curvature_and_derivative_from_rows,
+        curvature_derivative_from_derivatives,
+        curvature_from_derivatives,
+    )
+
+    u = np.concatenate((np.linspace(c.u_start, c.u_end, 301), c.knots[c.degree : -c.degree]))
+    rows = c.evaluate_rows(u, 3)
+    d = c.evaluate(u, 3)
+    assert np.array_equal(rows.transpose(0, 2, 1), d)
+    kappa, slope = curvature_and_derivative_from_rows(rows)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        assert np.array_equal(kappa, curvature_from_derivatives(d), equal_nan=True)
+        assert np.array_equal(slope, curvature_derivative_from_derivatives(d), equal_nan=True)
+
+
 def quarter_circle(radius: float) -> Nurbs:
     """Exact rational quadratic quarter circle: kappa = 1/R everywhere."""
     pts = np.array([[radius, 0.0], [radius, radius], [0.0, radius]])

@@ -10,6 +10,7 @@ import numpy as np
 
 from controller.geometry.curves import (
     Curve,
+    curvature_and_derivative_from_rows,
     curvature_derivative_from_derivatives,
     curvature_from_derivatives,
 )
@@ -46,6 +47,9 @@ def sample_grid(curve: Curve, samples_per_span: int = 64) -> np.ndarray:
 
 def _kappa_and_slope(curve: Curve, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """kappa and dkappa/du on a grid from one evaluation of the first three derivatives."""
+    rows = getattr(curve, "evaluate_rows", None)
+    if rows is not None:
+        return curvature_and_derivative_from_rows(rows(u, 3))
     d = curve.evaluate(u, 3)
     return curvature_from_derivatives(d), curvature_derivative_from_derivatives(d)
 
