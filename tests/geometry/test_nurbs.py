@@ -152,8 +152,7 @@ def test_small_arrays_remembered_give_the_numbers_of_a_fresh_call(c: Nurbs, seed
 @given(random_nurbs())
 def test_rows_and_the_joint_curvature_give_the_numbers_of_evaluate(c: Nurbs) -> None:
     """evaluate_rows is evaluate's array with x and y as rows, and the corner detector's
-    curvature with its slope from those rows equals the two (N, 2) functions bit for bit,
-    stops of the curve (kappa undefined) included."""
+    curvature with its slope from those rows equals the two (N, 2) functions bit for bit."""
     from controller.geometry.curves import (
         curvature_and_derivative_from_rows,
         curvature_derivative_from_derivatives,
