@@ -10,7 +10,7 @@ import numpy as np
 from controller.numeric import clamp, sorted_unique
 
 SpeedFn = Callable[[np.ndarray], np.ndarray]  # |C'(u)| for an array of u
-DerivsFn = Callable[[np.ndarray], np.ndarray]  # [C, C', C''] (3, N, 2) for an array of u
+DerivsFn = Callable[[np.ndarray], np.ndarray]  # [C, C', C''] as x, y rows (3, 2, N)
 IntegralFn = Callable[[SpeedFn, np.ndarray, np.ndarray], np.ndarray]  # speed over [a_i, b_i]
 
 # Quintic Hermite u(s) is checked to this at every sub-interval's midpoint. 1e-11 mm of position
@@ -87,9 +87,11 @@ def _quintic(x: np.ndarray, h: np.ndarray, u0: np.ndarray, u1: np.ndarray, d0: n
 
 
 def _u_derivatives(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(du/ds, d2u/ds2) = (1/|C'|, -(C'.C'')/|C'|^4) from d = [C, C', C''] (0 where |C'| = 0)."""
-    g = np.einsum("ni,ni->n", d[1], d[1])
-    dot = np.einsum("ni,ni->n", d[1], d[2])
+    """(du/ds, d2u/ds2) = (1/|C'|, -(C'.C'')/|C'|^4) from rows d = [C, C', C''] (3, 2, N)
+    (0 where |C'| = 0); each dot product the sum of its two products, as an einsum was."""
+    (x1, y1), (x2, y2) = d[1], d[2]
+    g = x1 * x1 + y1 * y1
+    dot = x1 * x2 + y1 * y2
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(g > 0, 1.0 / np.sqrt(g), 0.0), np.where(g > 0, -dot / (g * g), 0.0)
 

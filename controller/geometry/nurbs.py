@@ -241,7 +241,7 @@ class Nurbs:
     @cached_property
     def arc_length_table(self) -> ArcLengthTable:
         inner = self.knots[self.degree : self.knots.size - self.degree]
-        return ArcLengthTable.build(self.speed, inner, derivs=lambda u: self.evaluate(u, 2))
+        return ArcLengthTable.build(self.speed, inner, derivs=lambda u: self.evaluate_rows(u, 2))
 
     @property
     def length_mm(self) -> float:
