@@ -75,15 +75,49 @@ class InverseTable:
 
 def _quintic(x: np.ndarray, h: np.ndarray, u0: np.ndarray, u1: np.ndarray, d0: np.ndarray,
              c0: np.ndarray, d1: np.ndarray, c1: np.ndarray) -> np.ndarray:
-    """Quintic Hermite on [0, 1] (values, slopes h d, curvatures h^2 c at both ends)."""
+    """Quintic Hermite on [0, 1] (values, slopes h d, curvatures h^2 c at both ends):
+        m3 (1 + 3x + 6x2) u0 + x3 (1 + 3m + 6m2) u1 + h (m3 x (1 + 3x) d0 - x3 m (1 + 3m) d1)
+        + 0.5 h h (m3 x2 c0 + x3 m2 c1),  m = 1 - x,
+    in place, each product and sum in the order that expression is evaluated (1 + 3x and
+    1 + 3m made once for both of their uses): the same numbers with fewer temporaries, for
+    the hundreds of thousands of samples a long program interpolates."""
     x2 = x * x
     x3 = x2 * x
     m = 1 - x
     m2 = m * m
     m3 = m2 * m
-    return (m3 * (1 + 3 * x + 6 * x2) * u0 + x3 * (1 + 3 * m + 6 * m2) * u1
-            + h * (m3 * x * (1 + 3 * x) * d0 - x3 * m * (1 + 3 * m) * d1)
-            + 0.5 * h * h * (m3 * x2 * c0 + x3 * m2 * c1))
+    p = 3 * x
+    p += 1
+    q = 3 * m
+    q += 1
+    out = 6 * x2
+    out += p
+    out *= m3
+    out *= u0
+    t = 6 * m2
+    t += q
+    t *= x3
+    t *= u1
+    out += t
+    t = m3 * x
+    t *= p
+    t *= d0
+    p = x3 * m  # p (1 + 3x) is done with: the second product of h's term
+    p *= q
+    p *= d1
+    t -= p
+    t *= h
+    out += t
+    t = m3 * x2
+    t *= c0
+    p = x3 * m2
+    p *= c1
+    t += p
+    q = 0.5 * h
+    q *= h
+    t *= q
+    out += t
+    return out
 
 
 def _u_derivatives(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

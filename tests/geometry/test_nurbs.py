@@ -228,3 +228,29 @@ def test_all_curves_offer_the_curve_protocol() -> None:
         assert c.evaluate(u, 3).shape == (4, 2, 2)
         np.testing.assert_allclose(c.u_of_s(c.s_of_u(u)), u, atol=1e-12)
         assert c.s_of_u(np.array([c.u_end]))[0] == pytest.approx(c.length_mm, rel=1e-12)
+
+
+def _quintic_expression(x, h, u0, u1, d0, c0, d1, c1):  # type: ignore[no-untyped-def]
+    """The inverse table's quintic Hermite as one expression: the reference."""
+    x2 = x * x
+    x3 = x2 * x
+    m = 1 - x
+    m2 = m * m
+    m3 = m2 * m
+    return (m3 * (1 + 3 * x + 6 * x2) * u0 + x3 * (1 + 3 * m + 6 * m2) * u1
+            + h * (m3 * x * (1 + 3 * x) * d0 - x3 * m * (1 + 3 * m) * d1)
+            + 0.5 * h * h * (m3 * x2 * c0 + x3 * m2 * c1))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 3000))
+def test_inverse_quintic_in_place_equals_the_expression(seed: int, n: int) -> None:
+    """u(s) between the inverse table's nodes, computed in place, is the expression's number
+    bit for bit (values, slopes and curvatures of any size, x on [0, 1] with its ends)."""
+    from controller.geometry.arclength_inverse import _quintic
+
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0.0, 1.0, n)
+    x[: min(n, 2)] = (0.0, 1.0)[: min(n, 2)]
+    args = [x] + [rng.normal(size=n) * 10.0 ** rng.uniform(-8, 4) for _ in range(7)]
+    assert np.array_equal(_quintic(*args), _quintic_expression(*args))
