@@ -85,10 +85,10 @@ class ArcLengthTable:
         inverse over the span cost more than the trials themselves."""
         u = min(max(float(np.interp(s_mm, self.s_nodes, self.u_nodes)), lo), hi)
         a, b = lo, hi
-        u_list, last = self._u_node_list, self.u_nodes.size - 2
+        nodes, last = self.u_nodes, self.u_nodes.size - 2
         x = np.empty(_GL_ORDER + 1)  # the Gauss nodes on [u_node, u], then u itself
         for _ in range(_NEWTON_SWEEPS):
-            idx = min(max(bisect.bisect_right(u_list, u) - 1, 0), last)  # _interval, no numpy
+            idx = min(max(bisect.bisect_right(nodes, u) - 1, 0), last)  # _interval, no numpy
             u_node = self.u_nodes[idx]
             half = 0.5 * (u - u_node)
             np.add(0.5 * (u_node + u), half * _GL_X, out=x[:-1])
@@ -101,10 +101,6 @@ class ArcLengthTable:
             step = u - err / values[-1] if values[-1] > 0 else math.nan
             u = step if a < step < b else 0.5 * (a + b)
         return u
-
-    @cached_property
-    def _u_node_list(self) -> list[float]:
-        return self.u_nodes.tolist()
 
     @cached_property
     def _inverse(self) -> InverseTable:
