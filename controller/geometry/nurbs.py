@@ -22,10 +22,11 @@ from controller.numeric import cached_property
 # Arrays of up to MEMO_POINTS parameters are remembered by value (evaluate, s_of_u): a long
 # program's windows ask an interned curve (generator/repeats.py) for the same few points on every
 # copy (a piece's ends, its tangent at a joint, its parts' lengths), each call ~20 us of numpy
-# against ~1 us for the look-up. At most MEMO_ENTRIES per curve, then the memo starts afresh
-# (an airfoil's planning asks at most 20: a few kB per curve, of the 128 a long run interns).
-MEMO_POINTS = 16
-MEMO_ENTRIES = 64
+# against ~1 us for the look-up. At most MEMO_ENTRIES per curve, then the memo starts afresh: an
+# airfoil's planning asks 20 (all of them of 4 points or fewer), and a long run interns up to
+# 128 curves, so that the memos stay within a megabyte.
+MEMO_POINTS = 4
+MEMO_ENTRIES = 24
 
 
 def _derivative_points(knots: np.ndarray, pts: np.ndarray, p: int) -> np.ndarray:
