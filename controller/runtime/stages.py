@@ -35,6 +35,17 @@ def blocks_source(path: str, config: MachineConfig,
     yield from read_program(path, config, start_mm, offsets, from_line, track)
 
 
+def checked_blocks(blocks: list[Any]) -> BlocksFn:
+    """The interpreter stage over the blocks the check before the run kept (the same path,
+    config and offsets, read from the start): the forked interpreter inherits them instead of
+    reading the program a second time."""
+
+    def source(path: str, config: MachineConfig) -> Iterator[Any]:
+        yield from blocks
+
+    return source
+
+
 def reference_source(blocks: Iterable[Any], config: MachineConfig,
                      optional_stop: bool = False) -> Iterator[RefChunk]:
     """The generator stage: the look-ahead reference-point generator (controller.generator.plan).
