@@ -16,6 +16,7 @@ back either way, see BlockSend).
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -37,21 +38,56 @@ def block_frames(block_ms: float, period_s: float, cycle_frames: int, span_frame
 
 def fault_rows(
     fb: Feedback, fbcheck: FeedbackCheck, ferr: FerrorCheck, hist: RefHistory
-) -> int | None:
+) -> tuple[int | None, tuple[FeedbackCheck, FerrorCheck] | None]:
     """How many rows of a block's feedback a loop reading it cycle by cycle would have read
-    when it first had to stop (a reading no drive could give, a following error), or None.
-    The checks are run on copies: the loop runs them on the block again as it reads it."""
+    when it first had to stop (a reading no drive could give, a following error), or None;
+    and, when every row passed both, the two checks as they stand after the block. The checks
+    are run on copies: the loop takes these copies in place of checking the block again."""
     if not len(fb):
-        return None
-    bad = None if fbcheck.corrupt else copy.copy(fbcheck).check(fb)
+        return None, None
+    fb_copy, ferr_copy = copy.copy(fbcheck), copy.copy(ferr)
+    bad = None if fbcheck.corrupt else fb_copy.check(fb)
     believed = len(fb) if bad is None else int(np.searchsorted(fb.seq, bad.seq))
-    trip = copy.copy(ferr).check(
+    trip = ferr_copy.check(
         Feedback(fb.seq[:believed], fb.commanded_counts[:believed], fb.encoder_counts[:believed]),
         hist,
     )
     if trip is not None:
-        return int(np.searchsorted(fb.seq, trip.seq)) + 1
-    return None if bad is None else believed + 1
+        return int(np.searchsorted(fb.seq, trip.seq)) + 1, None
+    if bad is not None:
+        return believed + 1, None
+    return None, None if fbcheck.corrupt else (fb_copy, ferr_copy)
+
+
+class CheckedAhead:
+    """The feedback and following-error checks of a virtual-time block, run once: the block's
+    cut (fault_rows) checks its rows; if none failed, the cycle that then reads the same rows
+    (the same arrays: the card hands the block out as it gave it to the cut) takes the checks
+    as they stand after them instead of running both on them again. The card, halted or not
+    after the block, changes neither result: a halt only widens the steps believed."""
+
+    def __init__(self, checks: Any, hist: RefHistory, own: Callable[[Feedback], Feedback]) -> None:
+        self.checks, self.hist, self.own = checks, hist, own  # the loop's (own: its numbers)
+        self._rows: np.ndarray | None = None
+        self._after: tuple[FeedbackCheck, FerrorCheck] | None = None
+
+    def cut(self, raw: Feedback) -> int | None:
+        """fault_rows on a block as the card numbers it (the wait_block cut)."""
+        c = self.checks
+        rows, self._after = fault_rows(self.own(raw), c.fbcheck, c.ferr, self.hist)
+        self._rows = raw.encoder_counts if self._after is not None else None
+        return rows
+
+    def believed(self, raw: Feedback, settling: bool) -> tuple[Feedback, Any, bool]:
+        """FeedbackCheck.believed on a cycle's rows, and whether they were the block checked
+        ahead (then both checks already stand after them: the cycle checks nothing again)."""
+        done = self._after is not None and raw.encoder_counts is self._rows
+        if done:
+            self.checks.fbcheck, self.checks.ferr = self._after
+        self._rows = self._after = None
+        if done:
+            return self.own(raw), None, True
+        return (*self.checks.fbcheck.believed(self.own(raw), settling=settling), False)
 
 
 class BlockSend:

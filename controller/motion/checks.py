@@ -107,6 +107,9 @@ NEAR_FRAMES = 40  # reference frames searched each side of a frame for the neare
 # history ring (2 FIFOs + 1024 frames), far more than the BATCH_ROWS + NEAR_FRAMES frames a
 # batch reaches back.
 BATCH_ROWS = 128
+# In virtual time (a block of 64 frames a cycle, nothing waits on the clock) a batch is larger:
+# each costs a dozen numpy calls whatever its rows, and no cycle has a deadline to keep.
+VIRTUAL_BATCH_ROWS = 512
 
 
 class ContourStats:
@@ -114,8 +117,9 @@ class ContourStats:
     reference frames near their own frame (the sent path, stops and their overshoot included,
     not only eq. 28's normal component); running max/RMS/mean, BATCH_ROWS rows at a time."""
 
-    def __init__(self, pulse_mm: np.ndarray) -> None:
+    def __init__(self, pulse_mm: np.ndarray, batch_rows: int | None = None) -> None:
         self.pulse_mm = pulse_mm
+        self.batch_rows = batch_rows  # None: BATCH_ROWS
         self.max_abs_mm = 0.0
         self.sum_abs_mm = 0.0
         self.sum_sq_mm2 = 0.0
@@ -137,7 +141,7 @@ class ContourStats:
         self._seq.append(np.asarray(seq))
         self._counts.append(np.atleast_2d(encoder_counts))
         self._rows += len(self._seq[-1])
-        if self._rows >= BATCH_ROWS:
+        if self._rows >= (self.batch_rows or BATCH_ROWS):
             self._measure()
 
     def _measure(self) -> None:

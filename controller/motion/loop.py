@@ -15,13 +15,10 @@ import numpy as np
 from controller.config import MachineConfig
 from controller.errors import CncError, DriveError
 from controller.motion.at_speed import AtSpeedWait
-from controller.motion.blocks import BlockSend, block_frames, fault_rows
-from controller.motion.checks import ContourStats, FerrorCheck, RefHistory, start_gap
+from controller.motion.blocks import BlockSend, CheckedAhead, block_frames
+from controller.motion.checks import VIRTUAL_BATCH_ROWS, RefHistory, start_gap
 from controller.motion.events import EventFn, JobEvents
-from controller.motion.feedback_check import FeedbackCheck
-from controller.motion.in_position import InPosition
 from controller.motion.limits import LimitWatch
-from controller.motion.model_watch import ModelWatch
 from controller.motion.outputs import OutputRunner
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.pulses import PulseCounter, counts_of
@@ -107,12 +104,12 @@ class MotionController:
     def _setup(self) -> None:
         start_cmd, start_enc = self.drive.position_counts()
         self.figures = RunFigures(start_cmd=start_cmd, last_enc=start_enc)
-        self.checks = RunChecks(
-            ferr=FerrorCheck(self.config, start_cmd),
-            fbcheck=FeedbackCheck(self.config, start_enc),
-            contour=ContourStats(self.pulse_mm),
-            model=ModelWatch(self.config, start_cmd),
-            in_position=InPosition(self.pulse_mm, self.settings.in_position_mm, self.period_s))
+        # Clocked in real time: smaller refills (the FIFO stays nearer its high-water mark,
+        # where a late wake-up under load takes it from) and statistics batches.
+        virtual = isinstance(self.pacer, VirtualPacer) and self.pacer.blocks
+        batch = VIRTUAL_BATCH_ROWS if virtual else None
+        self.checks = RunChecks.start(self.config, start_cmd, start_enc,
+                                      self.settings.in_position_mm, batch)
         start_mm = start_cmd * self.pulse_mm
         precomp = (Precompensator([a.servo for a in self.config.axes], self.period_s, start_mm)
                    if self.config.interpolator.servo_precompensation else None)
@@ -121,6 +118,7 @@ class MotionController:
             retimer=self.retimer, pulses=PulseCounter(self.pulse_mm, start_cmd),
             hist=RefHistory(2 * self.drive.fifo_capacity() + 1024, self.n, self.period_s),
             precomp=precomp)
+        self.ahead = CheckedAhead(self.checks, self.stream.hist, self._own_numbers)
         self.pending_stop = np.zeros((0, self.n))
         self.state = MotionState.WAITING
         self.outcome: Outcome | None = None
@@ -143,9 +141,6 @@ class MotionController:
         s = self.settings
         span = self._frames(s.high_water_ms) - self._frames(s.low_water_ms) - s.cycle_frames
         self.block = block_frames(s.block_ms, self.period_s, s.cycle_frames, span)
-        # Clocked in real time, smaller refills: the FIFO stays nearer its high-water mark,
-        # where a late wake-up under load takes it from.
-        virtual = isinstance(self.pacer, VirtualPacer) and self.pacer.blocks
         self.refill = self.block if virtual else block_frames(s.refill_ms, self.period_s,
                                                               s.cycle_frames, span // 2)
 
@@ -165,7 +160,7 @@ class MotionController:
         if frames <= cycle:
             self.pacer.wait()
             return
-        clocked = self.pacer.wait_block(frames, self._fault_rows)
+        clocked = self.pacer.wait_block(frames, self.ahead.cut)  # blocks.py
         # The block's first cycle ended this much before its last (the first motion's time).
         self.block_early_s = (clocked - cycle) * self.period_s
 
@@ -180,19 +175,14 @@ class MotionController:
                 and self.estop_reason is None and not self.synced.pending
                 and not self.synced.written)  # M62's outputs: set and reported per cycle
 
-    def _fault_rows(self, fb: Feedback) -> int | None:
-        """Rows of a virtual-time block read before a fault a cycle would have acted on."""
-        return fault_rows(self._own_numbers(fb), self.checks.fbcheck, self.checks.ferr,
-                          self.stream.hist)
-
     def _cycle(self) -> None:
         try:
-            fb, status, level = self.drive.feedback(), self.drive.status(), self.drive.fifo_level()
+            raw, status, level = self.drive.feedback(), self.drive.status(), self.drive.fifo_level()
         except LostCommunicationError as exc:
             self.position_known = False
             self._finish(Outcome.FAULT, str(exc))
             return
-        fb, bad = self.checks.fbcheck.believed(self._own_numbers(fb), settling=status.halted)
+        fb, bad, checked = self.ahead.believed(raw, settling=status.halted)  # (blocks.py)
         if bad is not None:  # a reading no drive could give: none believed from then on
             self.position_known = False
             self._begin_stop(Outcome.FAULT, bad.message)
@@ -203,7 +193,7 @@ class MotionController:
             self.figures.underruns += int(CardStatus.UNDERRUN in status)
             self._finish(Outcome.FAULT, self.drive.fault_message())
             return
-        self._supervise(fb)
+        self._supervise(fb, checked)
         self._check_estop(level)
         level = self._operator_requests(level)
         if self.pending_tail is not None:
@@ -245,8 +235,8 @@ class MotionController:
                                  self.stream.hist)
         self.checks.in_position.frames(fb.seq, fb.encoder_counts, self.stream.pulses.counts)
 
-    def _supervise(self, fb: Feedback) -> None:
-        trip = self.checks.ferr.check(fb, self.stream.hist)
+    def _supervise(self, fb: Feedback, checked: bool = False) -> None:
+        trip = None if checked else self.checks.ferr.check(fb, self.stream.hist)
         if trip is not None:
             line = int(self.stream.hist.line[trip.seq % self.stream.hist.capacity])
             self._begin_stop(Outcome.FAULT, f"{trip.axis.upper()} axis following error "
@@ -352,8 +342,7 @@ class MotionController:
         hist = self.stream.hist
         counts = hist.cmd_counts[(before.hist_count + np.arange(len(out))) % hist.capacity]
         block = BlockSend(before, consumed, counts, self.stream.precomp)  # type: ignore[arg-type]
-        for entry in block.pieces(every):
-            self.stream.journal.record(entry.frames, entry.consumed, entry)
+        self.stream.journal.record_block(block, every)  # its pieces made if a take-back looks
 
     def _read_ahead(self, max_rows: int = 4096) -> None:
         """More held rows while re-timing: a ramp looks at the rows it will cross."""

@@ -25,8 +25,10 @@ class ModelWatch:
     (eq. 28's direction, as contour_error_mm); BATCH_ROWS rows at a time, every axis's filter
     in one call over the frames between two batches."""
 
-    def __init__(self, config: MachineConfig, start_counts: np.ndarray) -> None:
+    def __init__(self, config: MachineConfig, start_counts: np.ndarray,
+                 batch_rows: int | None = None) -> None:
         self.names = config.axis_names
+        self.batch_rows = batch_rows  # None: BATCH_ROWS (virtual time: checks.py says why)
         self.period_s = config.sample_period_s
         self.pulse_mm = np.array([a.pulse_mm for a in config.axes])
         self.servos = [discretise(a.servo, self.period_s) for a in config.axes]
@@ -60,7 +62,7 @@ class ModelWatch:
         self._cmd.append(np.asarray(commanded_counts))
         self._enc.append(np.asarray(encoder_counts))
         self._rows += len(seq)
-        if self._rows >= BATCH_ROWS:
+        if self._rows >= (self.batch_rows or BATCH_ROWS):
             self._measure()
 
     def _measure(self) -> None:

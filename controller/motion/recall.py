@@ -36,27 +36,53 @@ class Sent:
 class SendJournal:
     """What each send changed, newest last, so the newest sends can be undone together with
     the frames the card takes back (Drive.recall_frames). Arrays are kept by reference: the
-    loop replaces them, never writes into them."""
+    loop replaces them, never writes into them. A block sent as it is (motion/blocks.py) is
+    kept whole and cut into its cycle-sized sends only when a take-back looks (rarely): the
+    same entries, without making them for every block."""
 
     def __init__(self) -> None:
-        self.entries: list[Sent] = []
+        self.entries: list[Any] = []  # Sent, or a block's Pieces not yet made
+        self._count = 0  # the sends they hold
 
     def record(self, frames: int, consumed: np.ndarray, before: Sent) -> None:
         if frames <= 0:
             return
         before.frames, before.consumed = frames, consumed
-        self.entries.append(before)
-        if len(self.entries) > JOURNAL_ENTRIES:
+        self._add(before, 1)
+
+    def record_block(self, block: Any, piece: int) -> None:
+        """A block's rows sent at once, journalled as sends of `piece` frames (BlockSend)."""
+        if len(block.consumed):
+            self._add(Pieces(block, piece), -(-len(block.consumed) // piece))
+
+    def _add(self, entry: Any, count: int) -> None:
+        self.entries.append(entry)
+        self._count += count
+        # The oldest go while the rest hold JOURNAL_ENTRIES sends; _made() trims exactly.
+        while len(self.entries) > 1 and self._count - _sends(self.entries[0]) >= JOURNAL_ENTRIES:
+            self._count -= _sends(self.entries.pop(0))
+
+    def _made(self) -> list[Sent]:
+        """Every entry a Sent (blocks cut into their sends), the newest JOURNAL_ENTRIES."""
+        if any(isinstance(e, Pieces) for e in self.entries):
+            flat: list[Sent] = []
+            for e in self.entries:
+                flat.extend(e.made() if isinstance(e, Pieces) else (e,))
+            self.entries = flat[-JOURNAL_ENTRIES:]
+        elif len(self.entries) > JOURNAL_ENTRIES:
             del self.entries[: len(self.entries) - JOURNAL_ENTRIES]
+        self._count = len(self.entries)
+        return self.entries
 
     def clear(self) -> None:
         self.entries.clear()
+        self._count = 0
 
     def newest_within(self, budget_frames: int) -> list[Sent]:
         """The newest sends whose frames add up to at most budget_frames, newest first."""
         out: list[Sent] = []
         total = 0
-        for entry in reversed(self.entries):
+        for entry in reversed(self._made()):
             if total + entry.frames > budget_frames:
                 break
             out.append(entry)
@@ -64,7 +90,24 @@ class SendJournal:
         return out
 
     def drop(self, n: int) -> None:
-        del self.entries[len(self.entries) - n:]
+        entries = self._made()
+        del entries[len(entries) - n:]
+        self._count = len(entries)
+
+
+class Pieces:
+    """A block's journal entries (BlockSend.pieces(piece)), made when first asked for."""
+
+    def __init__(self, block: Any, piece: int) -> None:
+        self.block, self.piece = block, piece
+        self.sends = -(-len(block.consumed) // piece)
+
+    def made(self) -> list[Sent]:
+        return self.block.pieces(self.piece)  # type: ignore[no-any-return]
+
+
+def _sends(entry: Any) -> int:
+    return entry.sends if isinstance(entry, Pieces) else 1
 
 
 def retimer_state(retimer: Retimer) -> dict[str, Any]:

@@ -43,6 +43,20 @@ class RunChecks:
     in_position: InPosition
     model: ModelWatch
 
+    @classmethod
+    def start(cls, config: MachineConfig, start_cmd: np.ndarray, start_enc: np.ndarray,
+              in_position_mm: float, batch_rows: int | None = None) -> RunChecks:
+        """A run's checks from where the card stands; batch_rows: the statistics' batches
+        (None: BATCH_ROWS; virtual time: larger, see checks.py)."""
+        pulse_mm = np.array([a.pulse_mm for a in config.axes])
+        return cls(
+            ferr=FerrorCheck(config, start_cmd),
+            fbcheck=FeedbackCheck(config, start_enc),
+            contour=ContourStats(pulse_mm, batch_rows),
+            model=ModelWatch(config, start_cmd, batch_rows),
+            in_position=InPosition(pulse_mm, in_position_mm, config.sample_period_s),
+        )
+
 
 def read_position(drive: Drive, fbcheck: FeedbackCheck,
                   last_enc: np.ndarray) -> tuple[np.ndarray | None, np.ndarray, bool]:

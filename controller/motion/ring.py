@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+import mmap
 import time
-from multiprocessing import shared_memory
 
 import numpy as np
 
@@ -22,27 +22,26 @@ class RefRing:
     half-written row. A full ring blocks the producer: that is the back-pressure.
     """
 
-    def __init__(self, shm: shared_memory.SharedMemory) -> None:
-        self.shm = shm
-        self.header = np.ndarray((HEADER_WORDS,), dtype=np.int64, buffer=shm.buf)
+    def __init__(self, buf: mmap.mmap) -> None:
+        self.buf = buf
+        self.header = np.ndarray((HEADER_WORDS,), dtype=np.int64, buffer=buf)
         self.capacity = int(self.header[CAPACITY])
         self.n_cols = int(self.header[N_COLS])
         self.rows = np.ndarray((self.capacity, self.n_cols), dtype=np.float64,
-                               buffer=shm.buf, offset=HEADER_WORDS * 8)
+                               buffer=buf, offset=HEADER_WORDS * 8)
 
     @classmethod
     def create(cls, capacity_rows: int, n_cols: int) -> RefRing:
         size = HEADER_WORDS * 8 + capacity_rows * n_cols * 8
-        shm = shared_memory.SharedMemory(create=True, size=size)
-        # Its name is removed at once: the producers are forked and inherit the mapping, and
-        # nobody attaches by name, so nothing is left in /dev/shm even when every process of
-        # the run is killed together (the resource tracker too), as by SIGKILL to a group.
-        shm.unlink()
-        header = np.ndarray((HEADER_WORDS,), dtype=np.int64, buffer=shm.buf)
-        header[:] = 0
+        # An anonymous shared mapping (zero-filled): the producers are forked and inherit it,
+        # and nobody attaches by name, so nothing is ever in /dev/shm, even when every process
+        # of the run is killed together. A named SharedMemory also started multiprocessing's
+        # resource tracker, a whole interpreter of its own (some 40 ms of CPU per run).
+        buf = mmap.mmap(-1, size, flags=mmap.MAP_SHARED)
+        header = np.ndarray((HEADER_WORDS,), dtype=np.int64, buffer=buf)
         header[N_COLS], header[CAPACITY] = n_cols, capacity_rows
         del header
-        return cls(shm)
+        return cls(buf)
 
     # -- producer -------------------------------------------------------------------------
     def write(self, rows: np.ndarray, poll_s: float = 0.001) -> bool:
@@ -91,4 +90,4 @@ class RefRing:
 
     def close(self) -> None:
         del self.header, self.rows
-        self.shm.close()  # the name went at creation (see create): unmapping frees it
+        self.buf.close()  # unmapped here; freed once the forked producers unmapped it too

@@ -30,11 +30,14 @@ class BlockClock:
                 return step
             snap = self._snapshot()
             card._clock(n_frames)
-            rows = cut(self._block_feedback(card._trace[snap[1] :]))
+            block = self._block_feedback(card._trace[snap[1] :])
+            rows = cut(block)
             keep = n_frames if rows is None else min(n_frames, -(-rows // step) * step)
             if keep < n_frames:
                 self._restore(snap)
                 card._clock(keep)
+            elif len(block):  # read back as the cut saw it: the same arrays, joined once
+                card._trace[snap[1] :] = [(block.seq, block.commanded_counts, block.encoder_counts)]
             return keep
 
     def _block_feedback(self, trace: list[tuple[np.ndarray, ...]]) -> Feedback:

@@ -77,3 +77,14 @@ def test_a_halted_cards_motors_may_close_their_following_error_in_one_row() -> N
     assert check.check(_fb([[1000 + settle, 2000]]), settling=True) is None
     flip = check.believed(_fb([[1000 + settle, 2000 + (1 << 23)]], seq0=1), settling=True)
     assert flip[1] is not None and flip[1].axis == "y" and len(flip[0]) == 0
+
+
+@pytest.mark.parametrize("rows", [1, 2, 3])  # a cycle's rows (a frame each), and a block's
+def test_a_jump_in_the_second_row_of_a_cycle_is_named_at_its_frame(rows: int) -> None:
+    check = FeedbackCheck(CONFIG, np.array([1000, 2000]))
+    assert check.check(_fb([[1058, 2000]])) is None  # frame 0
+    moves = [[1058 + 58 * k, 2000] for k in range(1, rows + 1)]
+    moves[min(1, rows - 1)][1] += 5000  # 5 mm in a period
+    trip = check.check(_fb(moves, seq0=1))
+    assert trip is not None and trip.axis == "y" and trip.seq == 1 + min(1, rows - 1)
+    assert "jumped 5.000 mm in 1 period(s) (at most" in trip.message

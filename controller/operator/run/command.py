@@ -31,6 +31,7 @@ from controller.operator.run.probing import run_probing
 from controller.operator.run.remote import run_on_daemon
 from controller.operator.run.view import JsonView, PlainView, ProgramLines, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
+from controller.runtime.stages import checked_blocks
 from controller.tools import ToolTableError, load_tool_table
 from drivers.errors import DriveUnavailableError
 
@@ -157,8 +158,9 @@ def run(args: argparse.Namespace) -> int:
         offsets = load_offsets(args.offsets, missing_ok=False) \
             if args.offsets is not None else None
         track = ProgramOffsets()
+        kept: list[Any] = []  # the blocks, for the interpreter stage (see _checked_blocks)
         check_program(args.program, config, offsets=offsets, from_line=args.from_line,
-                      track=track, summary=False)
+                      track=track, summary=False, keep=kept)
     except (NcError, ConfigError, OffsetsError, ToolTableError) as exc:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
@@ -187,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
     options = replace(options, on_progress=_Announcer(view.progress, keys, tools).progress,
                       on_event=lambda e: view.event(**e))  # an output changed: a line each
     if not shared_drive:
-        runtime.options = options
+        runtime.options = _checked_blocks(options, kept)
     fd = stdin_fd()
     restore_terminal: list[Any] = [lambda: None]
 
@@ -243,6 +245,16 @@ def run(args: argparse.Namespace) -> int:
     view.close()
     view.final(result)
     return EXIT_CODES[result.outcome]
+
+
+def _checked_blocks(options: RuntimeOptions, kept: list[Any]) -> RuntimeOptions:
+    """A run of the whole program as checked (the same offsets, from its start): its stages
+    read the blocks the check kept, if it kept them all (a longer program is read again)."""
+    from controller.operator.check_cmd import KEEP_BLOCKS
+
+    if len(kept) > KEEP_BLOCKS:
+        return options
+    return replace(options, blocks_fn=checked_blocks(kept))
 
 
 def _say_scheduling() -> None:

@@ -1,0 +1,71 @@
+"""The reference ring as an anonymous shared mapping (no resource tracker process), and a run's
+interpreter stage reading the blocks its check kept instead of the program again."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+from runtime_helpers import xy_config
+
+from controller.interpreter.program import read_program
+from controller.motion.types import Outcome
+from controller.runtime.processes import Runtime, RuntimeOptions
+from controller.runtime.stages import BATCH_BLOCKS, checked_blocks
+
+REPO = Path(__file__).resolve().parents[2]
+CFG = xy_config()
+
+_FORKED_RING = textwrap.dedent(
+    """
+    import multiprocessing.resource_tracker as tracker, os, sys
+    import numpy as np
+    from controller.motion.ring import FLAG_FINAL, RefRing
+    ring = RefRing.create(16, 3)
+    pid = os.fork()
+    if pid == 0:  # the producer: what it writes, the parent reads
+        ring.write(np.arange(30.0).reshape(10, 3))
+        ring.set_flag(FLAG_FINAL)
+        os._exit(0)
+    os.waitpid(pid, 0)
+    rows = ring.read(100)
+    ring.close()
+    print(len(rows), float(rows.sum()), tracker._resource_tracker._pid)
+    """
+)
+
+
+def test_a_forked_producer_writes_into_the_ring_and_no_resource_tracker_starts() -> None:
+    """In a fresh interpreter: a named SharedMemory started multiprocessing's resource
+    tracker, a process of its own, for every run."""
+    done = subprocess.run(
+        [sys.executable, "-c", _FORKED_RING],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        check=True,
+    )
+    n_rows, total, tracker_pid = done.stdout.split()
+    assert (int(n_rows), float(total)) == (10, sum(range(30)))
+    assert tracker_pid == "None"
+
+
+def test_the_interpreter_stage_runs_the_blocks_the_check_kept(tmp_path: Path) -> None:
+    """The stage reads the list, not the path (which is gone by then), and passes it on in
+    batches (more blocks than one): the same run."""
+    program = tmp_path / "squares.nc"
+    squares = "G1 X0.5\nG1 Y0.5\nG1 X0\nG1 Y0\n" * (BATCH_BLOCKS // 4 + 8)
+    program.write_text(f"G21 G90 G64 F3000\n{squares}M2\n")
+    kept = list(read_program(str(program), CFG))
+    assert len(kept) > BATCH_BLOCKS
+    whole = Runtime(str(program), CFG, RuntimeOptions(virtual_time=True)).run()
+    program.unlink()
+    options = RuntimeOptions(virtual_time=True, blocks_fn=checked_blocks(kept))
+    checked = Runtime(str(program), CFG, options).run()
+    assert whole.outcome is checked.outcome is Outcome.DONE
+    assert checked.motion_time_s == whole.motion_time_s > 0.0
+    assert checked.final_position_mm == whole.final_position_mm
