@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bisect
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum
 
 import numpy as np
@@ -148,8 +148,27 @@ class _Memo:
 
     globals_: tuple[float, float, float, float, TransitionShape]
     planner: Callable[..., SegmentPlan]  # plan_segments (a test may swap it)
-    rows: dict[bytes, tuple[float, ...]]
+    rows: dict[bytes, int]  # key -> its row of table
+    table: np.ndarray = field(default_factory=lambda: np.empty((0, 6)))  # the results
+    n_rows: int = 0  # rows of table in use (it grows by doubling)
     key_bytes: int = 0
+
+    def look_up(self, keys: list[bytes]) -> np.ndarray:
+        """Each key's row of table, -1 where it has none."""
+        get = self.rows.get
+        return np.array([get(key, -1) for key in keys], np.intp)
+
+    def store(self, keys: list[bytes], results: np.ndarray) -> None:
+        """Remember results (one row per key): rows appended, the keys pointed at them."""
+        end = self.n_rows + len(keys)
+        if end > len(self.table):
+            grown = np.empty((max(end, 2 * len(self.table)), 6))
+            grown[:self.n_rows] = self.table[:self.n_rows]
+            self.table = grown
+        self.table[self.n_rows:end] = results
+        self.rows.update(zip(keys, range(self.n_rows, end), strict=True))
+        self.n_rows = end
+        self.key_bytes += sum(map(len, keys))
 
 
 _last_memo: list[_Memo] = []  # the previous call's memo (at most one)
@@ -176,13 +195,14 @@ def _plan_round(nodes: Nodes, v: np.ndarray, curve: LimitCurve, accel: float, to
     win = SegmentWindows.build(curve, nodes.s)
     vi, vj = v[:-1], v[1:]
     keys = _segment_keys(win, vi, vj, nodes.flat)
-    known = np.array([key in memo.rows for key in keys], bool)
+    row = memo.look_up(keys)
+    known = row >= 0
     new = np.flatnonzero(~known)
     # zeros, not empty: the += below runs over every row, and np.empty's recycled memory held
     # a NaN now and then (a RuntimeWarning; the new rows are overwritten further down).
     out = np.zeros((len(keys), 6))
     if new.size < len(keys):
-        out[known] = [memo.rows[key] for key, kn in zip(keys, known.tolist(), strict=True) if kn]
+        out[known] = memo.table[row[known]]
     # Rows hold positions relative to their segment's start: a segment that moved along the
     # path unchanged (a zone before it was widened) keeps its result.
     out[:, _POSITION_COLUMNS] += win.a[:, None]
@@ -204,10 +224,8 @@ def _plan_round(nodes: Nodes, v: np.ndarray, curve: LimitCurve, accel: float, to
                                        viol.phase_len_mm[new])
     out[new, 3:] = rel[rep, 3:]
     out[new, 4] += a_new
-    for j in set(rep.tolist()):  # one row per key
-        key = keys[int(new[j])]
-        memo.rows[key] = tuple(rel[j].tolist())
-        memo.key_bytes += len(key)
+    once = np.unique(rep)  # one row per key
+    memo.store([keys[i] for i in new[once].tolist()], rel[once])
     return ph, Violations(out[:, 3], out[:, 4], out[:, 5])
 
 
