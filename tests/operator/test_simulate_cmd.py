@@ -220,6 +220,7 @@ def test_a_short_program_is_planned_from_its_check_a_long_one_read_again(
     reports = []
     for keep in (1000, 10):  # 41 blocks: kept, then over the limit
         monkeypatch.setattr(simulate_cmd, "KEEP_BLOCKS", keep)
+        monkeypatch.setattr(simulate_cmd, "KEEP_LINES", keep)
         reads.clear()
         assert main(["simulate", str(prog), "--json"]) == 0
         reports.append(json.loads(capsys.readouterr().out))
