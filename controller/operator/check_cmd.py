@@ -60,8 +60,8 @@ _GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
 
 CHECK_BEAT_BLOCKS = 4096  # on_block is called every this many blocks
 # A check keeps up to this many blocks for its caller (simulate plans them without reading the
-# program again): some 10 MB of arcs; and up to KEEP_LINES G0/G1 lines, as numbers (32 MB); a
-# longer program is read twice, in bounded memory.
+# program again), some 10 MB, and up to KEEP_LINES G0/G1 lines, those past the first
+# KEEP_BLOCKS as numbers (32 MB); a longer program is read twice, in bounded memory.
 KEEP_BLOCKS = 30_000
 KEEP_LINES = 1_000_000
 

@@ -23,11 +23,12 @@ class _LineRun:
 
     def takes(self, b: LineBlock) -> bool:
         """Whether b (a line of one program line) is the run's next line."""
+        # Identity first: the interpreter hands the same objects on from line to line.
         return (
-            b.start == self.last_end
+            (b.start is self.last_end or b.start == self.last_end)
             and b.feed_mm_s == self.feed_mm_s
             and b.rapid == self.rapid
-            and b.path == self.path
+            and (b.path is self.path or b.path == self.path)
             and b.source.path == self.file
         )
 
@@ -48,11 +49,14 @@ class _LineRun:
 
 class KeptBlocks:
     """A program's blocks in order, kept while there are at most max_blocks blocks other than
-    plain lines and max_lines plain lines (then full: the caller reads the program again); a
-    plain line (a G0/G1 of one program line) is kept as numbers in a run of such lines."""
+    plain lines and max_lines plain lines (then full: the caller reads the program again). A
+    plain line (a G0/G1 of one program line) past the first lines_as_blocks is kept as numbers
+    in a run of such lines (a shorter program keeps its blocks as they are: nothing to make
+    again)."""
 
-    def __init__(self, max_blocks: int, max_lines: int) -> None:
+    def __init__(self, max_blocks: int, max_lines: int, lines_as_blocks: int) -> None:
         self.max_blocks, self.max_lines = max_blocks, max_lines
+        self.lines_as_blocks = lines_as_blocks
         self.n_blocks = self.n_lines = 0
         self._parts: list[NcBlock | _LineRun] = []
         self._run: _LineRun | None = None
@@ -66,16 +70,18 @@ class KeptBlocks:
         if self.full:
             return
         if type(block) is LineBlock and block.source.first_line == block.source.last_line:
-            run = self._run
-            if run is None or not run.takes(block):
-                run = self._run = _LineRun(block)
-                self._parts.append(run)
-            run.add(block)
             self.n_lines += 1
-            return
+            if self.n_lines > self.lines_as_blocks:
+                run = self._run
+                if run is None or not run.takes(block):
+                    run = self._run = _LineRun(block)
+                    self._parts.append(run)
+                run.add(block)
+                return
+        else:
+            self.n_blocks += 1
         self._run = None
         self._parts.append(block)
-        self.n_blocks += 1
 
     def __len__(self) -> int:
         return self.n_blocks + self.n_lines

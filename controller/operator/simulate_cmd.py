@@ -58,7 +58,7 @@ def _check_whole_program(path: str, config: MachineConfig) -> KeptBlocks | None:
     error. The program's blocks if it has at most KEEP_BLOCKS blocks other than G0/G1 lines
     and KEEP_LINES lines (planned as they are), else None (read again as it is planned, so a
     long program is never held whole)."""
-    kept = KeptBlocks(KEEP_BLOCKS, KEEP_LINES)
+    kept = KeptBlocks(KEEP_BLOCKS, KEEP_LINES, KEEP_BLOCKS)
     check_program(path, config, summary=False, keep=kept)
     return None if kept.full else kept
 

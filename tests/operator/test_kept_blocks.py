@@ -32,7 +32,7 @@ def _blocks(tmp_path: Path) -> list:
 
 def test_the_kept_blocks_are_the_blocks_appended_in_order(tmp_path: Path) -> None:
     blocks = _blocks(tmp_path)
-    kept = KeptBlocks(100, 100)
+    kept = KeptBlocks(100, 100, 1)  # lines but the first as numbers
     for b in blocks:
         kept.append(b)
     assert not kept.full and len(kept) == len(blocks)
@@ -53,7 +53,7 @@ def test_full_once_past_either_limit(tmp_path: Path) -> None:
         (n_other - 1, n_lines, True),
         (n_other, n_lines - 1, True),
     ):
-        kept = KeptBlocks(max_blocks, max_lines)
+        kept = KeptBlocks(max_blocks, max_lines, 1)
         for b in blocks:
             kept.append(b)
         assert kept.full == full
