@@ -67,21 +67,22 @@ class KeptBlocks:
         return self.n_blocks > self.max_blocks or self.n_lines > self.max_lines
 
     def append(self, block: NcBlock) -> None:
-        if self.full:
-            return
-        if type(block) is LineBlock and block.source.first_line == block.source.last_line:
-            self.n_lines += 1
-            if self.n_lines > self.lines_as_blocks:
-                run = self._run
-                if run is None or not run.takes(block):
-                    run = self._run = _LineRun(block)
-                    self._parts.append(run)
-                run.add(block)
-                return
-        else:
+        """Keep block (past either limit: count it only; the caller asks full)."""
+        if type(block) is not LineBlock or block.source.first_line != block.source.last_line:
             self.n_blocks += 1
-        self._run = None
-        self._parts.append(block)
+            if self.n_blocks <= self.max_blocks:
+                self._run = None
+                self._parts.append(block)
+            return
+        self.n_lines += 1
+        if self.n_lines <= self.lines_as_blocks:  # the first lines: before any run
+            self._parts.append(block)
+        elif self.n_lines <= self.max_lines:
+            run = self._run
+            if run is None or not run.takes(block):
+                run = self._run = _LineRun(block)
+                self._parts.append(run)
+            run.add(block)
 
     def __len__(self) -> int:
         return self.n_blocks + self.n_lines
