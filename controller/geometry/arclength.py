@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -84,11 +85,15 @@ class ArcLengthTable:
         inverse over the span cost more than the trials themselves."""
         u = min(max(float(np.interp(s_mm, self.s_nodes, self.u_nodes)), lo), hi)
         a, b = lo, hi
+        nodes, last = self.u_nodes, self.u_nodes.size - 2
+        x = np.empty(_GL_ORDER + 1)  # the Gauss nodes on [u_node, u], then u itself
         for _ in range(_NEWTON_SWEEPS):
-            idx = int(self._interval(np.array([u]))[0])
+            idx = min(max(bisect.bisect_right(nodes, u) - 1, 0), last)  # _interval, no numpy
             u_node = self.u_nodes[idx]
             half = 0.5 * (u - u_node)
-            values = self.speed(np.append(0.5 * (u_node + u) + half * _GL_X, u))
+            np.add(0.5 * (u_node + u), half * _GL_X, out=x[:-1])
+            x[-1] = u
+            values = self.speed(x)
             err = float(self.s_nodes[idx] + half * (values[:-1] @ _GL_W)) - s_mm
             if abs(err) <= tol_mm:
                 break

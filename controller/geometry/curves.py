@@ -63,6 +63,21 @@ def curvature_derivative_from_derivatives(d: np.ndarray) -> np.ndarray:
         return np.sign(c) * dc / g**1.5 - 3.0 * np.abs(c) * dot12 / g**2.5
 
 
+def curvature_and_derivative_from_rows(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """curvature_from_derivatives and curvature_derivative_from_derivatives together, from
+    rows r = [C, C', C'', C^(3)] of shape (4, 2, N) (x and y rows contiguous): the same
+    operations, each product and sum computed once for both (the same numbers)."""
+    (x1, y1), (x2, y2), (x3, y3) = r[1], r[2], r[3]
+    c = x1 * y2 - y1 * x2
+    dc = x1 * y3 - y1 * x3
+    g = x1 * x1 + y1 * y1
+    dot12 = x1 * x2 + y1 * y2
+    abs_c = np.abs(c)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g15 = g**1.5
+        return abs_c / g15, np.sign(c) * dc / g15 - 3.0 * abs_c * dot12 / g**2.5
+
+
 def _as_u(u: ArrayLike) -> np.ndarray:
     return np.atleast_1d(np.asarray(u, dtype=float))
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from math import comb, factorial
 
@@ -17,6 +18,15 @@ from controller.geometry.curves import (
     curvature_from_derivatives,
 )
 from controller.numeric import cached_property
+
+# Arrays of up to MEMO_POINTS parameters are remembered by value (evaluate, s_of_u): a long
+# program's windows ask an interned curve (generator/repeats.py) for the same few points on every
+# copy (a piece's ends, its tangent at a joint, its parts' lengths), each call ~20 us of numpy
+# against ~1 us for the look-up. At most MEMO_ENTRIES per curve, then the memo starts afresh: an
+# airfoil's planning asks 20 (all of them of 4 points or fewer), and a long run interns up to
+# 128 curves, so that the memos stay within a megabyte.
+MEMO_POINTS = 4
+MEMO_ENTRIES = 24
 
 
 def _derivative_points(knots: np.ndarray, pts: np.ndarray, p: int) -> np.ndarray:
@@ -173,12 +183,39 @@ class Nurbs:
             a = np.concatenate((a, w), axis=1)
         return a.transpose(0, 2, 1)
 
+    @cached_property
+    def _memo(self) -> dict[tuple[int, bytes], np.ndarray]:
+        """Results of evaluate (key: order >= 0) and s_of_u (key: -1) on small arrays, by the
+        parameters' bytes: the same numbers as a call, copied out so no caller shares them."""
+        return {}
+
+    def _remembered(self, kind: int, u: ArrayLike,
+                    compute: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+        uu = np.atleast_1d(np.asarray(u, dtype=float))
+        if uu.size > MEMO_POINTS:
+            return compute(uu)
+        memo, key = self._memo, (kind, uu.tobytes())
+        found = memo.get(key)
+        if found is None:
+            if len(memo) >= MEMO_ENTRIES:
+                memo.clear()
+            found = memo[key] = compute(uu)
+        return found.copy()
+
     def evaluate(self, u: ArrayLike, order: int = 2) -> np.ndarray:
         """[C, C', ..., C^(order)] of shape (order+1, N, 2), by Leibniz on A = w C (A itself
-        when the curve is polynomial)."""
+        when the curve is polynomial); small arrays remembered (_memo)."""
+        return self._remembered(order, u, lambda uu: self._evaluate(uu, order))
+
+    def _evaluate(self, u: np.ndarray, order: int) -> np.ndarray:
+        return self.evaluate_rows(u, order).transpose(0, 2, 1)
+
+    def evaluate_rows(self, u: ArrayLike, order: int = 2) -> np.ndarray:
+        """evaluate as (order+1, 2, N): each derivative's x and y rows contiguous (the array
+        evaluate returns a view of), for arithmetic on x and y without strided reads."""
         a = self._homogeneous_rows(u, order)
         if self._polynomial:  # w = 1, w' = w'' = ... = 0: C^(k) = A^(k)
-            return a.transpose(0, 2, 1)
+            return a
         w = a[:, 2]
         inv_w = 1.0 / w[0]
         c = np.empty((order + 1, 2, a.shape[2]))
@@ -188,7 +225,7 @@ class Nurbs:
                 acc -= (comb(k, i) * w[i]) * c[k - i]
             acc *= inv_w
             c[k] = acc
-        return c.transpose(0, 2, 1)
+        return c
 
     def curvature(self, u: ArrayLike) -> np.ndarray:
         """Eq. 14 (unsigned), 1/mm."""
@@ -199,20 +236,22 @@ class Nurbs:
         return curvature_derivative_from_derivatives(self.evaluate(u, 3))
 
     def speed(self, u: np.ndarray) -> np.ndarray:
-        d1 = self.evaluate(u, 1)[1]
-        return np.hypot(d1[:, 0], d1[:, 1])
+        """|C'(u)|, never remembered: the arc-length tables and their Newton steps ask it at
+        points that seldom come back."""
+        d1 = self.evaluate_rows(u, 1)[1]
+        return np.hypot(d1[0], d1[1])
 
     @cached_property
     def arc_length_table(self) -> ArcLengthTable:
         inner = self.knots[self.degree : self.knots.size - self.degree]
-        return ArcLengthTable.build(self.speed, inner, derivs=lambda u: self.evaluate(u, 2))
+        return ArcLengthTable.build(self.speed, inner, derivs=lambda u: self.evaluate_rows(u, 2))
 
     @property
     def length_mm(self) -> float:
         return self.arc_length_table.total_length_mm
 
     def s_of_u(self, u: ArrayLike) -> np.ndarray:
-        return self.arc_length_table.s_of_u(u)
+        return self._remembered(-1, u, self.arc_length_table.s_of_u)
 
     def u_of_s(self, s_mm: ArrayLike, tol_mm: float = 1e-11) -> np.ndarray:
         return self.arc_length_table.u_of_s(s_mm, tol_mm)

@@ -18,6 +18,7 @@ from typing import Any
 END = "__end__"  # last item on the NC FIFO after the final block
 FAILED = "__failed__"  # the interpreter raised; the runtime carries its message separately
 POLL_S = 0.02  # how often a waiting side looks for a stop
+FAILED_MESSAGE = "NC interpreter failed"  # the generator's error when its input failed
 
 
 def feed_fifo(items: Iterable[Any], fifo: Any, should_stop: Callable[[], bool]) -> bool:
@@ -46,5 +47,5 @@ def drain_fifo(fifo: Any, should_stop: Callable[[], bool]) -> Iterator[Any]:
         if isinstance(item, str) and item == END:
             return
         if isinstance(item, str) and item == FAILED:
-            raise RuntimeError("NC interpreter failed")
+            raise RuntimeError(FAILED_MESSAGE)
         yield item

@@ -13,6 +13,7 @@ from typing import Any
 
 from controller.config import MachineConfig
 from controller.errors import DriveError
+from controller.interpreter.fifo import FAILED_MESSAGE
 from controller.motion.loop import MotionController
 from controller.motion.pacing import VirtualPacer, WallPacer
 from controller.motion.realtime import MOTION_PRIORITY, Scheduling, back_to_normal, try_realtime
@@ -71,6 +72,7 @@ class _Messages:
         self.sched: dict[str, str] = {}  # what each producer runs at ("nice -10")
         self.outputs: list[tuple] = []  # the changes of each output mark, in stream order
         self.sync_outputs: list[tuple] = []  # ... of each M62 mark (set as it is clocked)
+        self.provisional: str | None = None  # a failure() given before its cause was in
 
     def drain(self, wait_s: float = 0.0, until: Callable[[], bool] | None = None) -> None:
         """Take the messages already sent; wait up to wait_s for more, unless until() holds
@@ -90,12 +92,25 @@ class _Messages:
 
     def failure(self) -> str:
         """Why the reference stream failed, once the failed stage's message is in (waited for
-        at most MESSAGE_WAIT_S: it may still be in the queue's pipe)."""
+        at most MESSAGE_WAIT_S: it may still be in the queue's pipe). Given before the message
+        that says why (the interpreter's error comes through its own feeder thread, which a
+        loaded machine may run after the generator's), it is kept as provisional: see final()."""
         self.drain(MESSAGE_WAIT_S, until=lambda: "interpreter" in self.errors
                    or "generator" in self.rss_kb)
         if "interpreter" in self.errors:  # the generator only failed because its input did
-            return f"NC interpreter failed: {self.errors['interpreter']}"
-        return self.errors.get("generator", "reference generator failed")
+            return f"{FAILED_MESSAGE}: {self.errors['interpreter']}"
+        message = self.errors.get("generator", "reference generator failed")
+        if message == "reference generator failed" or message.endswith(FAILED_MESSAGE):
+            self.provisional = message
+        return message
+
+    def final(self, message: str) -> str:
+        """message with a provisional failure replaced by the one the stages have sent since
+        (called once the children are joined and their last messages drained)."""
+        provisional, self.provisional = self.provisional, None
+        if provisional is None or provisional not in message:
+            return message
+        return message.replace(provisional, self.failure(), 1)
 
 
 class RingSource:
@@ -211,6 +226,7 @@ class Runtime:
             # The children are joined: their last messages (peak RSS) are in the pipe.
             messages.drain(MESSAGE_WAIT_S, until=lambda: set(self.procs) <= set(messages.rss_kb))
             ring.close()
+        result = replace(result, message=messages.final(result.message))
         result.extra["realtime"] = rt
         if rt != "off":
             producers = messages.sched.get("generator", "unknown")
@@ -255,7 +271,7 @@ class Runtime:
                 return None
             messages.drain(MESSAGE_WAIT_S, until=lambda: "interpreter" in messages.rss_kb)
             if "interpreter" in messages.errors:
-                found.append(f"NC interpreter failed: {messages.errors['interpreter']}")
+                found.append(f"{FAILED_MESSAGE}: {messages.errors['interpreter']}")
             else:
                 found.append(f"NC interpreter process died (exit code {code})")
             return found[0]

@@ -214,3 +214,32 @@ def _distance_to(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
         near = a[None] + t[..., None] * ab[None]
         out[k:k + 200] = np.linalg.norm(p[:, None, :] - near, axis=2).min(axis=1)
     return out
+
+
+def _deviation_einsum(ph, poly: np.ndarray, n: int = 65) -> float:  # type: ignore[no-untyped-def]
+    """deviation_mm as it was written on (points, segments, 2) arrays: the reference."""
+    pts = ph.point(np.linspace(0.0, 1.0, n))
+    pts = np.column_stack([pts.real, pts.imag])
+    a, b = poly[:-1], poly[1:]
+    ab = b - a
+    rel = pts[:, None, :] - a[None, :, :]
+    t = np.clip(np.einsum("pij,ij->pi", rel, ab)
+                / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300), 0.0, 1.0)
+    nearest = a[None] + t[..., None] * ab[None]
+    return float(np.min(np.linalg.norm(pts[:, None, :] - nearest, axis=2), axis=1).max())
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(2, 140), st.booleans())
+def test_deviation_on_x_and_y_equals_the_einsum_form(seed: int, m: int, repeat: bool) -> None:
+    """A trial's deviation, computed on x and y apart, is the (points, segments, 2) form's
+    number bit for bit: random blends against random polylines, a zero-length segment too."""
+    from controller.geometry.ph_quintic import PhQuintic
+
+    rng = np.random.default_rng(seed)
+    ph = PhQuintic.hermite(complex(*rng.normal(0, 5, 2)), complex(*rng.normal(0, 5, 2)),
+                           complex(*rng.normal(0, 3, 2)), complex(*rng.normal(0, 3, 2)))
+    poly = np.cumsum(rng.normal(0, 1, (m, 2)), axis=0)
+    if repeat:
+        poly[m // 2] = poly[m // 2 - 1]
+    assert blend.deviation_mm(ph, poly) == _deviation_einsum(ph, poly)

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from nc_helpers import read_program_nurbs
 
 from controller.generator.corners.detection import detect_sharp_corners, joint_angle_rad, widen_zone
@@ -130,3 +132,55 @@ def test_scalar_curvature_slope_matches_numpy(naca, butterfly) -> None:  # type:
         ref = curve.curvature_derivative(u)
         scalar = np.array([curve.curvature_derivative_scalar(x) for x in u.tolist()])
         np.testing.assert_allclose(scalar, ref, rtol=1e-11, atol=1e-9 * np.abs(ref).max())
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 7), st.integers(0, 2**32 - 1))
+def test_scalar_root_finder_equals_the_array_one(curve_seed: int, seed: int) -> None:
+    """With few brackets the peaks are root-found point by point in Python floats
+    (detection._illinois); every root is bit for bit the one _bisect_all finds on arrays,
+    random brackets of a lobed curve's dkappa/du (and their ends swapped in sign) included."""
+    from gen_programs import lobed_nurbs
+
+    import controller.generator.corners.detection as corners
+    from controller.geometry.nurbs import Nurbs
+
+    ctrl, weights, knots = lobed_nurbs(curve_seed)
+    curve = Nurbs(3, knots, ctrl, weights)
+    grid = corners.sample_grid(curve)
+    dk = curve.curvature_derivative(grid)
+    i = np.flatnonzero((dk[:-1] > 0) & (dk[1:] <= 0))
+    rng = np.random.default_rng(seed)
+    # the grid's brackets, and wider ones around them (more steps, Illinois halvings)
+    lo = np.concatenate((grid[i], grid[np.maximum(i - rng.integers(1, 40, i.size), 0)]))
+    hi = np.concatenate((grid[i + 1], grid[np.minimum(i + 1 + rng.integers(1, 40, i.size),
+                                                      grid.size - 1)]))
+    f_lo, f_hi = curve.curvature_derivative(lo), curve.curvature_derivative(hi)
+    keep = (f_lo > 0) & (f_hi <= 0)
+    lo, hi, f_lo, f_hi = lo[keep], hi[keep], f_lo[keep], f_hi[keep]
+    assert lo.size  # a lobed curve has curvature peaks
+    arrays = corners._bisect_all(lambda u: np.array([curve.curvature_derivative_scalar(x)
+                                                     for x in u.tolist()]), lo, hi,
+                                 f_lo=f_lo, f_hi=f_hi)
+    scalar = [corners._illinois(curve.curvature_derivative_scalar, a, b, fa, fb)
+              for a, b, fa, fb in zip(lo.tolist(), hi.tolist(), f_lo.tolist(), f_hi.tolist(),
+                                      strict=True)]
+    assert np.array_equal(arrays, np.array(scalar))
+    assert np.all((arrays >= lo) & (arrays <= hi))
+
+
+def test_scalar_root_finder_handles_flat_and_exact_steps() -> None:
+    """A zero denominator (both ends equal) takes the midpoint, as numpy's inf does there, and
+    a step that lands on the root exactly ends the search on it."""
+    import controller.generator.corners.detection as corners
+
+    def step(u: float) -> float:
+        return 1.0 if u < 0.25 else -1.0
+
+    lo, hi = np.array([0.0]), np.array([1.0])
+    for f_lo, f_hi in ((1.0, 1.0), (1.0, -1.0), (3.0, -0.5)):
+        ref = corners._bisect_all(lambda u: np.array([step(x) for x in u.tolist()]), lo, hi,
+                                  f_lo=np.array([f_lo]), f_hi=np.array([f_hi]))
+        assert corners._illinois(step, 0.0, 1.0, f_lo, f_hi) == ref[0]
+    line = lambda u: 0.5 - u  # noqa: E731
+    assert corners._illinois(line, 0.0, 1.0, 0.5, -0.5) == 0.5

@@ -84,3 +84,57 @@ def test_foot_distances_settled_early_equal_fully_converged(seed: int,
         full = foot_distances(curve, z.u_start, z.u_end, pts, guess)
         monkeypatch.undo()
         np.testing.assert_allclose(early, full, rtol=0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_all_zones_points_at_once_equal_each_quintics_own(seed: int) -> None:
+    """_fit_all measures every zone's quintic at its samples in one Horner scheme over all of
+    them: bit for bit PhQuintic.point of each (the fit error and so the splits unchanged)."""
+    from controller.geometry.ph_quintic import PhQuintic
+
+    rng = np.random.default_rng(seed)
+    phs = [PhQuintic.hermite(complex(*rng.normal(0, 20, 2)), complex(*rng.normal(0, 20, 2)),
+                             complex(*rng.normal(0, 10, 2)), complex(*rng.normal(0, 10, 2)))
+           for _ in range(int(rng.integers(1, 12)))]
+    xi = np.linspace(0.0, 1.0, ph_fit._ERROR_SAMPLES)
+    assert np.array_equal(ph_fit._points(phs, xi), np.array([ph.point(xi) for ph in phs]))
+
+
+def _foot_distances_einsum(curve, u_start, u_end, pts, u_guess):  # type: ignore[no-untyped-def]
+    """foot_distances as it was written on (N, 2) arrays with einsum: the reference."""
+    u = u_guess.copy()
+    lo, hi = np.broadcast_to(u_start, u.shape), np.broadcast_to(u_end, u.shape)
+    settled = ph_fit.FOOT_SETTLED * np.maximum(hi - lo, 1e-300)
+    for _ in range(ph_fit._FOOT_NEWTON_SWEEPS):
+        d = curve.evaluate(u, 2)
+        diff = d[0] - pts
+        f = np.einsum("ni,ni->n", d[1], diff)
+        fp = np.einsum("ni,ni->n", d[1], d[1]) + np.einsum("ni,ni->n", d[2], diff)
+        step = np.where(fp > 0, f / np.where(fp > 0, fp, 1.0), 0.0)
+        u_new = np.clip(u - step, lo, hi)
+        moved = u - u_new
+        if not np.any(np.abs(moved) > settled):
+            diff -= moved[:, None] * d[1]
+            return np.sqrt(np.einsum("ni,ni->n", diff, diff))
+        u = u_new
+    return np.linalg.norm(curve.evaluate(u, 0)[0] - pts, axis=1)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_foot_distances_on_rows_equal_the_einsum_form(seed: int) -> None:
+    """The foot-point Newton on separate x and y rows gives the einsum form's numbers bit for
+    bit, on polynomial and rational NURBS and on a curve without evaluate_rows (a PH quintic)."""
+    from controller.geometry.ph_quintic import PhQuintic
+
+    rng = np.random.default_rng(seed)
+    ctrl, weights, knots = lobed_nurbs(seed)
+    curves = [Nurbs(3, knots, ctrl, weights), Nurbs(3, knots, ctrl, np.ones(len(weights))),
+              PhQuintic.hermite(0j, complex(*rng.normal(0, 9, 2)), complex(*rng.normal(0, 5, 2)),
+                                complex(*rng.normal(0, 5, 2)))]
+    for curve in curves:
+        a, b = sorted(rng.uniform(curve.u_start, curve.u_end, 2))
+        u = rng.uniform(a, b, 400)
+        pts = curve.evaluate(u, 0)[0] + rng.normal(0, 0.05, (400, 2))
+        guess = np.clip(u + rng.normal(0, 0.01 * (b - a), 400), a, b)
+        got = foot_distances(curve, a, b, pts, guess)
+        assert np.array_equal(got, _foot_distances_einsum(curve, a, b, pts, guess))

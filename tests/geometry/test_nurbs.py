@@ -122,6 +122,53 @@ def test_scalar_inverse_without_the_inverse_table(c: Nurbs, share: float) -> Non
     assert "_inverse" not in vars(table)
 
 
+@settings(max_examples=25, deadline=None)
+@given(random_nurbs(), st.integers(0, 2**32 - 1))
+def test_small_arrays_remembered_give_the_numbers_of_a_fresh_call(c: Nurbs, seed: int) -> None:
+    """evaluate and s_of_u on a few parameters are remembered by value (an interned curve is
+    asked the same points on every copy of a long program): asked again, in any order, with
+    any derivative order, they give the numbers of a curve that never remembered them, and
+    each answer is a copy of its own."""
+    import controller.geometry.nurbs as nurbs_module
+
+    rng = np.random.default_rng(seed)
+    fresh = Nurbs(c.degree, c.knots.copy(), c.control_points.copy(), c.weights.copy())
+    asks = [(rng.uniform(c.u_start, c.u_end, rng.integers(1, 5)), int(rng.integers(-1, 4)))
+            for _ in range(6)]
+    for u, order in asks + asks[::-1] + asks:
+        got = c.s_of_u(u) if order < 0 else c.evaluate(u, order)
+        ref = fresh.arc_length_table.s_of_u(u) if order < 0 else fresh._evaluate(u, order)
+        assert np.array_equal(got, ref)
+        got += 1.0  # the caller's own array: the next answer is untouched
+    big = np.linspace(c.u_start, c.u_end, nurbs_module.MEMO_POINTS + 1)
+    assert np.array_equal(c.evaluate(big, 2), fresh._evaluate(big, 2))
+    assert len(c._memo) <= 2 * len(asks)  # the large array was not remembered
+    for k in range(nurbs_module.MEMO_ENTRIES + 5):
+        c.evaluate(np.array([c.u_start + (c.u_end - c.u_start) * k / 1000.0]), 1)
+    assert len(c._memo) <= nurbs_module.MEMO_ENTRIES
+
+
+@settings(max_examples=25, deadline=None)
+@given(random_nurbs())
+def test_rows_and_the_joint_curvature_give_the_numbers_of_evaluate(c: Nurbs) -> None:
+    """evaluate_rows is evaluate's array with x and y as rows, and the corner detector's
+    curvature with its slope from those rows equals the two (N, 2) functions bit for bit."""
+    from controller.geometry.curves import (
+        curvature_and_derivative_from_rows,
+        curvature_derivative_from_derivatives,
+        curvature_from_derivatives,
+    )
+
+    u = np.concatenate((np.linspace(c.u_start, c.u_end, 301), c.knots[c.degree : -c.degree]))
+    rows = c.evaluate_rows(u, 3)
+    d = c.evaluate(u, 3)
+    assert np.array_equal(rows.transpose(0, 2, 1), d)
+    kappa, slope = curvature_and_derivative_from_rows(rows)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        assert np.array_equal(kappa, curvature_from_derivatives(d), equal_nan=True)
+        assert np.array_equal(slope, curvature_derivative_from_derivatives(d), equal_nan=True)
+
+
 def quarter_circle(radius: float) -> Nurbs:
     """Exact rational quadratic quarter circle: kappa = 1/R everywhere."""
     pts = np.array([[radius, 0.0], [radius, radius], [0.0, radius]])
@@ -181,3 +228,29 @@ def test_all_curves_offer_the_curve_protocol() -> None:
         assert c.evaluate(u, 3).shape == (4, 2, 2)
         np.testing.assert_allclose(c.u_of_s(c.s_of_u(u)), u, atol=1e-12)
         assert c.s_of_u(np.array([c.u_end]))[0] == pytest.approx(c.length_mm, rel=1e-12)
+
+
+def _quintic_expression(x, h, u0, u1, d0, c0, d1, c1):  # type: ignore[no-untyped-def]
+    """The inverse table's quintic Hermite as one expression: the reference."""
+    x2 = x * x
+    x3 = x2 * x
+    m = 1 - x
+    m2 = m * m
+    m3 = m2 * m
+    return (m3 * (1 + 3 * x + 6 * x2) * u0 + x3 * (1 + 3 * m + 6 * m2) * u1
+            + h * (m3 * x * (1 + 3 * x) * d0 - x3 * m * (1 + 3 * m) * d1)
+            + 0.5 * h * h * (m3 * x2 * c0 + x3 * m2 * c1))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 3000))
+def test_inverse_quintic_in_place_equals_the_expression(seed: int, n: int) -> None:
+    """u(s) between the inverse table's nodes, computed in place, is the expression's number
+    bit for bit (values, slopes and curvatures of any size, x on [0, 1] with its ends)."""
+    from controller.geometry.arclength_inverse import _quintic
+
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0.0, 1.0, n)
+    x[: min(n, 2)] = (0.0, 1.0)[: min(n, 2)]
+    args = [x] + [rng.normal(size=n) * 10.0 ** rng.uniform(-8, 4) for _ in range(7)]
+    assert np.array_equal(_quintic(*args), _quintic_expression(*args))

@@ -33,3 +33,34 @@ def test_a_bug_in_a_request_is_answered_and_logged_not_raised() -> None:
     finally:
         for s in (listener, here, there):
             s.close()
+
+
+class _Machine:
+    def status(self) -> dict:
+        return {"state": "IDLE"}
+
+
+def test_a_full_table_of_clients_that_asked_and_hung_up_makes_room_for_a_newcomer() -> None:
+    # Under a flood of connect-ask-hang-up, the table filled with connections whose request
+    # was still unread. Serving them closes them all; the newcomer was then refused
+    # ("too many connections") because no connection was left to evict.
+    import selectors
+
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    server = Server(listener, _Machine(), EventLog(100), policy=None, max_connections=4)  # type: ignore[arg-type]
+    pairs = [socket.socketpair() for _ in range(server.max_connections)]
+    try:
+        for here, there in pairs:
+            here.setblocking(False)
+            conn = Conn(here, 0)
+            server.conns.add(conn)
+            server.sel.register(here, selectors.EVENT_READ, conn)
+            there.sendall(b'{"id": 1, "cmd": "status"}\n')
+            there.close()
+        assert server._evict_idle() is True
+        assert len(server.conns) < server.max_connections
+    finally:
+        for here, there in pairs:
+            here.close()
+            there.close()
+        listener.close()

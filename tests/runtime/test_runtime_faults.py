@@ -155,6 +155,24 @@ def test_drain_stops_waiting_once_the_awaited_message_is_in() -> None:
     assert messages.errors == {"interpreter": "t.nc:3:1: error"}
 
 
+def test_an_interpreter_error_that_arrives_after_the_generators_still_names_its_line() -> None:
+    # Each stage's messages go through its own queue feeder thread: on a loaded machine the
+    # generator's "input failed" (and its last message) can be in before the interpreter's
+    # error. The stop is not held up for it; the result's message is completed at the end.
+    q = _CountingQueue([("error", "generator", "RuntimeError: NC interpreter failed"),
+                        ("rss_kb", "generator", 9)])
+    messages = _Messages(q)
+    stop_reason = messages.failure()
+    assert stop_reason == "RuntimeError: NC interpreter failed"
+    q.items += [("error", "interpreter", "t.nc:12:5: error: unknown G-code G5"),
+                ("rss_kb", "interpreter", 9)]
+    messages.drain(0.0)
+    final = messages.final(f"{stop_reason}, then card FIFO underrun")
+    assert final == ("NC interpreter failed: t.nc:12:5: error: unknown G-code G5, "
+                     "then card FIFO underrun")
+    assert messages.final("following error on X") == "following error on X"
+
+
 def test_a_dead_interpreter_is_waited_for_once_not_on_every_cycle_of_the_stop() -> None:
     class Dead:
         exitcode = 9

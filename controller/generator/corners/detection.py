@@ -10,6 +10,7 @@ import numpy as np
 
 from controller.geometry.curves import (
     Curve,
+    curvature_and_derivative_from_rows,
     curvature_derivative_from_derivatives,
     curvature_from_derivatives,
 )
@@ -46,6 +47,9 @@ def sample_grid(curve: Curve, samples_per_span: int = 64) -> np.ndarray:
 
 def _kappa_and_slope(curve: Curve, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """kappa and dkappa/du on a grid from one evaluation of the first three derivatives."""
+    rows = getattr(curve, "evaluate_rows", None)
+    if rows is not None:
+        return curvature_and_derivative_from_rows(rows(u, 3))
     d = curve.evaluate(u, 3)
     return curvature_from_derivatives(d), curvature_derivative_from_derivatives(d)
 
@@ -132,16 +136,47 @@ def _bisect_all(f: Callable[[np.ndarray], np.ndarray], lo: np.ndarray, hi: np.nd
     return 0.5 * (lo + hi)
 
 
+def _illinois(f: Callable[[float], float], lo: float, hi: float, f_lo: float, f_hi: float,
+              xtol: float = _XTOL) -> float:
+    """_bisect_all for one bracket in Python floats: the same steps and the same numbers (each
+    bracket of _bisect_all moves on its own), without a dozen numpy calls on one element per
+    step. A zero denominator is numpy's inf or nan there: not inside, so the midpoint."""
+    tol = xtol * max(1.0, max(abs(lo), abs(hi)))
+    side = 0  # +1: hi moved last, -1: lo moved last
+    for _ in range(200):
+        if not hi - lo > tol:
+            break
+        den = f_hi - f_lo
+        x = (lo * f_hi - hi * f_lo) / den if den != 0.0 else math.nan
+        if not lo < x < hi:
+            x = 0.5 * (lo + hi)
+        fx = f(x)
+        if fx <= 0.0:  # the root is left of x: x becomes hi
+            if side == 1:
+                f_lo = 0.5 * f_lo  # Illinois: halve the stale end
+            hi, f_hi, side = x, fx, 1
+            if fx == 0.0:
+                lo = x
+        elif fx > 0.0:
+            if side == -1:
+                f_hi = 0.5 * f_hi
+            lo, f_lo, side = x, fx, -1
+    return 0.5 * (lo + hi)
+
+
 SCALAR_BRACKETS = 8  # up to this many peaks, dkappa/du point by point beats one numpy call
 
 
-def _slope_function(curve: Curve, n_brackets: int) -> Callable[[np.ndarray], np.ndarray]:
-    """dkappa/du for the root finder: without numpy when there are few brackets and the curve
-    has a scalar form (a numpy evaluation costs ~50 us whatever its size; one point ~8 us)."""
+def _roots(curve: Curve, lo: np.ndarray, hi: np.ndarray, f_lo: np.ndarray,
+           f_hi: np.ndarray) -> np.ndarray:
+    """dkappa/du = 0 in every bracket: point by point in Python floats when there are few
+    brackets and the curve has a scalar form (a numpy evaluation costs ~50 us whatever its
+    size; one point ~8 us), else _bisect_all on arrays. The same roots either way."""
     scalar = getattr(curve, "curvature_derivative_scalar", None)
-    if scalar is None or n_brackets > SCALAR_BRACKETS:
-        return curve.curvature_derivative
-    return lambda u: np.array([scalar(x) for x in u.tolist()])
+    if scalar is None or lo.size > SCALAR_BRACKETS:
+        return _bisect_all(curve.curvature_derivative, lo, hi, f_lo=f_lo, f_hi=f_hi)
+    return np.array([_illinois(scalar, a, b, fa, fb) for a, b, fa, fb in
+                     zip(lo.tolist(), hi.tolist(), f_lo.tolist(), f_hi.tolist(), strict=True)])
 
 
 def _peaks(curve: Curve, grid: np.ndarray, kappa: np.ndarray, dk: np.ndarray,
@@ -164,8 +199,7 @@ def _peaks(curve: Curve, grid: np.ndarray, kappa: np.ndarray, dk: np.ndarray,
         f_hi[at_knot] = np.where(left > 0, f_hi[at_knot], left)
     roots = hi.copy()
     smooth = ~kink
-    roots[smooth] = _bisect_all(_slope_function(curve, int(smooth.sum())), lo[smooth],
-                                hi[smooth], f_lo=f_lo[smooth], f_hi=f_hi[smooth])
+    roots[smooth] = _roots(curve, lo[smooth], hi[smooth], f_lo[smooth], f_hi[smooth])
     peaks = roots.tolist()
     if dk[0] < 0:
         peaks.insert(0, float(grid[0]))

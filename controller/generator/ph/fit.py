@@ -51,28 +51,45 @@ def foot_distances(curve: Curve, u_start: ArrayLike, u_end: ArrayLike, pts: np.n
     u = u_guess.copy()
     lo, hi = np.broadcast_to(u_start, u.shape), np.broadcast_to(u_end, u.shape)
     settled = FOOT_SETTLED * np.maximum(hi - lo, 1e-300)
+    px, py = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
+    rows = getattr(curve, "evaluate_rows", None) or \
+        (lambda uu, order: curve.evaluate(uu, order).transpose(0, 2, 1))
     for _ in range(_FOOT_NEWTON_SWEEPS):
-        d = curve.evaluate(u, 2)
-        diff = d[0] - pts
-        f = np.einsum("ni,ni->n", d[1], diff)
-        fp = np.einsum("ni,ni->n", d[1], d[1]) + np.einsum("ni,ni->n", d[2], diff)
+        # x and y rows apart: the dot products as einsum over (x, y) computed them, the
+        # same sums in the same order, without strided reads
+        (cx, cy), (d1x, d1y), (d2x, d2y) = rows(u, 2)
+        dx, dy = cx - px, cy - py
+        f = d1x * dx + d1y * dy
+        fp = (d1x * d1x + d1y * d1y) + (d2x * dx + d2y * dy)
         step = np.where(fp > 0, f / np.where(fp > 0, fp, 1.0), 0.0)
         u_new = clamp(u - step, lo, hi)
         moved = u - u_new
         if not np.any(np.abs(moved) > settled):
             # Settled: C(u_new) = C(u) - moved C'(u) up to moved^2 |C''| / 2, ~1e-12 of the
             # zone's size, so the distance at the foot needs no further curve evaluation.
-            diff -= moved[:, None] * d[1]
-            return np.sqrt(np.einsum("ni,ni->n", diff, diff))
+            dx -= moved * d1x
+            dy -= moved * d1y
+            return np.sqrt(dx * dx + dy * dy)
         u = u_new
     return np.linalg.norm(curve.evaluate(u, 0)[0] - pts, axis=1)
+
+
+def _points(phs: list[PhQuintic], xi: np.ndarray) -> np.ndarray:
+    """Every PH's points at xi, (len(phs), xi.size): PhQuintic.point's Horner scheme run on
+    all of them at once, the same operations on each element (the same numbers)."""
+    c = np.array([ph._r_power for ph in phs])  # noqa: SLF001 (lowest power first)
+    acc = c[:, -1, None] * xi + c[:, -2, None]
+    for k in range(c.shape[1] - 3, -1, -1):
+        acc *= xi
+        acc += c[:, k, None]
+    return acc
 
 
 def _fit_all(curve: Curve, u_start: np.ndarray, u_end: np.ndarray) -> list[PhSegment]:
     """fit_single for many zones at once: one batch of foot-point sweeps for all their samples."""
     phs = _hermite_all(curve, u_start, u_end)
     xi = np.linspace(0.0, 1.0, _ERROR_SAMPLES)
-    z = np.concatenate([ph.point(xi) for ph in phs])
+    z = _points(phs, xi).ravel()
     lo, hi = np.repeat(u_start, xi.size), np.repeat(u_end, xi.size)
     dist = foot_distances(curve, lo, hi, np.column_stack((z.real, z.imag)),
                           lo + np.tile(xi, len(phs)) * (hi - lo)).reshape(len(phs), xi.size)

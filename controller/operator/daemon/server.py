@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import errno
 import queue
+import resource
 import selectors
 import socket
 import struct
@@ -138,11 +139,10 @@ class Server:
         self.sel.register(sock, selectors.EVENT_READ, conn)
 
     def _evict_idle(self, all_of_them: bool = False) -> bool:
-        """Make room for a newcomer (or every idle one, out of descriptors). Whatever other
-        clients do, a slot is found: first an idle connection past its grace, then one whose
-        request has been arriving longest (a trickle), then the subscriber quiet longest,
-        then a young idle one; never one following the job it started. (Subscribers were
-        never evicted: 64 silent ones locked `estop` and `status` out.)"""
+        """Make room for a newcomer (or every idle one, out of descriptors): first an idle
+        connection past its grace, then one whose request has been arriving longest (a
+        trickle), then the subscriber quiet longest, then a young idle one; never one following
+        the job it started. (Subscribers were never evicted: 64 silent ones locked `estop` out.)"""
         now = time.monotonic()
         idle = sorted((c for c in self.conns if c.idle and not c.out), key=lambda c: c.last_s)
         if all_of_them:
@@ -153,6 +153,8 @@ class Server:
         # evicted as idle: under a flood of reconnections a `reset` was closed unanswered.
         for conn in [c for c in self.conns if c.idle and not c.out and _unread(c.sock)]:
             self._service(conn, selectors.EVENT_READ)
+        if len(self.conns) < self.max_connections:  # serving closed some (clients hung up)
+            return True
         ranked = sorted((c for c in self.conns if not c.following),
                         key=lambda c: eviction_rank(c, now))
         if not ranked:
@@ -413,8 +415,6 @@ def _send_now(sock: socket.socket, data: bytes) -> None:
 
 def _connection_cap(configured: int) -> int:
     """At most the configured count, and always well inside the descriptor limit."""
-    import resource
-
     soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
     return max(4, min(configured, (soft - 64) // 2 if soft > 0 else configured))
 
