@@ -95,11 +95,13 @@ def _points_on_lines(path: Path, pieces: np.ndarray, idx: np.ndarray,
     """_points_on_curve for the samples on LINE pieces (sorted piece indices), all at once: the
     same operations per sample (LineCurve: u = s / length, p0 + u d, the tangent of d), so the
     same numbers, without a call per line of a G1 program."""
-    ps = [path.pieces[i] for i in pieces.tolist()]
+    lines = [path.pieces[i].curve for i in pieces.tolist()]
     k = np.searchsorted(pieces, idx)
-    ends = np.array([(*p.curve.p0, *p.curve.p1) for p in ps])  # type: ignore[attr-defined]
+    ends = np.empty((len(lines), 4))
+    ends[:, :2] = [c.p0 for c in lines]  # type: ignore[attr-defined]
+    ends[:, 2:] = [c.p1 for c in lines]  # type: ignore[attr-defined]
     d = np.column_stack((ends[:, 2] - ends[:, 0], ends[:, 3] - ends[:, 1]))
-    length = np.array([p.curve.length_mm for p in ps])
+    length = np.array([c.length_mm for c in lines])
     cols = path.columns
     u0, u1 = cols.u0[pieces], cols.u1[pieces]
     start, piece_len = cols.s0_mm[pieces], cols.length_mm[pieces]

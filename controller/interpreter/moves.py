@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 from controller.blocks import LineBlock, NcBlock, Source
@@ -162,7 +163,11 @@ class Moves:
         feed = self.rapid_mm_s if rapid else modal.feed_mm_s
         block = LineBlock(modal.pos, end, feed, rapid, modal.path_control,
                           Source(self.path, lineno, lineno))
-        _within_a_day(block.length_mm, self._capped(feed), "F")
+        cap = self._capped(feed)
+        # math.dist is within a few ulps of the length (a numpy norm): only a move near the
+        # limit needs that, and a G1 line of a long program costs no numpy call.
+        if math.dist(modal.pos, end) > cap * MAX_BLOCK_S * (1.0 - 1e-9):
+            _within_a_day(block.length_mm, cap, "F")
         self.out.append(block)
         modal.pos = end
 

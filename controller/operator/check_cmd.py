@@ -10,7 +10,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Literal, overload
 
-from controller.blocks import ArcBlock, HelixBlock, LineBlock, NcBlock, NurbsBlock, ProbeBlock
+from controller.blocks import ArcBlock, HelixBlock, LineBlock, NurbsBlock, ProbeBlock
 from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import ConfigError, DriveError, NcError, OffsetsError
 from controller.interpreter.extent import (
@@ -28,6 +28,7 @@ from controller.operator.drive_args import (
     config_with_drive_options,
     probe_drive,
 )
+from controller.operator.kept_blocks import KeptBlocks
 from controller.tools import ToolTableError, load_tool_table
 
 _AXES = ("x", "y", "z")
@@ -59,8 +60,10 @@ _GEOMETRY = {LineBlock: line_length_and_box, ArcBlock: arc_length_and_box,
 
 CHECK_BEAT_BLOCKS = 4096  # on_block is called every this many blocks
 # A check keeps up to this many blocks for its caller (simulate plans them without reading the
-# program again): some 10 MB of G1 blocks; a longer program is read twice, in bounded memory.
+# program again), some 10 MB, and up to KEEP_LINES G0/G1 lines, those past the first
+# KEEP_BLOCKS as numbers (32 MB); a longer program is read twice, in bounded memory.
 KEEP_BLOCKS = 30_000
+KEEP_LINES = 1_000_000
 
 
 @overload
@@ -69,7 +72,7 @@ def check_program(path: str, config: MachineConfig,
                   start_mm: tuple[float, float, float] | None = None,
                   offsets: OffsetTable | None = None, from_line: int | None = None,
                   track: ProgramOffsets | None = None, summary: Literal[True] = True,
-                  keep: list[NcBlock] | None = None) -> CheckSummary: ...
+                  keep: KeptBlocks | None = None) -> CheckSummary: ...
 
 
 @overload
@@ -78,7 +81,7 @@ def check_program(path: str, config: MachineConfig,
                   start_mm: tuple[float, float, float] | None = None,
                   offsets: OffsetTable | None = None, from_line: int | None = None,
                   track: ProgramOffsets | None = None, *, summary: Literal[False],
-                  keep: list[NcBlock] | None = None) -> None: ...
+                  keep: KeptBlocks | None = None) -> None: ...
 
 
 def check_program(path: str, config: MachineConfig,
@@ -86,7 +89,7 @@ def check_program(path: str, config: MachineConfig,
                   start_mm: tuple[float, float, float] | None = None,
                   offsets: OffsetTable | None = None, from_line: int | None = None,
                   track: ProgramOffsets | None = None, summary: bool = True,
-                  keep: list[NcBlock] | None = None) -> CheckSummary | None:
+                  keep: KeptBlocks | None = None) -> CheckSummary | None:
     """Parse and check the whole program (from from_line, if given) with the work offsets in
     force; raise NcError at the first problem, travel in machine coordinates. on_block(n), if
     given, is called every CHECK_BEAT_BLOCKS blocks (the daemon's watchdog sees the check
@@ -96,8 +99,8 @@ def check_program(path: str, config: MachineConfig,
     control points lie inside the travel is not sampled for its length and extent (it lies in
     their hull), which was a tenth of simulating a program of distinct NURBS; returns None.
 
-    keep: the blocks are appended to it, up to KEEP_BLOCKS + 1 (more: the caller reads the
-    program again rather than hold a long one), so that a short one is not read twice."""
+    keep: the blocks are appended to it until it is full (then the caller reads the program
+    again rather than hold a long one), so that a short one is not read twice."""
     kinds: Counter[type] = Counter()
     start = start_mm if start_mm is not None else (0.0, 0.0, 0.0)
     lo, hi = list(start), list(start)  # where the machine stands (X0 Y0 Z0 by default)
@@ -109,7 +112,7 @@ def check_program(path: str, config: MachineConfig,
     limits = travel.axes  # (index, axis, min, max) of each axis the machine has
     for block in read_program(path, config, start_mm, offsets, from_line, track):
         n += 1
-        if keep is not None and n <= KEEP_BLOCKS + 1:
+        if keep is not None:
             keep.append(block)
         if on_block is not None and n % CHECK_BEAT_BLOCKS == 0:
             on_block(n)

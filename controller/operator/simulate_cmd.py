@@ -10,12 +10,12 @@ from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
-from controller.blocks import NcBlock
 from controller.config import CONFIG_HELP, MachineConfig, load_config
 from controller.errors import CncError, NcError
 from controller.generator.plan import Algorithm
 from controller.interpreter.program import read_program
-from controller.operator.check_cmd import KEEP_BLOCKS, check_program
+from controller.operator.check_cmd import KEEP_BLOCKS, KEEP_LINES, check_program
+from controller.operator.kept_blocks import KeptBlocks
 from controller.operator.outputs import OutputError, output_path, plot_path
 from controller.runtime.simulate_figures import Figures
 from controller.runtime.simulate_stream import SampleBlock
@@ -53,18 +53,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="add how the plan was obtained: look-ahead windows, dynamics rounds")
 
 
-def _check_whole_program(path: str, config: MachineConfig) -> list[NcBlock] | None:
+def _check_whole_program(path: str, config: MachineConfig) -> KeptBlocks | None:
     """`cncctl check` first (syntax, travel limits, feeds): no planning on a program with an
-    error. The program's blocks if it has at most KEEP_BLOCKS (planned as they are), else None
-    (read again as it is planned, so a long program is never held whole)."""
-    kept: list[NcBlock] = []
+    error. The program's blocks if it has at most KEEP_BLOCKS blocks other than G0/G1 lines
+    and KEEP_LINES lines (planned as they are), else None (read again as it is planned, so a
+    long program is never held whole)."""
+    kept = KeptBlocks(KEEP_BLOCKS, KEEP_LINES, KEEP_BLOCKS)
     check_program(path, config, summary=False, keep=kept)
-    return kept if len(kept) <= KEEP_BLOCKS else None
+    return None if kept.full else kept
 
 
 def _one(path: str, config: MachineConfig, algorithm: str, trajectory: str | None = None,
          plot: PlotSeries | None = None, stats: bool = False,
-         view: SimulateView | None = None, checked: list[NcBlock] | None = None) -> dict:
+         view: SimulateView | None = None, checked: KeptBlocks | None = None) -> dict:
     """Simulate one algorithm, streaming: the figures, and the trajectory CSV, the plot's
     series and the terminal's progress bar if asked for, are gathered sample block by sample
     block (memory bounded). checked: the program's blocks, if the check kept them."""

@@ -218,12 +218,15 @@ def test_a_short_program_is_planned_from_its_check_a_long_one_read_again(
     monkeypatch.setattr("controller.operator.check_cmd.read_program", counted)
     monkeypatch.setattr(simulate_cmd, "read_program", counted)
     reports = []
-    for keep in (1000, 10):  # 41 blocks: kept, then over the limit
+    # 41 blocks, 39 of them lines: kept as blocks, kept with lines past the 10th as numbers,
+    # then over the limit
+    for keep, keep_lines, n_reads in ((1000, 1000, 1), (10, 1000, 1), (10, 10, 2)):
         monkeypatch.setattr(simulate_cmd, "KEEP_BLOCKS", keep)
+        monkeypatch.setattr(simulate_cmd, "KEEP_LINES", keep_lines)
         reads.clear()
         assert main(["simulate", str(prog), "--json"]) == 0
         reports.append(json.loads(capsys.readouterr().out))
-        assert len(reads) == (1 if keep == 1000 else 2)
+        assert len(reads) == n_reads
     for r in reports:
         del r["planning_cpu_s"]
-    assert reports[0] == reports[1]
+    assert reports[0] == reports[1] == reports[2]

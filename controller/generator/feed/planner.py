@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bisect
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum
 
 import numpy as np
@@ -148,8 +148,27 @@ class _Memo:
 
     globals_: tuple[float, float, float, float, TransitionShape]
     planner: Callable[..., SegmentPlan]  # plan_segments (a test may swap it)
-    rows: dict[tuple, tuple[float, ...]]
+    rows: dict[bytes, int]  # key -> its row of table
+    table: np.ndarray = field(default_factory=lambda: np.empty((0, 6)))  # the results
+    n_rows: int = 0  # rows of table in use (it grows by doubling)
     key_bytes: int = 0
+
+    def look_up(self, keys: list[bytes]) -> np.ndarray:
+        """Each key's row of table, -1 where it has none."""
+        get = self.rows.get
+        return np.array([get(key, -1) for key in keys], np.intp)
+
+    def store(self, keys: list[bytes], results: np.ndarray) -> None:
+        """Remember results (one row per key): rows appended, the keys pointed at them."""
+        end = self.n_rows + len(keys)
+        if end > len(self.table):
+            grown = np.empty((max(end, 2 * len(self.table)), 6))
+            grown[:self.n_rows] = self.table[:self.n_rows]
+            self.table = grown
+        self.table[self.n_rows:end] = results
+        self.rows.update(zip(keys, range(self.n_rows, end), strict=True))
+        self.n_rows = end
+        self.key_bytes += sum(map(len, keys))
 
 
 _last_memo: list[_Memo] = []  # the previous call's memo (at most one)
@@ -176,13 +195,14 @@ def _plan_round(nodes: Nodes, v: np.ndarray, curve: LimitCurve, accel: float, to
     win = SegmentWindows.build(curve, nodes.s)
     vi, vj = v[:-1], v[1:]
     keys = _segment_keys(win, vi, vj, nodes.flat)
-    known = np.array([key in memo.rows for key in keys], bool)
+    row = memo.look_up(keys)
+    known = row >= 0
     new = np.flatnonzero(~known)
     # zeros, not empty: the += below runs over every row, and np.empty's recycled memory held
     # a NaN now and then (a RuntimeWarning; the new rows are overwritten further down).
     out = np.zeros((len(keys), 6))
     if new.size < len(keys):
-        out[known] = [memo.rows[key] for key, kn in zip(keys, known.tolist(), strict=True) if kn]
+        out[known] = memo.table[row[known]]
     # Rows hold positions relative to their segment's start: a segment that moved along the
     # path unchanged (a zone before it was widened) keeps its result.
     out[:, _POSITION_COLUMNS] += win.a[:, None]
@@ -204,14 +224,12 @@ def _plan_round(nodes: Nodes, v: np.ndarray, curve: LimitCurve, accel: float, to
                                        viol.phase_len_mm[new])
     out[new, 3:] = rel[rep, 3:]
     out[new, 4] += a_new
-    for j in set(rep.tolist()):  # one row per key
-        key = keys[int(new[j])]
-        memo.rows[key] = tuple(rel[j].tolist())
-        memo.key_bytes += len(key[4]) + len(key[5])
+    once = np.unique(rep)  # one row per key
+    memo.store([keys[i] for i in new[once].tolist()], rel[once])
     return ph, Violations(out[:, 3], out[:, 4], out[:, 5])
 
 
-def _representatives(keys: list[tuple]) -> np.ndarray:
+def _representatives(keys: list[bytes]) -> np.ndarray:
     """Per key, the index of its last occurrence (the row the memo keeps for it)."""
     last = {key: j for j, key in enumerate(keys)}
     return np.array([last[key] for key in keys], np.intp)
@@ -222,23 +240,31 @@ KEY_DECIMALS = 10  # positions in memo keys, relative to the segment start, roun
 
 
 def _segment_keys(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray,
-                  flat: np.ndarray) -> list[tuple]:
+                  flat: np.ndarray) -> list[bytes]:
     """Per segment: its length, node speeds, flat flag and the vlim samples it depends on (the
-    grid inside and one either side), positions relative to the segment start. All windows are
-    gathered and rounded in one go; each key slices the two byte strings."""
+    grid inside and one either side), positions relative to the segment start, as one byte
+    string (one hash per look-up, not one per field). All rows are gathered and rounded into
+    one buffer in one go; each key slices it. The four leading numbers have + 0.0, so that a
+    -0.0 is the key of 0.0 (as when they were compared as floats)."""
     s, vl = win.curve.s_mm, win.curve.vlim_mm_s
     first = win.lo - 1  # each key holds s[lo - 1:hi + 2] (lo >= 1: a node is never before s[0])
     count = np.maximum(np.minimum(win.hi + 2, len(s)) - first, 0)
-    idx = np.repeat(first, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count,
-                                                                       count)
-    rel = np.round(s[idx] - np.repeat(win.a, count), KEY_DECIMALS).tobytes()
-    vals = vl[idx].tobytes()
-    ends = (np.cumsum(count) * 8).tolist()
-    starts = [0, *ends[:-1]]
-    rel_b = np.round(win.b - win.a, KEY_DECIMALS).tolist()
-    return [(b, v0, v1, f, rel[i:j], vals[i:j])
-            for b, v0, v1, f, i, j in zip(rel_b, vi.tolist(), vj.tolist(), flat.tolist(), starts,
-                                          ends, strict=True)]
+    # Row of segment i: rel_b, vi, vj, flat, then count[i] relative positions, count[i] vlim.
+    size = 4 + 2 * count
+    row0 = np.cumsum(size) - size
+    buf = np.empty(int(size.sum()))
+    buf[row0] = np.round(win.b - win.a, KEY_DECIMALS) + 0.0
+    buf[row0 + 1] = vi + 0.0
+    buf[row0 + 2] = vj + 0.0
+    buf[row0 + 3] = flat
+    local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    idx = np.repeat(first, count) + local
+    at = np.repeat(row0 + 4, count) + local
+    buf[at] = np.round(s[idx] - np.repeat(win.a, count), KEY_DECIMALS)
+    buf[at + np.repeat(count, count)] = vl[idx]
+    data = buf.tobytes()
+    ends = ((row0 + size) * 8).tolist()
+    return [data[i:j] for i, j in zip((row0 * 8).tolist(), ends, strict=True)]
 
 
 def _input_error(s: np.ndarray, vlim: np.ndarray, v0: float, v1: float) -> PlanResult | None:

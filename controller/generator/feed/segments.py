@@ -62,7 +62,7 @@ class SegmentWindows:
     start, b from the end) or always stop at (b from the start, a from the end). The crossing
     then always lies between a slot and its neighbour: no case for a search that did not move
     or found nothing inside. Searches from the start (first_reach) and from the end
-    (last_reach) share one pass (reach_pair): per segment and direction, one row of _ends (near
+    (last_reach) share one pass (reach_pair): per segment and direction, one column of _ends (near
     end, vlim at the near and far ends, k * big, the answer when never reached) and of _nohit
     (the slot a search ends at when no sample reaches the level), forward rows first."""
 
@@ -76,7 +76,7 @@ class SegmentWindows:
     v_slot: np.ndarray
     fkey: np.ndarray  # running max from each segment's start, + k * big: non-decreasing
     bkey: np.ndarray  # k * big - running max from each segment's end: non-decreasing
-    _ends: np.ndarray  # (2 n, 5) float, see above
+    _ends: np.ndarray  # (5, 2 n) float, see above
     _nohit: np.ndarray  # (2 n,) intp
 
     @classmethod
@@ -112,8 +112,9 @@ class SegmentWindows:
         f_slot[first], f_slot[last] = below, above
         b_slot[first], b_slot[last] = below, above
         kbig = k * big
-        ends = np.vstack((np.column_stack((a, va, vb, kbig, np.full(len(a), np.inf))),
-                          np.column_stack((b, vb, va, kbig, np.full(len(a), -np.inf)))))
+        ends = np.vstack((np.concatenate((a, b)), np.concatenate((va, vb)),
+                          np.concatenate((vb, va)), np.concatenate((kbig, kbig)),
+                          np.repeat([np.inf, -np.inf], len(a))))
         return cls(curve, a, b, lo, hi, big, s_slot, v_slot, f_slot, b_slot, ends,
                    np.concatenate((last, first)))
 
@@ -122,7 +123,7 @@ class SegmentWindows:
         rows = np.concatenate((k, k + len(self.a)))
         return SegmentWindows(self.curve, self.a[k], self.b[k], self.lo[k], self.hi[k],
                               self.big, self.s_slot, self.v_slot, self.fkey, self.bkey,
-                              self._ends[rows], self._nohit[rows])
+                              self._ends[:, rows], self._nohit[rows])
 
     def reach_pair(self, up: np.ndarray, down: np.ndarray,
                    k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -132,37 +133,44 @@ class SegmentWindows:
         A level array is (len(k),) or (len(k), n) for n levels per segment; up and down have the
         same shape; levels lie in [0, max vlim]."""
         s, v = self.s_slot, self.v_slot
+        near_s, near_v, far_v, kbig_row, never = self._ends
         n_up = len(k)
         rows = np.concatenate((k, k + len(self.a)))
         level = np.concatenate((up, down))
-        e, nohit = self._ends[rows], self._nohit[rows]
         per_row = level.shape[1] if level.ndim == 2 else 1
         # Only levels above vlim at the near end are searched (elsewhere the answer is the near
         # end itself): 4 in 10 on a G1 walk. Each searched level takes the operations it took
         # among all of them, so the same bits.
-        below = (e[:, 1:2] < level) if level.ndim == 2 else e[:, 1] < level
-        x = np.repeat(e[:, 0], per_row).reshape(level.shape)
+        v_near = near_v[rows]
+        below = (v_near[:, None] < level) if level.ndim == 2 else v_near < level
+        x = np.repeat(near_s[rows], per_row).reshape(level.shape)
         sel = np.flatnonzero(below)
-        r = sel // per_row  # the row (segment and direction) of each searched level
-        n_sel_up = int(np.searchsorted(r, n_up))  # rows: searches from the start first
+        n_sel_up = int(np.searchsorted(sel, n_up * per_row))  # searches from the start first
+        r = rows[sel // per_row]  # the row (segment and direction) of each searched level
         lev = level.ravel()[sel]
-        kbig = e[r, 3]
+        kbig = kbig_row[r]
         # g: the first (last) slot where the running max reaches level, b (a) when no sample
         # inside does; p: the slot before it (toward near).
         g = np.empty(len(sel), np.intp)
+        p = np.empty(len(sel), np.intp)
         lq = _on_key_grid(lev)
-        g[:n_sel_up] = np.searchsorted(self.fkey, lq[:n_sel_up] + kbig[:n_sel_up], side="left")
-        g[n_sel_up:] = np.searchsorted(self.bkey, kbig[n_sel_up:] - lq[n_sel_up:],
-                                       side="right") - 1
-        p = g.copy()
-        p[:n_sel_up] -= 1
-        p[n_sel_up:] += 1
-        p_v, q_v = v[p], v[g]
-        dv = q_v - p_v
+        lq[:n_sel_up] += kbig[:n_sel_up]
+        np.subtract(kbig[n_sel_up:], lq[n_sel_up:], out=lq[n_sel_up:])
+        g[:n_sel_up] = np.searchsorted(self.fkey, lq[:n_sel_up], side="left")
+        g[n_sel_up:] = np.searchsorted(self.bkey, lq[n_sel_up:], side="right")
+        g[n_sel_up:] -= 1
+        np.subtract(g[:n_sel_up], 1, out=p[:n_sel_up])
+        np.add(g[n_sel_up:], 1, out=p[n_sel_up:])
+        p_v = v[p]
+        dv = v[g] - p_v
         frac = np.minimum(np.maximum((lev - p_v) / np.where(dv != 0.0, dv, 1.0), 0.0), 1.0)
         p_s = s[p]
         found = p_s + frac * (s[g] - p_s)
-        x.ravel()[sel] = np.where((g == nohit[r]) & (e[r, 2] < lev), e[r, 4], found)
+        # Where the search ended at the far end with vlim there below the level: never reached.
+        end = np.flatnonzero(g == self._nohit[r])
+        never_hit = end[far_v[r[end]] < lev[end]]
+        found[never_hit] = never[r[never_hit]]
+        x.ravel()[sel] = found
         return x[:n_up], x[n_up:]
 
 
@@ -202,22 +210,27 @@ def plan_segments(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, flat: np.
     # Where waiting at vi may last, where waiting at vj may start: fixed for the segment.
     to_vj, from_vi = win.reach_pair(vj, vi, allk)
     reach = (from_vi, to_vj)
-    # The windows at the highest and at the safe cruise, in one call (numpy's per-call cost).
+    # The windows at the highest and at the safe cruise, in one call (numpy's per-call cost);
+    # where the two are one speed (a fifth of a G1 walk's segments), shaped once.
     n = len(a)
-    both = np.concatenate((allk, allk))
-    e_both, d_both = _window(win, np.concatenate((vi, vi)), np.concatenate((vj, vj)),
-                             np.concatenate((high, safe)), both, accel, reach, shape)
+    differ = np.flatnonzero(high != safe)
+    e_both, d_both = _window(win, np.concatenate((vi, vi[differ])),
+                             np.concatenate((vj, vj[differ])),
+                             np.concatenate((high, safe[differ])),
+                             np.concatenate((allk, differ)), accel, reach, shape)
     e0, d0 = e_both[:n], d_both[:n]
+    e_safe, d_safe = e0.copy(), d0.copy()
+    e_safe[differ], d_safe[differ] = e_both[n:], d_both[n:]
     ok = (e0 <= d0) & ~flat
     todo = np.flatnonzero(~ok & ~flat & (high > safe))
     lo_v, lo_e0, lo_d0 = _peak_search(win, vi[todo], vj[todo], todo, safe[todo], high[todo],
                                       _gap(e0[todo], d0[todo]), accel, reach,
-                                      (e_both[n:][todo], d_both[n:][todo]), shape)
+                                      (e_safe[todo], d_safe[todo]), shape)
     vp = np.where(ok, high, safe)
     vp[todo] = lo_v
     e0[todo], d0[todo] = lo_e0, lo_d0
     _prefer_no_wait(win, vi, vj, safe, vp, e0, d0, accel, flat, reach,
-                    (e_both[n:], d_both[n:]), shape)
+                    (e_safe, d_safe), shape)
     # Flat segments, and those whose window stays empty: accelerate at once, brake at the end
     # (safe when the node speeds are below the segment's minimum; otherwise the check splits or
     # flattens the segment).

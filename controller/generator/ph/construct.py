@@ -20,9 +20,8 @@ from controller.generator.ph.fit import PhSegment, fit_zones
 from controller.generator.ph.line_blends import (
     LineJoints,
     applies,
-    applies_onto_line,
+    blend_line_run,
     blend_lines,
-    blend_onto_line,
     line_joints,
 )
 from controller.geometry.curves import ArcCurve, Curve, LineCurve
@@ -233,29 +232,6 @@ def _joint_angle_rad(a: Piece, b: Piece, line_row: tuple[LineJoints, int] | None
     return joint_angle_rad(end_tangent(a, True), end_tangent(b, False))
 
 
-def _blended_onto_line(pieces: list[Piece], own: list[bool], curves: list[BlockCurve], i: int,
-                       joints: LineJoints) -> bool:
-    """build_path's step for line i where the piece before it is a line that blends into it
-    (every joint of a G1 program): the pieces appended as build_path's general step would
-    append them (blend_onto_line), True; False where that step is needed (not a joint of two
-    lines, a smooth joint, a stop)."""
-    row = joints.row.get(i)
-    if row is None or not applies_onto_line(pieces[-1], joints, row) \
-            or joints.angle_rad[row] <= SMOOTH_JOINT_RAD:
-        return False
-    tol = curves[i - 1].blend_tolerance_mm  # i >= 1: a joint of two of the window's lines
-    bc = curves[i]
-    blended = blend_onto_line(pieces[-1], own[-1], bc.curve, bc.feed_mm_s,  # type: ignore[arg-type]
-                              bc.line, tol, joints, row) if tol else None
-    if blended is None:
-        return False
-    pieces[-1] = blended[0]
-    own[-1] = True
-    pieces += blended[1:]
-    own += [True, True]
-    return True
-
-
 def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
                error_limit_mm: float, use_ph: bool = True,
                cache: FitCache | None = None, prefix: tuple[Piece, ...] = (),
@@ -278,10 +254,15 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
     stops: list[int] = []
     blends = 0
     joints = line_joints(curves) if repeats is not None else None
-    for i, bc in enumerate(curves):
-        if joints is not None and pieces and _blended_onto_line(pieces, own, curves, i, joints):
-            blends += 1
-            continue
+    i = 0
+    while i < len(curves):
+        if joints is not None and pieces:
+            after = blend_line_run(pieces, own, curves, i, joints, SMOOTH_JOINT_RAD)
+            blends += after - i
+            if after == len(curves):
+                break
+            i = after
+        bc = curves[i]
         if bc.nurbs:
             ps, inf = _nurbs_pieces(bc, i, zones.get(i, []), error_limit_mm, use_ph,
                                     corner_base + len(infos), cache)
@@ -312,6 +293,7 @@ def build_path(curves: list[BlockCurve], zones: dict[int, list[CornerZone]],
                 blends += 1
         pieces += ps
         own += [first_own] + [mine] * (len(ps) - 1)
+        i += 1
     chained = chain(pieces, own)
     stop_s = tuple(chained[k].s0_mm for k in stops)
     ph = tuple(p for p in chained if p.kind == PieceKind.PH)

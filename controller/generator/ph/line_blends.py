@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -76,28 +77,6 @@ def blend_lines(a: Piece, b: Piece, tolerance_mm: float, joints: LineJoints,
                       b.line, b.corner))
 
 
-def blend_onto_line(a: Piece, a_own: bool, line: LineCurve, feed_mm_s: float, source_line: int,
-                    tolerance_mm: float, joints: LineJoints,
-                    row: int) -> tuple[Piece, Piece, Piece] | None:
-    """blend_lines(a, b) for b the whole line (make_piece(LINE, line, 0, 1, ...)), without
-    making b first, and with a trimmed in place when a_own (a was made for this path alone):
-    the same pieces, two fewer made per joint of a G1 program."""
-    lb = line.length_mm  # make_piece's length: 1 lb - 0 lb
-    cut = _cut(a.length_mm, lb, tolerance_mm, joints, row)
-    if cut is None:
-        return None
-    la = a.curve.length_mm
-    u_a, blend = _trim_and_blend(a, la, cut, feed_mm_s, source_line, joints, row)
-    u_b = cut / lb
-    if a_own:
-        a.__dict__.update(u1=u_a, length_mm=u_a * la - a.u0 * la)
-    else:
-        a = new_piece(a.kind, a.curve, a.u0, u_a, 0.0, u_a * la - a.u0 * la, a.feed_mm_s,
-                      a.line, a.corner)
-    return a, blend, new_piece(PieceKind.LINE, line, u_b, 1.0, 0.0, 1.0 * lb - u_b * lb,
-                               feed_mm_s, source_line)
-
-
 def _cut(a_mm: float, b_mm: float, tolerance_mm: float, joints: LineJoints,
          row: int) -> float | None:
     """The largest cut within the tolerance and MAX_SHARE of each line (None: under
@@ -129,7 +108,42 @@ def applies(a: Piece, b: Piece, joints: LineJoints, row: int) -> bool:
             and a.u1 == 1.0 and b.u0 == 0.0 and a.u0 < 1.0 and b.u1 > 0.0)
 
 
-def applies_onto_line(a: Piece, joints: LineJoints, row: int) -> bool:
-    """applies(a, b) for b a whole line."""
-    return (joints.canonical[row] and a.kind == PieceKind.LINE and a.u1 == 1.0
-            and a.u0 < 1.0)
+def blend_line_run(pieces: list[Piece], own: list[bool], curves: list[Any], i: int,
+                   joints: LineJoints, smooth_rad: float) -> int:
+    """build_path's step for lines i, i + 1, ... (BlockCurve) while each one blends onto the
+    piece before it (every joint of a G1 program): blend_lines(a, b) for b the whole line,
+    without making b first, and with a trimmed in place when own (a was made for this path
+    alone), in one loop that carries each new line over to the next joint as the piece to
+    trim, with its length: the same pieces as blend_lines, two fewer made per joint. Returns
+    the index of the first line not taken (i for none): a joint of a line and another curve,
+    a smooth joint, a stop."""
+    row_of, canonical, angle = joints.row, joints.canonical, joints.angle_rad
+    a, a_own = pieces[-1], own[-1]
+    la = a.curve.length_mm if a.kind == PieceKind.LINE else 0.0
+    while i < len(curves):
+        row = row_of.get(i)
+        if row is None or not (canonical[row] and a.kind == PieceKind.LINE and a.u1 == 1.0
+                               and a.u0 < 1.0) or angle[row] <= smooth_rad:
+            break
+        tol = curves[i - 1].blend_tolerance_mm
+        bc = curves[i]
+        lb = bc.curve.length_mm  # make_piece's length: 1 lb - 0 lb
+        cut = _cut(a.length_mm, lb, tol, joints, row) if tol else None
+        if cut is None:
+            break
+        u_a, blend = _trim_and_blend(a, la, cut, bc.feed_mm_s, bc.line, joints, row)
+        if a_own:
+            a.__dict__.update(u1=u_a, length_mm=u_a * la - a.u0 * la)
+        else:
+            a = new_piece(a.kind, a.curve, a.u0, u_a, 0.0, u_a * la - a.u0 * la, a.feed_mm_s,
+                          a.line, a.corner)
+        pieces[-1] = a
+        own[-1] = True
+        u_b = cut / lb
+        a = new_piece(PieceKind.LINE, bc.curve, u_b, 1.0, 0.0, 1.0 * lb - u_b * lb,
+                      bc.feed_mm_s, bc.line)
+        pieces += (blend, a)
+        own += (True, True)
+        a_own, la = True, lb
+        i += 1
+    return i
