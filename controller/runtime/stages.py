@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ctypes
+import itertools
 import os
 import resource
 import signal
@@ -43,14 +44,15 @@ class BlockBatch(list):
 BATCH_BLOCKS = 256
 
 
-def checked_blocks(blocks: list[Any]) -> BlocksFn:
+def checked_blocks(blocks: Iterable[Any]) -> BlocksFn:
     """The interpreter stage over the blocks the check before the run kept (the same path,
     config and offsets, read from the start): the forked interpreter inherits them instead of
     reading the program a second time, and passes them on in batches (all are in memory)."""
 
     def source(path: str, config: MachineConfig) -> Iterator[Any]:
-        for start in range(0, len(blocks), BATCH_BLOCKS):
-            yield BlockBatch(blocks[start : start + BATCH_BLOCKS])
+        it = iter(blocks)
+        while batch := list(itertools.islice(it, BATCH_BLOCKS)):
+            yield BlockBatch(batch)
 
     return source
 

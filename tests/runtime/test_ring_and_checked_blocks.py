@@ -13,6 +13,7 @@ from runtime_helpers import xy_config
 
 from controller.interpreter.program import read_program
 from controller.motion.types import Outcome
+from controller.operator.kept_blocks import KeptBlocks
 from controller.runtime.processes import Runtime, RuntimeOptions
 from controller.runtime.stages import BATCH_BLOCKS, checked_blocks
 
@@ -55,13 +56,16 @@ def test_a_forked_producer_writes_into_the_ring_and_no_resource_tracker_starts()
 
 
 def test_the_interpreter_stage_runs_the_blocks_the_check_kept(tmp_path: Path) -> None:
-    """The stage reads the list, not the path (which is gone by then), and passes it on in
-    batches (more blocks than one): the same run."""
+    """The stage reads the kept blocks, not the path (which is gone by then), and passes them
+    on in batches (more blocks than one): the same run. The check keeps lines past its first
+    ones as numbers (`cncctl run` keeps them so): the blocks made again run the same."""
     program = tmp_path / "squares.nc"
     squares = "G1 X0.5\nG1 Y0.5\nG1 X0\nG1 Y0\n" * (BATCH_BLOCKS // 4 + 8)
     program.write_text(f"G21 G90 G64 F3000\n{squares}M2\n")
-    kept = list(read_program(str(program), CFG))
-    assert len(kept) > BATCH_BLOCKS
+    kept = KeptBlocks(max_blocks=100, max_lines=10_000, lines_as_blocks=10)
+    for block in read_program(str(program), CFG):
+        kept.append(block)
+    assert len(kept) > BATCH_BLOCKS and not kept.full
     whole = Runtime(str(program), CFG, RuntimeOptions(virtual_time=True)).run()
     program.unlink()
     options = RuntimeOptions(virtual_time=True, blocks_fn=checked_blocks(kept))

@@ -158,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
         offsets = load_offsets(args.offsets, missing_ok=False) \
             if args.offsets is not None else None
         track = ProgramOffsets()
-        kept: list[Any] = []  # the blocks, for the interpreter stage (see _checked_blocks)
+        kept = _kept_blocks()  # the blocks, for the interpreter stage (see _checked_blocks)
         check_program(args.program, config, offsets=offsets, from_line=args.from_line,
                       track=track, summary=False, keep=kept)
     except (NcError, ConfigError, OffsetsError, ToolTableError) as exc:
@@ -247,12 +247,17 @@ def run(args: argparse.Namespace) -> int:
     return EXIT_CODES[result.outcome]
 
 
-def _checked_blocks(options: RuntimeOptions, kept: list[Any]) -> RuntimeOptions:
+def _kept_blocks() -> Any:
+    from controller.operator.check_cmd import KEEP_BLOCKS, KEEP_LINES
+    from controller.operator.kept_blocks import KeptBlocks
+
+    return KeptBlocks(KEEP_BLOCKS, KEEP_LINES, KEEP_BLOCKS)
+
+
+def _checked_blocks(options: RuntimeOptions, kept: Any) -> RuntimeOptions:
     """A run of the whole program as checked (the same offsets, from its start): its stages
     read the blocks the check kept, if it kept them all (a longer program is read again)."""
-    from controller.operator.check_cmd import KEEP_BLOCKS
-
-    if len(kept) > KEEP_BLOCKS:
+    if kept.full:
         return options
     return replace(options, blocks_fn=checked_blocks(kept))
 
