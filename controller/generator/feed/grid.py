@@ -23,11 +23,13 @@ PieceSamples = dict[tuple[Curve, float, float, int], tuple[np.ndarray, np.ndarra
 
 
 def _speed_and_kappa(curve: Curve, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    d = curve.evaluate(u, 2)
-    speed2 = np.einsum("ni,ni->n", d[1], d[1])
+    rows = getattr(curve, "evaluate_rows", None)  # a NURBS: x and y rows contiguous, the same
+    d = rows(u, 2) if rows is not None else curve.evaluate(u, 2).transpose(0, 2, 1)
+    (dx, dy), (ddx, ddy) = d[1], d[2]
+    speed2 = dx * dx + dy * dy
     speed = np.sqrt(speed2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        kappa = np.abs(d[1, :, 0] * d[2, :, 1] - d[1, :, 1] * d[2, :, 0]) / (speed2 * speed)
+        kappa = np.abs(dx * ddy - dy * ddx) / (speed2 * speed)
     return speed, np.where(np.isfinite(kappa), kappa, 0.0)  # |C'| = 0: nan or +inf
 
 
