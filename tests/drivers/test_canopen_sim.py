@@ -26,7 +26,10 @@ T_S = CONFIG.sample_period_s
 
 
 def wait_for(cond: Callable[[], Any], timeout_s: float = 2.0) -> Any:
-    """Poll an event (not a fixed sleep); fail with the time it took."""
+    """Poll an event (not a fixed sleep); fail with the time it took. What reaches the
+    simulated drives through the bus's notifier thread is waited for with the default: on a
+    loaded machine it is late by what the scheduler gives, which the code does not bound (the
+    reaction times it does bound are asserted where they are measured)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         value = cond()
@@ -181,7 +184,7 @@ def test_bringup_writes_the_objects_and_close_leaves_drives_disabled() -> None:
             assert a.mode == c.MODE_CSP and a.node.nmt._heartbeat_time_ms == 50
             assert a.node.sdo[c.INTERPOLATION_PERIOD][1].raw == 1
         drive.close()  # controlwords reach the simulated drives through the notifier thread
-        wait_for(lambda: [a.state for a in sims.axes] == ["READY TO SWITCH ON"] * 2, 0.5)
+        wait_for(lambda: [a.state for a in sims.axes] == ["READY TO SWITCH ON"] * 2)
         assert [a.consumer_ms for a in sims.axes] == [0, 0]  # closing is not losing us
 
 
@@ -210,7 +213,7 @@ def test_underrun_mid_program_latches_and_quick_stops() -> None:
         wait_for(lambda: drive.status().halted, 1.0)
         assert drive.status() == CardStatus.UNDERRUN
         assert "underrun" in drive.fault_message()
-        wait_for(lambda: [a.state for a in sims.axes] == ["QUICK STOP ACTIVE"] * 2, 0.5)
+        wait_for(lambda: [a.state for a in sims.axes] == ["QUICK STOP ACTIVE"] * 2)
         with pytest.raises(UnderrunError):
             drive.write_frames(ramp(1))
 
@@ -224,7 +227,7 @@ def test_following_error_emcy_latches_and_quick_stops_the_other_axis() -> None:
         wait_for(lambda: "0x8611" in drive.fault_message(), 0.2)
         assert CardStatus.FOLLOWING_ERROR in drive.status()
         assert "Y axis drive (node 2) EMCY 0x8611 following error" in drive.fault_message()
-        wait_for(lambda: [a.state for a in sims.axes] == ["QUICK STOP ACTIVE", "FAULT"], 0.5)
+        wait_for(lambda: [a.state for a in sims.axes] == ["QUICK STOP ACTIVE", "FAULT"])
         with pytest.raises(DriveFaultError, match="0x8611"):
             drive.write_frames(ramp(1))
 
@@ -235,7 +238,7 @@ def test_drive_fault_then_reset_re_enables_bumpless() -> None:
         wait_for(lambda: "0x2310" in drive.fault_message(), 1.0)
         assert "X axis drive (node 1) EMCY 0x2310 over-current" in drive.fault_message()
         assert CardStatus.FAULT in drive.status()
-        wait_for(lambda: sims.axis("y").state == "QUICK STOP ACTIVE", 0.5)
+        wait_for(lambda: sims.axis("y").state == "QUICK STOP ACTIVE")
         # both axes at rest (the faulted one may have missed the last targets: cmd != enc)
         wait_for(lambda: all(abs(a.actual_mm * 1e3 - a.ref) < 0.5 for a in sims.axes))
         wait_for(lambda: drive.position_counts()[1].tolist() == [a.position for a in sims.axes])
@@ -269,10 +272,12 @@ def test_silent_drive_is_lost_communication_naming_it() -> None:
         assert time.monotonic() - t0 < 0.5  # 50 ms + 100 SYNC cycles without TPDO1 (+ load)
         with pytest.raises(LostCommunicationError, match=r"lost X axis drive \(node 1\)"):
             drive.status()
-        wait_for(lambda: sims.axis("y").state == "QUICK STOP ACTIVE", 0.5)
+        # The quick stop and the disable reach the simulated drive through the bus's notifier
+        # thread and the peer's own: waited for as events (the suite's four workers on two
+        # loaded cores once took longer than 0.5 s), not timed.
+        wait_for(lambda: sims.axis("y").state == "QUICK STOP ACTIVE")
         drive.close()
-        # The disable reaches the simulated drive through the bus's notifier thread.
-        wait_for(lambda: sims.axis("y").state == "SWITCH ON DISABLED", 0.5)
+        wait_for(lambda: sims.axis("y").state == "SWITCH ON DISABLED")
 
 
 def test_master_heartbeat_loss_faults_the_drives() -> None:
@@ -319,4 +324,4 @@ def test_unexpected_drive_messages_latch(inject: str, flag: CardStatus, text: st
         wait_for(lambda: drive.status().halted, 1.0)
         assert flag in drive.status()
         assert re.search(text, drive.fault_message()), drive.fault_message()
-        wait_for(lambda: "OPERATION ENABLED" not in drive.drive_states(), 0.5)
+        wait_for(lambda: "OPERATION ENABLED" not in drive.drive_states())
