@@ -77,7 +77,7 @@ def zoh(num: np.ndarray, den: np.ndarray, sample_period_s: float) -> tuple[np.nd
     return b, a
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class DiscreteServo:
     """Discrete E/V filter coefficients (b, a) for one axis at period T."""
 

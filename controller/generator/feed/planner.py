@@ -136,7 +136,7 @@ def _result(best: tuple[float, PhaseArrays, int] | None, s0: float, failed: Plan
     return FeedPlan(profile, PlanResult.OK, best[2])
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, repr=False)
 class _Memo:
     """Segment results (cruise speed, end of the acceleration, start of the braking, excess,
     where, phase length) by segment: its length, node speeds, flat flag and the vlim samples it
