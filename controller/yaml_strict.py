@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
 import math
 from typing import Any
 
@@ -119,6 +118,8 @@ class Section:
 
 def close_match(key: Any, candidates: list[Any]) -> Any:
     """The candidate a mistyped key most likely meant, if one is close."""
+    import difflib  # only on the error path: a valid config never pays its import
+
     names = [c for c in candidates if isinstance(c, str)]
     found = difflib.get_close_matches(key, names, n=1, cutoff=0.8) if isinstance(key, str) \
         else []

@@ -21,7 +21,7 @@ FORMULA_FEEDS = ("adaptive", "curvature")
 MAX_SAMPLES = 10_000_000  # a guard: a feed of zero would otherwise never reach the end
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class FormulaSamples:
     xy_mm: np.ndarray
     v_mm_s: np.ndarray

@@ -11,6 +11,7 @@ import numpy as np
 from controller.blocks import ArcBlock, LineBlock, NurbsBlock
 from controller.geometry.nurbs import Nurbs
 from controller.geometry.nurbs_split import split_at
+from controller.numeric import sorted_unique
 
 # A contour line or arc whose nominal time (length over programmed feed) exceeds this is
 # planned as parts of at most this: a look-ahead window holds whole blocks, and one arc of a
@@ -86,7 +87,7 @@ def nurbs_parts(block: NurbsBlock, max_feed_mm_s: float,
     if block.polygon_length_mm / feed <= NURBS_PART_NOMINAL_S:
         return [block]
     curve = Nurbs.from_block(block)
-    knots = np.unique(block.knots[(block.knots > curve.u_start) & (block.knots < curve.u_end)])
+    knots = sorted_unique(block.knots[(block.knots > curve.u_start) & (block.knots < curve.u_end)])
     if not knots.size:
         return [block]
     kappa = np.maximum(curve.curvature(knots), curve.curvature(np.nextafter(knots, -np.inf)))

@@ -66,7 +66,7 @@ class Algorithm(StrEnum):
     PH_LOOKAHEAD = "ph-lookahead"  # this controller (the paper's algorithm)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class PlannedStep:
     """One chunk of reference points and, for contour runs, how it was planned."""
 

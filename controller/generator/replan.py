@@ -77,7 +77,7 @@ PH_LOOKAHEAD = RunSettings()
 NURBS_LOOKAHEAD = RunSettings(False, LimitPolicy.CORNER_PLATEAU, Interpolation.SEQUENTIAL_TAYLOR)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class RunPlan:
     """Reference points of one run and the report of how they were obtained."""
 
@@ -176,7 +176,7 @@ def _widen_at(geo: Geometry, curves: list[BlockCurve], zones: dict, s_mm: float)
     widen(curves, zones, block, u, 0.9 * kappa)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class _Attempt:
     feed: FeedOutput
     samples: Samples | None = None
@@ -185,7 +185,7 @@ class _Attempt:
     stop_errors: tuple[StopError, ...] = ()
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Continuation:
     """Where the previous look-ahead window was cut: the next window starts here, mid-cruise."""
 

@@ -28,7 +28,7 @@ class Interpolation(StrEnum):
     SEQUENTIAL_TAYLOR = "sequential-taylor"
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Samples:
     """Reference points of one run at t = T, 2T, ..., the last one at the run's end point."""
 

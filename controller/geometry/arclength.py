@@ -38,7 +38,7 @@ def _subdivide(breaks: np.ndarray, m: int) -> np.ndarray:
     return np.append(inner, breaks[-1])
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class ArcLengthTable:
     """Cumulative arc length at sub-interval nodes; s(u) and u(s) evaluated to ~1e-12 relative."""
 

@@ -21,7 +21,7 @@ _PASSES = 6
 MAX_ROWS = 50_000  # sub-intervals one refinement may make (3.6 MB); the rest uses Newton
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, repr=False)
 class InverseTable:
     """Sub-intervals [u0, u1] with their arc lengths [s0, s1] and (du/ds, d2u/ds2) at both ends
     (seen from inside: they may jump at knots). Built per interval of the arc-length table the

@@ -51,7 +51,7 @@ def _de_boor(knots: np.ndarray, pts: np.ndarray, p: int, span: np.ndarray, u: np
     return d[:, p]
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Nurbs:
     """Clamped planar NURBS of any degree; parameter range [knots[p], knots[-p-1]]."""
 

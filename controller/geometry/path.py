@@ -18,7 +18,7 @@ class PieceKind(StrEnum):
     ARC = "arc"
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Piece:
     """The part [u0, u1] of a curve; s0_mm is where it starts along the whole path."""
 
@@ -47,7 +47,7 @@ class Piece:
 _KIND_CODE = {PieceKind.NURBS: 0, PieceKind.PH: 1, PieceKind.LINE: 2, PieceKind.ARC: 3}
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class PieceColumns:
     """Per piece of a path, read-only arrays: where it starts, its length, its parameter range,
     programmed feed, source line, corner and kind (a path of G1 lines has thousands of pieces;
@@ -78,7 +78,7 @@ class PieceColumns:
         return self.kind == _KIND_CODE[kind]
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Path:
     """Pieces joined end to end; stops_at holds path positions where the feed must be zero."""
 

@@ -25,7 +25,7 @@ from controller.servo.true_distance import NEAR_SAMPLES, window_distance_mm
 MOVING_MM = 1e-9  # a central difference shorter than this: the tangent is held
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class SampleBlock:
     """Finished samples i0 .. i0 + len - 1 of the run and the settling after it (the end point
     held for SETTLE_S); the first n_ref of them are reference samples."""

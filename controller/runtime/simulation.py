@@ -16,7 +16,7 @@ from controller.runtime.simulate_figures import Figures
 from controller.runtime.simulate_stream import SampleBlock, ServoStream
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Trajectory:
     """The whole program's reference points and the servo model's answer (virtual time)."""
 

@@ -12,12 +12,13 @@ the first motion. tests/servo/test_servo_model.py checks both functions against 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
 
 from controller.config import MachineConfig, ServoParams
+from controller.numeric import cached_property
 
 BLOCK = 256  # samples per block of the block-recursive filter
 
@@ -76,17 +77,19 @@ def zoh(num: np.ndarray, den: np.ndarray, sample_period_s: float) -> tuple[np.nd
     return b, a
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class DiscreteServo:
     """Discrete E/V filter coefficients (b, a) for one axis at period T."""
 
     b: np.ndarray
     a: np.ndarray
     sample_period_s: float
-    _blocks: tuple[np.ndarray, ...] = field(init=False, repr=False)
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "_blocks", _block_matrices(self.b, self.a, BLOCK))
+    @cached_property
+    def _blocks(self) -> tuple[np.ndarray, ...]:
+        """The block filter's matrices, built on the first filtering: most servos made while
+        a model is composed (the pre-compensation's factors) are only read for b and a."""
+        return _block_matrices(self.b, self.a, BLOCK)
 
     @property
     def order(self) -> int:

@@ -20,7 +20,7 @@ from controller.servo.precompensation import residual_servo
 SETTLE_S = 0.06  # simulate this long at rest after the run so the tail error is seen too
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class ServoPrediction:
     """Per-sample tracking errors (mm) of X and Y and the contour error (eq. 28)."""
 

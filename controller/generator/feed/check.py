@@ -20,7 +20,7 @@ SUPER_CHUNKS = 16
 SUPER_SHARE = 0.125
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class LimitCurve:
     """vlim(s), linear between samples on an increasing grid s (mm, mm/s)."""
 
@@ -84,7 +84,7 @@ def _range_reduce(op: np.ufunc, vals: np.ndarray, empty: float, lo: np.ndarray,
     return np.where(hi > lo, out, empty)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class PhaseArrays:
     """Phases of a planned chain as arrays; seg maps each phase to its planning segment."""
 
@@ -103,7 +103,7 @@ class PhaseArrays:
                            self.ve_mm_s[mask], self.seg[mask])
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Violations:
     """Per planning segment: worst excess of v over vlim (mm/s, <= 0 when fine), where, and the
     length of the phase in which it happens."""
@@ -237,7 +237,7 @@ def _runs(count: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return group, local, np.flatnonzero(~last)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class _Chunks:
     """The kept runs of CHUNK_SAMPLES check-sample intervals per transition: those that may hold
     an excess above tol/4 (a transition is monotone, so on a chunk v <= its larger end speed,

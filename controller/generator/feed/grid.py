@@ -8,6 +8,7 @@ import numpy as np
 
 from controller.geometry.curves import Curve
 from controller.geometry.path import Path, Piece, PieceKind
+from controller.numeric import sorted_unique
 
 # Feed-limit samples per run, their spacing clamped: at most 35 um, under the 58 um a sample
 # period covers at full feed. Measured over 17 programs, 35 um planned 0.05 % less motion time
@@ -72,7 +73,7 @@ def _inner_knots(p: Piece) -> np.ndarray | None:
     knots = getattr(p.curve, "knots", None)
     if knots is None or p.kind != PieceKind.NURBS or not p.u1 > p.u0 or p.length_mm <= 0.0:
         return None
-    return np.unique(knots[(knots > p.u0) & (knots < p.u1)])
+    return sorted_unique(knots[(knots > p.u0) & (knots < p.u1)])
 
 
 def _knot_kappa(curve: Curve, knots: np.ndarray) -> np.ndarray:

@@ -57,7 +57,7 @@ class FeedInput:
     shape: TransitionShape = QUINTIC  # of every transition (interpolator.ramp_share)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class FeedOutput:
     s_mm: np.ndarray
     vlim_mm_s: np.ndarray

@@ -26,6 +26,7 @@ from controller.generator.feed.segments import (
 )
 from controller.generator.feed.shape import QUINTIC, TransitionShape
 from controller.generator.feed.time_bound import fb_pass_speed_mm_s
+from controller.numeric import sorted_unique
 
 MAX_SPLIT_DEPTH = 8  # a segment split this often is flattened instead (always safe)
 FLATTEN_ROUNDS = 3  # rounds that only flatten, before flattening everything
@@ -135,7 +136,7 @@ def _result(best: tuple[float, PhaseArrays, int] | None, s0: float, failed: Plan
     return FeedPlan(profile, PlanResult.OK, best[2])
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, repr=False)
 class _Memo:
     """Segment results (cruise speed, end of the acceleration, start of the braking, excess,
     where, phase length) by segment: its length, node speeds, flat flag and the vlim samples it
@@ -224,7 +225,7 @@ def _plan_round(nodes: Nodes, v: np.ndarray, curve: LimitCurve, accel: float, to
                                        viol.phase_len_mm[new])
     out[new, 3:] = rel[rep, 3:]
     out[new, 4] += a_new
-    once = np.unique(rep)  # one row per key
+    once = sorted_unique(rep)  # one row per key (np.unique would import numpy.ma)
     memo.store([keys[i] for i in new[once].tolist()], rel[once])
     return ph, Violations(out[:, 3], out[:, 4], out[:, 5])
 

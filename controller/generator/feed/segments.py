@@ -51,7 +51,7 @@ def _on_key_grid(v: np.ndarray) -> np.ndarray:
     return np.rint(v * (1.0 / KEY_STEP_MM_S)) * KEY_STEP_MM_S
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class SegmentWindows:
     """Where vlim reaches a level inside each segment [a_k, b_k].
 
@@ -174,7 +174,7 @@ class SegmentWindows:
         return x[:n_up], x[n_up:]
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class SegmentPlan:
     """Per segment: node speeds, cruise speed, end of the acceleration, start of the braking."""
 

@@ -33,7 +33,7 @@ SMOOTH_JOINT_RAD = math.radians(0.5)
 MIN_LENGTH_MM = 1e-6
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class BlockCurve:
     """One motion block as a curve, with its programmed feed and source line."""
 
@@ -57,7 +57,7 @@ class CornerInfo:
     y_mm: float
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Geometry:
     """The output of modules 1-2: the path with PH corners, and what was done to it."""
 

@@ -27,8 +27,6 @@ from controller.operator.run.exit_codes import EXIT_CODES, EXIT_REJECTED, STOP_S
 from controller.operator.run.from_line import HomingAborted, Sequence, run_from_line
 from controller.operator.run.io_announce import ToolChanges
 from controller.operator.run.keys import KeyControl, read_keys, stdin_fd
-from controller.operator.run.probing import run_probing
-from controller.operator.run.remote import run_on_daemon
 from controller.operator.run.view import JsonView, PlainView, ProgramLines, RichView
 from controller.runtime.processes import Runtime, RuntimeOptions
 from controller.runtime.stages import checked_blocks
@@ -143,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
             print(refusal, file=sys.stderr)
             return EXIT_REJECTED
         view = _view(args, args.program)
+        from controller.operator.run.remote import run_on_daemon  # only a run through cncd
+
         try:
             return run_on_daemon(args, socket_path, view)
         except DaemonUnavailable as exc:  # no daemon at all: rejected; lost mid-job: a fault
@@ -214,6 +214,8 @@ def run(args: argparse.Namespace) -> int:
         if not shared_drive:
             result = runtime.run()
         elif probing:
+            from controller.operator.run.probing import run_probing  # only a probing program
+
             result = run_probing(args, config, offsets, options, runtime, probing,
                                  _event_to(view))
         else:
