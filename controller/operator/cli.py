@@ -39,29 +39,20 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser; only the chosen command's module is imported (none given: all of them).
 
     Importing every command costs about 0.1 s more, which `cncctl run` would pay before the
-    first motion. The other commands are only named (usage, errors): building their parsers
-    cost about 3 ms."""
+    first motion."""
     parser = argparse.ArgumentParser(prog="cncctl", description="phcnc CNC controller")
     parser.add_argument("--version", action="version", version=f"cncctl {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     known = {name for name, _, _ in COMMANDS}
     for name, module_name, help_text in COMMANDS:
         # help= is %-formatted by argparse (description is not): "in % (0-150)" crashed --help.
-        if command in known and name != command:
-            _name_only(sub, name, help_text.replace("%", "%%"))
-            continue
         p = sub.add_parser(name, help=help_text.replace("%", "%%"), description=help_text)
+        if command in known and name != command:
+            continue
         module = importlib.import_module(module_name)
         module.add_arguments(p)
         p.set_defaults(_run=module.run)
     return parser
-
-
-def _name_only(sub: argparse._SubParsersAction, name: str, help_text: str) -> None:
-    """A command listed as add_parser lists it (the choices in usage and errors, the line in
-    help), without its parser: argv's first word names the command parsed, never this one."""
-    sub._choices_actions.append(sub._ChoicesPseudoAction(name, (), help_text))
-    sub._name_parser_map[name] = None
 
 
 def _raise_priority_for_motion(argv: list[str]) -> None:

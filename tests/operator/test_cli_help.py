@@ -33,26 +33,6 @@ def test_every_command_help_renders(name: str) -> None:
     assert text.startswith(f"usage: cncctl {name}")
 
 
-@pytest.mark.parametrize("name", [name for name, _, _ in COMMANDS])
-def test_a_chosen_command_leaves_the_top_level_usage_and_help_as_they_were(name: str) -> None:
-    # Only the chosen command's parser is built; the others are named for usage and help.
-    full = build_parser()
-    assert build_parser(name).format_usage() == full.format_usage()
-    assert build_parser(name).format_help() == full.format_help()
-
-
-def test_an_unknown_option_is_refused_with_the_usage_naming_every_command(
-        capsys: pytest.CaptureFixture[str]) -> None:
-    from controller.operator.cli import main
-
-    with pytest.raises(SystemExit) as info:
-        main(["simulate", "nc_programs/arcs.nc", "--no-such-option"])
-    assert info.value.code == 2
-    err = capsys.readouterr().err
-    assert err.startswith(build_parser().format_usage())
-    assert "unrecognized arguments: --no-such-option" in err
-
-
 def test_the_daemon_help_renders() -> None:
     assert "usage: cncd" in build_daemon_parser().format_help()
 
