@@ -58,12 +58,14 @@ class SendJournal:
     def _add(self, entry: Any, count: int) -> None:
         self.entries.append(entry)
         self._count += count
-        # The oldest go while the rest hold JOURNAL_ENTRIES sends; _made() trims exactly.
+        # The oldest go while the rest hold JOURNAL_ENTRIES sends; made() trims exactly.
         while len(self.entries) > 1 and self._count - _sends(self.entries[0]) >= JOURNAL_ENTRIES:
             self._count -= _sends(self.entries.pop(0))
 
-    def _made(self) -> list[Sent]:
-        """Every entry a Sent (blocks cut into their sends), the newest JOURNAL_ENTRIES."""
+    def made(self) -> list[Sent]:
+        """Every entry a Sent (blocks cut into their sends), the newest JOURNAL_ENTRIES. A
+        take-back whose drive level is read just before it calls this first: cutting a
+        FIFO's worth of blocks takes a few hundred microseconds, in which the card clocks on."""
         if any(isinstance(e, Pieces) for e in self.entries):
             flat: list[Sent] = []
             for e in self.entries:
@@ -82,7 +84,7 @@ class SendJournal:
         """The newest sends whose frames add up to at most budget_frames, newest first."""
         out: list[Sent] = []
         total = 0
-        for entry in reversed(self._made()):
+        for entry in reversed(self.made()):
             if total + entry.frames > budget_frames:
                 break
             out.append(entry)
@@ -90,7 +92,7 @@ class SendJournal:
         return out
 
     def drop(self, n: int) -> None:
-        entries = self._made()
+        entries = self.made()
         del entries[len(entries) - n:]
         self._count = len(entries)
 

@@ -31,6 +31,7 @@ TRIPPED_BY_PROBE = "the probe tripped"
 # after the trip (it rests 22 um past it at F300). Fewer than the e-stop keeps (6 ms): a
 # descheduling longer than 2 ms there runs the card dry, an underrun fault at the probe.
 PROBE_KEEP_FRAMES = 2
+PROBE_TRIES = 3  # take-backs refused because the card clocked on: tried again
 
 
 class ProbeWatch:
@@ -125,8 +126,15 @@ def _take_back(ctrl: Any) -> None:
     the e-stop does: the abort's stop along the path at Amax then starts about 2 ms after the
     trip, not behind the whole card FIFO (100 ms of the probe's feed further on)."""
     at_rest = ctrl.sent_eos or ctrl.pausing or ctrl.pending_tail is not None
-    if ctrl.state in (MotionState.WAITING, MotionState.RUNNING) and not at_rest:
-        ctrl.stream.take_back(ctrl.drive, ctrl.drive.fifo_level(), PROBE_KEEP_FRAMES)
+    if ctrl.state not in (MotionState.WAITING, MotionState.RUNNING) or at_rest:
+        return
+    # With 2 frames kept, the card must not clock a frame between the level's read and the
+    # take-back (it then refuses, all or nothing, and the stop comes behind the whole FIFO):
+    # the journal is made first, and a refusal is tried again from the level then.
+    ctrl.stream.journal.made()
+    for _ in range(PROBE_TRIES):
+        if ctrl.stream.take_back(ctrl.drive, ctrl.drive.fifo_level(), PROBE_KEEP_FRAMES):
+            return
 
 
 class ProbeRun(CurrentRun):
