@@ -194,7 +194,7 @@ class MotionController:
             self._finish(Outcome.FAULT, self.drive.fault_message())
             return
         self._supervise(fb, checked)
-        self._check_estop(level)
+        self._check_estop()
         level = self._operator_requests(level)
         if self.pending_tail is not None:
             self._send_tail(level)  # a stream's last frames, the lead settling: nothing first
@@ -504,7 +504,7 @@ class MotionController:
         self.outcome = Outcome.FAULT
         self.message = f"{before}; then {message}" if before else message
 
-    def _check_estop(self, level: int) -> None:
+    def _check_estop(self) -> None:
         """Each cycle: an e-stop asked, or the drive's e-stop input open, starts the e-stop
         (a category 1 stop: the fastest the drives allow, along the path, then disabled)."""
         if self.estop_reason is not None:
@@ -517,11 +517,11 @@ class MotionController:
             reason = LIMIT_INPUT.format(limit)
         if reason is not None:
             self.estop_reason = reason
-            self._begin_estop(reason, level)
+            self._begin_estop(reason)
         if limit is not None:
             self.outcome = Outcome.FAULT
 
-    def _begin_estop(self, reason: str, level: int) -> None:
+    def _begin_estop(self, reason: str) -> None:
         if self.outcome is None or self.outcome is Outcome.DONE:
             self.outcome, self.message = Outcome.ABORTED, reason
         elif reason not in self.message:
@@ -543,7 +543,8 @@ class MotionController:
         if self.state in (MotionState.WAITING, MotionState.RUNNING) and not ends_at_rest:
             # The frames queued beyond ESTOP_KEEP_MS are taken back (where the drive can): the
             # stop starts 6 ms out, not behind the whole FIFO (2 ms ran a loaded card dry).
-            st.take_back(self.drive, level, self._frames(ESTOP_KEEP_MS))
+            # From the level now: the cycle's was read before its checks ran.
+            st.take_back_now(self.drive, self._frames(ESTOP_KEEP_MS))
             self.pending_stop = stop_along_path(st.prev_mm, st.last_mm, st.held[:, : self.n],
                                                 accel, self.period_s, amax_stop_distances_mm)
             st.held = st.held[:0]

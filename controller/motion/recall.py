@@ -13,8 +13,10 @@ from controller.motion.checks import RefHistory
 from controller.motion.pulses import PulseCounter
 from controller.motion.retime import Retimer
 from drivers.base import Drive
+from drivers.errors import DriveError
 
 JOURNAL_ENTRIES = 512  # sends remembered; more than a FIFO's worth at two frames a cycle
+TAKE_BACK_TRIES = 3  # take-backs refused because the card clocked on meanwhile: tried again
 RETIMER_FIELDS = ("rate", "target", "wanted", "ramp", "frac", "back", "recent", "rows_passed",
                   "cap_at", "cap_goal", "cap_wanted")
 
@@ -187,3 +189,28 @@ class SendState:
         self.journal.drop(len(undo))
         self.recalled_frames += total
         return total
+
+    def take_back_now(self, drive: Drive, keep_frames: int) -> int:
+        """take_back from the level the drive reports now: an e-stop's or a probe trip's,
+        which keep only a few frames. The journal's blocks are cut into sends first (a few
+        hundred microseconds for a FIFO's worth), so the card does not clock on between the
+        level's read and the take-back; one refused because the card clocked on anyway (the
+        level fell below what it needed) is tried again from the level then, up to
+        TAKE_BACK_TRIES times. A drive that cannot take back is asked once. Returns the
+        frames taken back (0: none)."""
+        self.journal.made()
+        try:
+            level = drive.fifo_level()
+            for _ in range(TAKE_BACK_TRIES):
+                undo = self.backlog(level, keep_frames)
+                if not undo:
+                    return 0
+                got = self.take_back(drive, level, keep_frames, undo)
+                if got:
+                    return got
+                level = drive.fifo_level()
+                if level >= keep_frames + sum(e.frames for e in undo):
+                    return 0  # they were still queued: the drive cannot take them back
+        except DriveError:  # the link lost: the cycle's next read faults on it
+            return 0
+        return 0

@@ -12,12 +12,14 @@ one run: a probe line in a loop (or a subprogram called again) runs once per pas
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
 from controller.config import MachineConfig
 from controller.io_events import T_DECIMALS, io_event
+from controller.motion.loop import ESTOP_KEEP_MS
 from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
 from controller.probe import ProbeResult, ProbeResults
 from controller.runtime.current_run import CurrentRun
@@ -27,11 +29,10 @@ from drivers.errors import DriveError
 from drivers.probe_latch import ProbeLatch
 
 TRIPPED_BY_PROBE = "the probe tripped"
-# Frames left in the card when a trip takes the rest back: the probe's stop starts about 2 ms
-# after the trip (it rests 22 um past it at F300). Fewer than the e-stop keeps (6 ms): a
-# descheduling longer than 2 ms there runs the card dry, an underrun fault at the probe.
-PROBE_KEEP_FRAMES = 2
-PROBE_TRIES = 3  # take-backs refused because the card clocked on: tried again
+# Left in the card when a trip takes the rest back, as the e-stop keeps: 2 frames (2 ms) ran
+# the serial card dry under two CPU hogs in 4 probes of 16 (an underrun fault at the probe);
+# a probe's latched trip does not depend on it, its overtravel grows by 4 ms of its feed.
+PROBE_KEEP_MS = ESTOP_KEEP_MS
 
 
 class ProbeWatch:
@@ -122,19 +123,14 @@ class ProbeWatch:
 
 
 def _take_back(ctrl: Any) -> None:
-    """The frames the card has queued beyond a couple are taken back (where the drive can), as
-    the e-stop does: the abort's stop along the path at Amax then starts about 2 ms after the
-    trip, not behind the whole card FIFO (100 ms of the probe's feed further on)."""
+    """The frames the card has queued beyond PROBE_KEEP_MS are taken back (where the drive
+    can), as the e-stop does: the abort's stop along the path at Amax then starts that long
+    after the trip, not behind the whole card FIFO (100 ms of the probe's feed further on)."""
     at_rest = ctrl.sent_eos or ctrl.pausing or ctrl.pending_tail is not None
     if ctrl.state not in (MotionState.WAITING, MotionState.RUNNING) or at_rest:
         return
-    # With 2 frames kept, the card must not clock a frame between the level's read and the
-    # take-back (it then refuses, all or nothing, and the stop comes behind the whole FIFO):
-    # the journal is made first, and a refusal is tried again from the level then.
-    ctrl.stream.journal.made()
-    for _ in range(PROBE_TRIES):
-        if ctrl.stream.take_back(ctrl.drive, ctrl.drive.fifo_level(), PROBE_KEEP_FRAMES):
-            return
+    keep_frames = max(1, math.ceil(PROBE_KEEP_MS * 1e-3 / ctrl.period_s - 1e-9))
+    ctrl.stream.take_back_now(ctrl.drive, keep_frames)
 
 
 class ProbeRun(CurrentRun):

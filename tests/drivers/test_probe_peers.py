@@ -28,7 +28,7 @@ def test_a_probe_on_the_serial_card_through_its_peer_process(tmp_path: Path) -> 
                               capture_output=True, text=True,
                               timeout=120, stdin=subprocess.DEVNULL, cwd=REPO)
     events = [json.loads(line) for line in done.stdout.splitlines()]
-    assert done.returncode == 0, done.stderr
+    assert done.returncode == 0, (done.stderr, events[-1].get("message"))
     (probe,) = [e for e in events if e["event"] == "probe"]
     trip_x, stop_x = probe["trip_mm"][0], probe["stop_mm"][0]
     # the face at X10, seen within a few status periods of the link and the servo's lag
