@@ -38,10 +38,17 @@ class LineJoints:
     canonical: list[bool]
 
 
-def _unit_tangent(curve: LineCurve) -> complex:
-    (x0, y0), (x1, y1) = curve.p0, curve.p1
-    t = complex(x1 - x0, y1 - y0)
-    return t / abs(t)
+def _unit_tangents(curves: list[object], is_line: list[bool]) -> np.ndarray:
+    """Each line's unit tangent, complex (0 for a curve that is not a line): t / abs(t) of
+    t = complex(dx, dy) as Python computes it, on arrays (abs is hypot in both, and the
+    division by a real, taken as a complex, is (dx + dy 0) / |t| and (dy - dx 0) / |t|)."""
+    ends = np.array([(*c.curve.p0, *c.curve.p1) if line else (0.0, 0.0, 1.0, 0.0)  # type: ignore[attr-defined]
+                     for c, line in zip(curves, is_line, strict=True)], float).reshape(-1, 4)
+    dx, dy = ends[:, 2] - ends[:, 0], ends[:, 3] - ends[:, 1]
+    r = np.hypot(dx, dy)
+    t = np.empty(len(ends), complex)
+    t.real, t.imag = (dx + dy * 0.0) / r, (dy - dx * 0.0) / r
+    return np.where(is_line, t, 0j)
 
 
 def line_joints(curves: list[object]) -> LineJoints:
@@ -50,10 +57,9 @@ def line_joints(curves: list[object]) -> LineJoints:
     index = [i for i in range(1, len(curves)) if is_line[i - 1] and is_line[i]]
     # Each line's tangent once (a line between two others is in two joints); block_curve
     # makes no line shorter than a micrometre, so none has a zero tangent.
-    tangent = [_unit_tangent(c.curve) if line else 0j  # type: ignore[attr-defined]
-               for c, line in zip(curves, is_line, strict=True)]
-    t0 = np.array([tangent[i - 1] for i in index], complex)
-    t1 = np.array([tangent[i] for i in index], complex)
+    tangent = _unit_tangents(curves, is_line)
+    at = np.array(index, np.intp)
+    t0, t1 = tangent[at - 1], tangent[at]
     w, deviation, canonical = unit_blends(t0, t1, MAX_BLEND_ANGLE_RAD)
     return LineJoints({i: k for k, i in enumerate(index)},
                       np.abs(np.angle(t1 * np.conj(t0))).tolist(), deviation.tolist(),
