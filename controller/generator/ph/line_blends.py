@@ -102,8 +102,7 @@ def _trim_and_blend(a: Piece, la: float, cut: float, feed_mm_s: float, line: int
     p0 = complex(x0 + u_a * (x1 - x0), y0 + u_a * (y1 - y0))
     w0, w1, w2 = joints.w_unit[row]
     root = math.sqrt(cut)
-    ph = object.__new__(PhQuintic)  # PhQuintic(p0, ...) without the frozen setattr per field
-    ph.__dict__.update(p0=p0, w0=w0 * root, w1=w1 * root, w2=w2 * root)
+    ph = PhQuintic.made(p0, w0 * root, w1 * root, w2 * root)
     return u_a, new_piece(PieceKind.PH, ph, 0.0, 1.0, 0.0, ph.length_mm, feed_mm_s, line)
 
 
