@@ -3,6 +3,7 @@ per-line forms they replace (block_curve, t / abs(t) of a Python complex)."""
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -10,9 +11,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from controller.blocks import ArcBlock, LineBlock, PathControl, PathMode, Source
-from controller.generator.ph.construct import block_curve, block_curves
-from controller.generator.ph.line_blends import _unit_tangents
+from controller.generator.ph.construct import (
+    SMOOTH_JOINT_RAD,
+    BlockCurve,
+    block_curve,
+    block_curves,
+)
+from controller.generator.ph.line_blends import (
+    LineJoints,
+    _unit_tangents,
+    blend_line_run,
+    blend_lines,
+    line_joints,
+)
 from controller.geometry.curves import LineCurve
+from controller.geometry.path import Piece, PieceKind, make_piece, new_piece
 from controller.geometry.ph_quintic import PhQuintic
 
 _COORD = st.floats(-500.0, 500.0, allow_nan=False)
@@ -139,3 +152,90 @@ def test_a_made_ph_quintic_is_the_constructed_one(
     assert made == built
     assert made.__dict__["sigma_values"] == built.sigma_values
     assert made.__dict__["length_mm"] == built.length_mm
+
+
+def _piece_fields(p: Piece) -> tuple:
+    c = p.curve
+    curve = (
+        (c.p0, c.w0, c.w1, c.w2, c.__dict__.get("sigma_values"))
+        if p.kind == PieceKind.PH
+        else id(c)
+    )
+    return (p.kind, curve, p.u0, p.u1, p.s0_mm, p.length_mm, p.feed_mm_s, p.line, p.corner)
+
+
+def _by_blend_lines(first: Piece, curves: list, joints: LineJoints) -> tuple[list, int]:
+    """The run joint by joint through blend_lines, each line made whole first."""
+    pieces, i = [first], 1
+    while i < len(curves):
+        row, a, tol = joints.row.get(i), pieces[-1], curves[i - 1].blend_tolerance_mm
+        if (
+            row is None
+            or not joints.canonical[row]
+            or joints.angle_rad[row] <= SMOOTH_JOINT_RAD
+            or not tol
+        ):
+            break
+        bc = curves[i]
+        b = make_piece(PieceKind.LINE, bc.curve, 0.0, 1.0, 0.0, bc.feed_mm_s, bc.line)
+        blended = blend_lines(a, b, tol, joints, row)
+        if blended is None:
+            break
+        pieces[-1:] = blended
+        i += 1
+    return pieces, i
+
+
+@st.composite
+def _polyline(draw: st.DrawFn) -> list:
+    """Block curves of lines joined end to end: turns from none to reversals, lengths from
+    a micrometre up, tolerances of none, zero and several sizes, feeds and lines per block."""
+    n = draw(st.integers(2, 30))
+    x, y, heading = 0.0, 0.0, draw(st.floats(-math.pi, math.pi))
+    curves = []
+    for i in range(n):
+        heading += math.radians(
+            draw(
+                st.sampled_from(
+                    [0.0, 0.3, 1.0, 30.0, -90.0, 170.0, 179.0, draw(st.floats(-180.0, 180.0))]
+                )
+            )
+        )
+        length = draw(st.sampled_from([1e-3, 0.05, 1.0, draw(st.floats(1e-3, 50.0))]))
+        end = (x + length * math.cos(heading), y + length * math.sin(heading))
+        tol = draw(st.sampled_from([None, 0.0, 1e-6, 0.002, 0.02, 0.5]))
+        curves.append(
+            BlockCurve(LineCurve((x, y), end), draw(st.floats(1.0, 80.0)), i + 1, False, tol)
+        )
+        x, y = end
+    return curves
+
+
+@settings(max_examples=300, deadline=None)
+@given(curves=_polyline(), own_first=st.booleans(), trimmed=st.booleans())
+def test_a_line_run_is_its_joints_blended_one_by_one(
+    curves: list, own_first: bool, trimmed: bool
+) -> None:
+    """blend_line_run: the pieces blend_lines makes joint by joint, bit for bit, with the last
+    piece before the run (whole or trimmed at its start) trimmed in place when its own."""
+    joints = line_joints(curves)
+    c0 = curves[0].curve
+    u0 = 0.3 if trimmed else 0.0
+    first = new_piece(
+        PieceKind.LINE,
+        c0,
+        u0,
+        1.0,
+        0.0,
+        1.0 * c0.length_mm - u0 * c0.length_mm,
+        curves[0].feed_mm_s,
+        curves[0].line,
+        4,
+    )
+    want, want_end = _by_blend_lines(copy.copy(first), curves, joints)
+    pieces, own = [first], [own_first]
+    end = blend_line_run(pieces, own, curves, 1, joints, SMOOTH_JOINT_RAD)
+    assert end == want_end
+    assert [_piece_fields(p) for p in pieces] == [_piece_fields(p) for p in want]
+    assert own == [own_first] if end == 1 else own == [True] * len(pieces)
+    assert (pieces[0] is first) == (own_first or end == 1)
