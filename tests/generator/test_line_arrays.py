@@ -1,5 +1,6 @@
-"""A window's G1 lines in one pass: the same block curves and tangents, bit for bit, as the
-per-line forms they replace (block_curve, t / abs(t) of a Python complex)."""
+"""A window's G1 lines in one pass: the same block curves, tangents, blend quintics and run
+of blended lines, bit for bit, as the per-line forms they replace (block_curve, t / abs(t)
+of a Python complex, PhQuintic(...), blend_lines joint by joint)."""
 
 from __future__ import annotations
 
