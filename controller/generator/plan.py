@@ -30,7 +30,7 @@ from controller.generator.feed.shape import TransitionShape
 from controller.generator.helix_move import helix_move
 from controller.generator.long_blocks import chunk_bounds, contour_parts, nurbs_parts
 from controller.generator.output_marks import SyncMark, output_mark, with_synced
-from controller.generator.ph.construct import BlockCurve, block_curve
+from controller.generator.ph.construct import BlockCurve, block_curves
 from controller.generator.repeats import Repeats
 from controller.generator.replan import (
     NURBS_LOOKAHEAD,
@@ -155,8 +155,8 @@ def plan_run(curves: list[BlockCurve], start_xy: np.ndarray, config: MachineConf
 def _curves(blocks: list[NcBlock], config: MachineConfig,
             repeats: Repeats | None = None) -> list[BlockCurve]:
     ip = config.interpolator
-    curves = [c for b in blocks
-              if (c := block_curve(b, ip.max_feed_mm_s, ip.contour_error_limit_mm)) is not None]
+    curves = block_curves(blocks, ip.max_feed_mm_s,  # type: ignore[arg-type]
+                          ip.contour_error_limit_mm)
     return curves if repeats is None else [repeats.intern(c) for c in curves]
 
 

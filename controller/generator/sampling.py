@@ -105,13 +105,13 @@ def _points_on_lines(path: Path, pieces: np.ndarray, idx: np.ndarray,
     """_points_on_curve for the samples on LINE pieces (sorted piece indices), all at once: the
     same operations per sample (LineCurve: u = s / length, p0 + u d, the tangent of d), so the
     same numbers, without a call per line of a G1 program."""
-    lines = [path.pieces[i].curve for i in pieces.tolist()]
+    all_pieces = path.pieces
+    rows = np.array([(*c.p0, *c.p1, c.length_mm)  # type: ignore[attr-defined]
+                     for c in [all_pieces[i].curve for i in pieces.tolist()]],
+                    float).reshape(-1, 5)
     k = np.searchsorted(pieces, idx)
-    ends = np.empty((len(lines), 4))
-    ends[:, :2] = [c.p0 for c in lines]  # type: ignore[attr-defined]
-    ends[:, 2:] = [c.p1 for c in lines]  # type: ignore[attr-defined]
+    ends, length = rows[:, :4], rows[:, 4]
     d = np.column_stack((ends[:, 2] - ends[:, 0], ends[:, 3] - ends[:, 1]))
-    length = np.array([c.length_mm for c in lines])
     cols = path.columns
     u0, u1 = cols.u0[pieces], cols.u1[pieces]
     start, piece_len = cols.s0_mm[pieces], cols.length_mm[pieces]

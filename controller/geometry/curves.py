@@ -9,6 +9,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike
 
+from controller.numeric import cached_property
+
 
 @runtime_checkable
 class Curve(Protocol):
@@ -110,8 +112,9 @@ class LineCurve(ConstantSpeedCurve):
     p1: tuple[float, float]
     _curvature = 0.0
 
-    @property
+    @cached_property
     def length_mm(self) -> float:
+        # Kept: a G1 program's lines are asked for it at every stage (cut, blend, sampling).
         return math.hypot(self.p1[0] - self.p0[0], self.p1[1] - self.p0[1])
 
     def evaluate(self, u: ArrayLike, order: int = 2) -> np.ndarray:

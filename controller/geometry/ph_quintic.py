@@ -47,6 +47,20 @@ def _horner(coeffs_low_first: tuple[float, ...] | tuple[complex, ...],
     return acc
 
 
+def _sigma_values(w0: complex, w1: complex,
+                  w2: complex) -> tuple[float, float, float, float, float]:
+    """The Bernstein coefficients of |w|^2 (PhQuintic.sigma_values)."""
+    return (abs(w0) ** 2, (w0 * w1.conjugate()).real,
+            (2 * abs(w1) ** 2 + (w0 * w2.conjugate()).real) / 3,
+            (w1 * w2.conjugate()).real, abs(w2) ** 2)
+
+
+def _length_mm(sigma: tuple[float, float, float, float, float]) -> float:
+    """sigma_bernstein.sum() / 5, in numpy's order for five values (one after the other)."""
+    s0, s1, s2, s3, s4 = sigma
+    return ((((s0 + s1) + s2) + s3) + s4) / 5.0
+
+
 @dataclass(frozen=True)
 class PhQuintic:
     """r(xi) = p0 + integral of w(xi)^2, w quadratic Bernstein with coefficients w0, w1, w2."""
@@ -83,14 +97,22 @@ class PhQuintic:
         steps = [w0 * w0 / 5, w0 * w1 / 5, (2 * w1 * w1 + w0 * w2) / 15, w1 * w2 / 5, w2 * w2 / 5]
         return self.p0 + np.concatenate(([0j], np.cumsum(steps)))
 
+    @classmethod
+    def made(cls, p0: complex, w0: complex, w1: complex, w2: complex) -> PhQuintic:
+        """PhQuintic(p0, w0, w1, w2) with its sigma values and length already in place, without
+        the frozen setattr per field or a cached property's call for each (a G1 program makes
+        one at every joint, and its length is asked at once)."""
+        ph = object.__new__(cls)
+        sigma = _sigma_values(w0, w1, w2)
+        ph.__dict__.update(p0=p0, w0=w0, w1=w1, w2=w2, sigma_values=sigma,
+                           length_mm=_length_mm(sigma))
+        return ph
+
     @cached_property
     def sigma_values(self) -> tuple[float, float, float, float, float]:
         """sigma_bernstein as Python floats: a blend's length from them costs no numpy call
         (a G1 program has a blend at every joint)."""
-        w0, w1, w2 = self.w0, self.w1, self.w2
-        return (abs(w0) ** 2, (w0 * w1.conjugate()).real,
-                (2 * abs(w1) ** 2 + (w0 * w2.conjugate()).real) / 3,
-                (w1 * w2.conjugate()).real, abs(w2) ** 2)
+        return _sigma_values(self.w0, self.w1, self.w2)
 
     @cached_property
     def sigma_bernstein(self) -> np.ndarray:
@@ -118,9 +140,7 @@ class PhQuintic:
 
     @cached_property
     def length_mm(self) -> float:
-        # sigma_bernstein.sum() / 5, in numpy's order for five values (one after the other).
-        s0, s1, s2, s3, s4 = self.sigma_values
-        return ((((s0 + s1) + s2) + s3) + s4) / 5.0
+        return _length_mm(self.sigma_values)
 
     @cached_property
     def arc_length_table(self) -> tuple[np.ndarray, np.ndarray]:

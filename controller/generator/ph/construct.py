@@ -81,11 +81,12 @@ def block_curve(block: MotionBlock, feed_cap_mm_s: float,
             else default_tolerance_mm
     if isinstance(block, LineBlock):  # first: every G1 line of a program comes here
         p0, p1 = block.start[:2], block.end[:2]
-        if math.hypot(p1[0] - p0[0], p1[1] - p0[1]) < MIN_LENGTH_MM:
+        length = math.hypot(p1[0] - p0[0], p1[1] - p0[1])  # LineCurve.length_mm's
+        if length < MIN_LENGTH_MM:
             return None
         # LineCurve(p0, p1) and BlockCurve(...) without the frozen setattr per field.
         curve = object.__new__(LineCurve)
-        curve.__dict__.update(p0=p0, p1=p1)
+        curve.__dict__.update(p0=p0, p1=p1, length_mm=length)
         bc = object.__new__(BlockCurve)
         bc.__dict__.update(curve=curve, feed_mm_s=feed, line=line, nurbs=False,
                            blend_tolerance_mm=tol)
@@ -102,6 +103,38 @@ def block_curve(block: MotionBlock, feed_cap_mm_s: float,
     change = block.radius_change_mm
     return BlockCurve(ArcCurve(c, block.radius_mm, a0, block.sweep_rad, change), feed, line,
                       False, tol)
+
+
+def block_curves(blocks: list[MotionBlock], feed_cap_mm_s: float,
+                 default_tolerance_mm: float = 0.0) -> list[BlockCurve]:
+    """block_curve of every block, the blocks that do not move in XY left out. A G1 line's
+    curve is made here in one loop (the same fields as block_curve: 2 us less a line), its
+    tolerance found again only when its path control is another object than the line
+    before's (the interpreter hands the same one on from line to line)."""
+    out: list[BlockCurve] = []
+    new, line_block, blend = object.__new__, LineBlock, PathMode.BLEND
+    path, tol = None, None
+    for block in blocks:
+        if type(block) is not line_block:
+            if (bc := block_curve(block, feed_cap_mm_s, default_tolerance_mm)) is not None:
+                out.append(bc)
+            continue
+        if block.path is not path:
+            path = block.path
+            tol = (path.tolerance_mm if path.tolerance_mm is not None
+                   else default_tolerance_mm) if path.mode == blend else None
+        p0, p1 = block.start[:2], block.end[:2]
+        length = math.hypot(p1[0] - p0[0], p1[1] - p0[1])  # LineCurve.length_mm's
+        if length < MIN_LENGTH_MM:
+            continue
+        curve = new(LineCurve)
+        curve.__dict__.update(p0=p0, p1=p1, length_mm=length)
+        bc = new(BlockCurve)
+        feed = block.feed_mm_s  # min(feed, cap), which returns the first of equals
+        bc.__dict__.update(curve=curve, feed_mm_s=feed_cap_mm_s if feed_cap_mm_s < feed else feed,
+                           line=block.source.first_line, nurbs=False, blend_tolerance_mm=tol)
+        out.append(bc)
+    return out
 
 
 def find_corners(curves: list[BlockCurve], kappa_th_per_mm: float) -> dict[int, list[CornerZone]]:

@@ -38,10 +38,17 @@ class LineJoints:
     canonical: list[bool]
 
 
-def _unit_tangent(curve: LineCurve) -> complex:
-    (x0, y0), (x1, y1) = curve.p0, curve.p1
-    t = complex(x1 - x0, y1 - y0)
-    return t / abs(t)
+def _unit_tangents(curves: list[object], is_line: list[bool]) -> np.ndarray:
+    """Each line's unit tangent, complex (0 for a curve that is not a line): t / abs(t) of
+    t = complex(dx, dy) as Python computes it, on arrays (abs is hypot in both, and the
+    division by a real, taken as a complex, is (dx + dy 0) / |t| and (dy - dx 0) / |t|)."""
+    ends = np.array([(*c.curve.p0, *c.curve.p1) if line else (0.0, 0.0, 1.0, 0.0)  # type: ignore[attr-defined]
+                     for c, line in zip(curves, is_line, strict=True)], float).reshape(-1, 4)
+    dx, dy = ends[:, 2] - ends[:, 0], ends[:, 3] - ends[:, 1]
+    r = np.hypot(dx, dy)
+    t = np.empty(len(ends), complex)
+    t.real, t.imag = (dx + dy * 0.0) / r, (dy - dx * 0.0) / r
+    return np.where(is_line, t, 0j)
 
 
 def line_joints(curves: list[object]) -> LineJoints:
@@ -50,10 +57,9 @@ def line_joints(curves: list[object]) -> LineJoints:
     index = [i for i in range(1, len(curves)) if is_line[i - 1] and is_line[i]]
     # Each line's tangent once (a line between two others is in two joints); block_curve
     # makes no line shorter than a micrometre, so none has a zero tangent.
-    tangent = [_unit_tangent(c.curve) if line else 0j  # type: ignore[attr-defined]
-               for c, line in zip(curves, is_line, strict=True)]
-    t0 = np.array([tangent[i - 1] for i in index], complex)
-    t1 = np.array([tangent[i] for i in index], complex)
+    tangent = _unit_tangents(curves, is_line)
+    at = np.array(index, np.intp)
+    t0, t1 = tangent[at - 1], tangent[at]
     w, deviation, canonical = unit_blends(t0, t1, MAX_BLEND_ANGLE_RAD)
     return LineJoints({i: k for k, i in enumerate(index)},
                       np.abs(np.angle(t1 * np.conj(t0))).tolist(), deviation.tolist(),
@@ -96,8 +102,7 @@ def _trim_and_blend(a: Piece, la: float, cut: float, feed_mm_s: float, line: int
     p0 = complex(x0 + u_a * (x1 - x0), y0 + u_a * (y1 - y0))
     w0, w1, w2 = joints.w_unit[row]
     root = math.sqrt(cut)
-    ph = object.__new__(PhQuintic)  # PhQuintic(p0, ...) without the frozen setattr per field
-    ph.__dict__.update(p0=p0, w0=w0 * root, w1=w1 * root, w2=w2 * root)
+    ph = PhQuintic.made(p0, w0 * root, w1 * root, w2 * root)
     return u_a, new_piece(PieceKind.PH, ph, 0.0, 1.0, 0.0, ph.length_mm, feed_mm_s, line)
 
 
@@ -111,39 +116,59 @@ def applies(a: Piece, b: Piece, joints: LineJoints, row: int) -> bool:
 def blend_line_run(pieces: list[Piece], own: list[bool], curves: list[Any], i: int,
                    joints: LineJoints, smooth_rad: float) -> int:
     """build_path's step for lines i, i + 1, ... (BlockCurve) while each one blends onto the
-    piece before it (every joint of a G1 program): blend_lines(a, b) for b the whole line,
-    without making b first, and with a trimmed in place when own (a was made for this path
-    alone), in one loop that carries each new line over to the next joint as the piece to
-    trim, with its length: the same pieces as blend_lines, two fewer made per joint. Returns
-    the index of the first line not taken (i for none): a joint of a line and another curve,
-    a smooth joint, a stop."""
+    piece before it (every joint of a G1 program): blend_lines(a, b) for b the whole line, in
+    one loop that carries each line over to the next joint as the piece to trim, with its
+    parameter and length, and makes its piece once, trimmed at both ends (the last piece
+    before the run is trimmed in place when own: made for this path alone). The same pieces
+    as blend_lines, the same operations inlined (_cut, _trim_and_blend). Returns the index of
+    the first line not taken (i for none): a joint of a line and another curve, a smooth
+    joint, a stop."""
+    first = pieces[-1]
+    if not (first.kind == PieceKind.LINE and first.u1 == 1.0 and first.u0 < 1.0):
+        return i
     row_of, canonical, angle = joints.row, joints.canonical, joints.angle_rad
-    a, a_own = pieces[-1], own[-1]
-    la = a.curve.length_mm if a.kind == PieceKind.LINE else 0.0
+    deviation, w_unit, made, new = joints.unit_deviation, joints.w_unit, PhQuintic.made, new_piece
+    line_kind, ph_kind = PieceKind.LINE, PieceKind.PH
+    # The line to trim at the next joint: its curve, start parameter, length, and (once made
+    # here) its feed and source line.
+    curve, u0, a_mm, la = first.curve, first.u0, first.length_mm, first.curve.length_mm
+    feed, line = first.feed_mm_s, first.line
+    start = i
     while i < len(curves):
         row = row_of.get(i)
-        if row is None or not (canonical[row] and a.kind == PieceKind.LINE and a.u1 == 1.0
-                               and a.u0 < 1.0) or angle[row] <= smooth_rad:
+        if row is None or not canonical[row] or angle[row] <= smooth_rad:
             break
         tol = curves[i - 1].blend_tolerance_mm
+        if not tol:
+            break
         bc = curves[i]
         lb = bc.curve.length_mm  # make_piece's length: 1 lb - 0 lb
-        cut = _cut(a.length_mm, lb, tol, joints, row) if tol else None
-        if cut is None:
+        cut = MAX_SHARE * min(a_mm, lb)
+        dev = deviation[row]
+        if dev * cut > tol:
+            cut = tol / dev * _SAFETY
+        if cut < MIN_CUT_MM:
             break
-        u_a, blend = _trim_and_blend(a, la, cut, bc.feed_mm_s, bc.line, joints, row)
-        if a_own:
-            a.__dict__.update(u1=u_a, length_mm=u_a * la - a.u0 * la)
+        u_a = (a_mm - cut + u0 * la) / la
+        (x0, y0), (x1, y1) = curve.p0, curve.p1
+        w0, w1, w2 = w_unit[row]
+        root = math.sqrt(cut)
+        ph = made(complex(x0 + u_a * (x1 - x0), y0 + u_a * (y1 - y0)), w0 * root, w1 * root,
+                  w2 * root)
+        if i > start:
+            pieces.append(new(line_kind, curve, u0, u_a, 0.0, u_a * la - u0 * la, feed, line))
+        elif own[-1]:
+            first.__dict__.update(u1=u_a, length_mm=u_a * la - u0 * la)
         else:
-            a = new_piece(a.kind, a.curve, a.u0, u_a, 0.0, u_a * la - a.u0 * la, a.feed_mm_s,
-                          a.line, a.corner)
-        pieces[-1] = a
-        own[-1] = True
-        u_b = cut / lb
-        a = new_piece(PieceKind.LINE, bc.curve, u_b, 1.0, 0.0, 1.0 * lb - u_b * lb,
-                      bc.feed_mm_s, bc.line)
-        pieces += (blend, a)
-        own += (True, True)
-        a_own, la = True, lb
+            pieces[-1] = new(first.kind, curve, u0, u_a, 0.0, u_a * la - u0 * la, feed, line,
+                             first.corner)
+        feed, line = bc.feed_mm_s, bc.line
+        pieces.append(new(ph_kind, ph, 0.0, 1.0, 0.0, ph.length_mm, feed, line))
+        u0 = cut / lb
+        curve, a_mm, la = bc.curve, 1.0 * lb - u0 * lb, lb
         i += 1
+    if i > start:
+        pieces.append(new(line_kind, curve, u0, 1.0, 0.0, a_mm, feed, line))
+        own[-1] = True
+        own += [True] * (2 * (i - start))
     return i
