@@ -44,6 +44,8 @@ class SegmentWindows:
     bkey: np.ndarray  # k * big - running max from each segment's end: non-decreasing
     _ends: np.ndarray  # (5, 2 n) float, see above
     _nohit: np.ndarray  # (2 n,) intp
+    _step: tuple[np.ndarray, ...]  # 4 of (2 slots,): per answer slot g of a search, _steps
+    _far: np.ndarray  # (2 slots,) bool: g is the far end of its segment (no sample reached)
 
     @classmethod
     def build(cls, curve: LimitCurve, nodes_s: np.ndarray) -> SegmentWindows:
@@ -81,15 +83,18 @@ class SegmentWindows:
         ends = np.vstack((np.concatenate((a, b)), np.concatenate((va, vb)),
                           np.concatenate((vb, va)), np.concatenate((kbig, kbig)),
                           np.repeat([np.inf, -np.inf], len(a))))
+        far = np.zeros(2 * len(s_slot), bool)
+        far[last] = True
+        far[len(s_slot) + first] = True
         return cls(curve, a, b, lo, hi, big, s_slot, v_slot, f_slot, b_slot, ends,
-                   np.concatenate((last, first)))
+                   np.concatenate((last, first)), _steps(s_slot, v_slot), far)
 
     def take(self, k: np.ndarray) -> SegmentWindows:
         """Segments k alone (their searches still use the whole grid's keys)."""
         rows = np.concatenate((k, k + len(self.a)))
         return SegmentWindows(self.curve, self.a[k], self.b[k], self.lo[k], self.hi[k],
                               self.big, self.s_slot, self.v_slot, self.fkey, self.bkey,
-                              self._ends[:, rows], self._nohit[rows])
+                              self._ends[:, rows], self._nohit[rows], self._step, self._far)
 
     def reach_pair(self, up: np.ndarray, down: np.ndarray,
                    k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -98,7 +103,6 @@ class SegmentWindows:
         - last_reach: per segment, the largest s in it with vlim(s) >= down (-inf if none).
         A level array is (len(k),) or (len(k), n) for n levels per segment; up and down have the
         same shape; levels lie in [0, max vlim]."""
-        s, v = self.s_slot, self.v_slot
         near_s, near_v, far_v, kbig_row, never = self._ends
         n_up = len(k)
         rows = np.concatenate((k, k + len(self.a)))
@@ -116,25 +120,36 @@ class SegmentWindows:
         lev = level.ravel()[sel]
         kbig = kbig_row[r]
         # g: the first (last) slot where the running max reaches level, b (a) when no sample
-        # inside does; p: the slot before it (toward near).
-        g = np.empty(len(sel), np.intp)
-        p = np.empty(len(sel), np.intp)
+        # inside does (the slot before it, toward near, is p); a search from the end reads its
+        # slot's row of _step in the second half.
         lq = _on_key_grid(lev)
         lq[:n_sel_up] += kbig[:n_sel_up]
         np.subtract(kbig[n_sel_up:], lq[n_sel_up:], out=lq[n_sel_up:])
+        g = np.empty(len(sel), np.intp)
         g[:n_sel_up] = np.searchsorted(self.fkey, lq[:n_sel_up], side="left")
         g[n_sel_up:] = np.searchsorted(self.bkey, lq[n_sel_up:], side="right")
-        g[n_sel_up:] -= 1
-        np.subtract(g[:n_sel_up], 1, out=p[:n_sel_up])
-        np.add(g[n_sel_up:], 1, out=p[n_sel_up:])
-        p_v = v[p]
-        dv = v[g] - p_v
-        frac = np.minimum(np.maximum((lev - p_v) / np.where(dv != 0.0, dv, 1.0), 0.0), 1.0)
-        p_s = s[p]
-        found = p_s + frac * (s[g] - p_s)
+        g[n_sel_up:] += len(self.s_slot) - 1
+        p_v, dv, p_s, ds = (col[g] for col in self._step)
+        frac = np.minimum(np.maximum((lev - p_v) / dv, 0.0), 1.0)
+        found = p_s + frac * ds
         # Where the search ended at the far end with vlim there below the level: never reached.
-        end = np.flatnonzero(g == self._nohit[r])
+        end = np.flatnonzero(self._far[g])
         never_hit = end[far_v[r[end]] < lev[end]]
         found[never_hit] = never[r[never_hit]]
         x.ravel()[sel] = found
         return x[:n_up], x[n_up:]
+
+
+def _steps(s_slot: np.ndarray, v_slot: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Per slot g where a search ends: vlim at p (the slot before it toward the near end), the
+    step of vlim from p to g (1 where none: the divisor of the crossing's share), the position
+    of p and the step of s from p to g; searches from the start (p = g - 1) in the first half,
+    from the end (p = g + 1) in the second. What every search ending there computed, once."""
+    n = len(s_slot)
+    g = np.arange(n)
+    p = np.concatenate((np.maximum(g - 1, 0), np.minimum(g + 1, n - 1)))
+    g = np.concatenate((g, g))
+    p_v = v_slot[p]
+    dv = v_slot[g] - p_v
+    p_s = s_slot[p]
+    return p_v, np.where(dv != 0.0, dv, 1.0), p_s, s_slot[g] - p_s
