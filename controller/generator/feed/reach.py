@@ -103,16 +103,22 @@ class SegmentWindows:
         - last_reach: per segment, the largest s in it with vlim(s) >= down (-inf if none).
         A level array is (len(k),) or (len(k), n) for n levels per segment; up and down have the
         same shape; levels lie in [0, max vlim]."""
+        level = np.concatenate((up, down))
+        x = self.reach_rows(level.reshape(len(level), -1), k)
+        return x[:len(k)].reshape(up.shape), x[len(k):].reshape(down.shape)
+
+    def reach_rows(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """reach_pair of the (2 len(k), n) levels: the first len(k) rows searched from the
+        start (first_reach), the others from the end (last_reach)."""
         near_s, near_v, far_v, kbig_row, never = self._ends
         n_up = len(k)
         rows = np.concatenate((k, k + len(self.a)))
-        level = np.concatenate((up, down))
-        per_row = level.shape[1] if level.ndim == 2 else 1
+        per_row = level.shape[1]
         # Only levels above vlim at the near end are searched (elsewhere the answer is the near
         # end itself): 4 in 10 on a G1 walk. Each searched level takes the operations it took
         # among all of them, so the same bits.
         v_near = near_v[rows]
-        below = (v_near[:, None] < level) if level.ndim == 2 else v_near < level
+        below = v_near[:, None] < level
         x = np.repeat(near_s[rows], per_row).reshape(level.shape)
         sel = np.flatnonzero(below)
         n_sel_up = int(np.searchsorted(sel, n_up * per_row))  # searches from the start first
@@ -137,7 +143,7 @@ class SegmentWindows:
         never_hit = end[far_v[r[end]] < lev[end]]
         found[never_hit] = never[r[never_hit]]
         x.ravel()[sel] = found
-        return x[:n_up], x[n_up:]
+        return x
 
 
 def _steps(s_slot: np.ndarray, v_slot: np.ndarray) -> tuple[np.ndarray, ...]:

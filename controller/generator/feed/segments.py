@@ -268,30 +268,37 @@ def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray,
     a, b = win.a[k], win.b[k]
     v0, v1 = np.concatenate((vi, vp)), np.concatenate((vp, vj))
     length = transition_length_mm(v0, v1, accel, shape)
-    x, c = _shape(v0, v1, accel, shape)
-    first, last = win.reach_pair(c[:n, 1:], c[n:, :-1], k)
+    x, c = _corners(v0, v1, n, accel, shape)
+    reached = win.reach_rows(c, k)
     rest = REST_FRACTION * win.big
     # Acceleration: earliest start with every box corner past where vlim reaches its speed;
     # never a wait at (near) rest, nor one past where vlim stays above vi.
-    start = np.maximum(a, (first - x[:n, :-1]).max(axis=1))
+    start = np.maximum(a, (reached[:n] - x[:n]).max(axis=1))
     start[((vi <= rest) & (start > a)) | (start > reach[0][k])] = np.inf
     # Braking: latest end with every box corner before where vlim falls below its speed.
     sd = length[n:]
-    end = np.minimum(b, (last + (sd[:, None] - x[n:, 1:])).min(axis=1))
+    end = np.minimum(b, (reached[n:] + (sd[:, None] - x[n:])).min(axis=1))
     end[((vj <= rest) & (end < b)) | (end < reach[1][k])] = -np.inf
     return start + length[:n], end - sd
 
 
-def _shape(vs: np.ndarray, ve: np.ndarray, accel: float,
-           shape: TransitionShape = QUINTIC) -> tuple[np.ndarray, np.ndarray]:
-    """Samples (distance from start, speed) of the transitions vs -> ve, one row each."""
+def _corners(vs: np.ndarray, ve: np.ndarray, n: int, accel: float,
+             shape: TransitionShape = QUINTIC) -> tuple[np.ndarray, np.ndarray]:
+    """Box corners (distance from start, speed) of the transitions vs -> ve, one row each: the
+    first n accelerations (sample j's distance, sample j + 1's speed), then brakings (sample
+    j + 1's distance, sample j's speed), j = 0 .. SHAPE_SAMPLES - 2: the samples' numbers, made
+    only where a corner takes them."""
     dur = transition_duration_s(vs, ve, accel, shape)
     table_a, table_b, table_c = _shape_tables(shape)
-    x = (dur * vs)[:, None] * table_a
-    x += (dur * ve)[:, None] * table_b
-    v = (ve - vs)[:, None] * table_c
-    v += vs[:, None]
-    return x, v
+    x = np.empty((len(vs), SHAPE_SAMPLES - 1))
+    c = np.empty(x.shape)
+    for rows, near, far in ((slice(None, n), slice(None, -1), slice(1, None)),
+                            (slice(n, None), slice(1, None), slice(None, -1))):
+        np.multiply((dur[rows] * vs[rows])[:, None], table_a[near], out=x[rows])
+        x[rows] += (dur[rows] * ve[rows])[:, None] * table_b[near]
+        np.multiply((ve[rows] - vs[rows])[:, None], table_c[far], out=c[rows])
+    c += vs[:, None]
+    return x, c
 
 
 def segment_phases(sp: SegmentPlan, accel: float,
