@@ -10,7 +10,7 @@ import numpy as np
 from controller.generator.feed.check import LimitCurve
 from controller.numeric import clamp
 
-KEY_STEP_MM_S = 2.0 ** -20  # speeds in search keys: on this grid, so k * big + v is exact
+KEY_STEP_MM_S = 2.0**-20  # speeds in search keys: on this grid, so k * big + v is exact
 
 
 def _on_key_grid(v: np.ndarray) -> np.ndarray:
@@ -70,8 +70,7 @@ class SegmentWindows:
         size = n_in + 2
         last = np.cumsum(size) - 1
         first = last - (size - 1)
-        src = clamp(np.repeat(lo - 1 - first, size) + np.arange(int(last[-1]) + 1), 0,
-                    len(s) - 1)
+        src = clamp(np.repeat(lo - 1 - first, size) + np.arange(int(last[-1]) + 1), 0, len(s) - 1)
         k = np.arange(len(a), dtype=float)
         below, above = (k - 0.5) * big, (k + 0.5) * big  # outside every level's reach
         s_slot, v_slot, f_slot, b_slot = s[src], v[src], fkey[src], bkey[src]
@@ -80,32 +79,66 @@ class SegmentWindows:
         f_slot[first], f_slot[last] = below, above
         b_slot[first], b_slot[last] = below, above
         kbig = k * big
-        ends = np.vstack((np.concatenate((a, b)), np.concatenate((va, vb)),
-                          np.concatenate((vb, va)), np.concatenate((kbig, kbig)),
-                          np.repeat([np.inf, -np.inf], len(a))))
+        ends = np.vstack(
+            (
+                np.concatenate((a, b)),
+                np.concatenate((va, vb)),
+                np.concatenate((vb, va)),
+                np.concatenate((kbig, kbig)),
+                np.repeat([np.inf, -np.inf], len(a)),
+            )
+        )
         far = np.zeros(2 * len(s_slot), bool)
         far[last] = True
         far[len(s_slot) + first] = True
-        return cls(curve, a, b, lo, hi, big, s_slot, v_slot, f_slot, b_slot, ends,
-                   np.concatenate((last, first)), _steps(s_slot, v_slot), far)
+        return cls(
+            curve,
+            a,
+            b,
+            lo,
+            hi,
+            big,
+            s_slot,
+            v_slot,
+            f_slot,
+            b_slot,
+            ends,
+            np.concatenate((last, first)),
+            _steps(s_slot, v_slot),
+            far,
+        )
 
     def take(self, k: np.ndarray) -> SegmentWindows:
         """Segments k alone (their searches still use the whole grid's keys)."""
         rows = np.concatenate((k, k + len(self.a)))
-        return SegmentWindows(self.curve, self.a[k], self.b[k], self.lo[k], self.hi[k],
-                              self.big, self.s_slot, self.v_slot, self.fkey, self.bkey,
-                              self._ends[:, rows], self._nohit[rows], self._step, self._far)
+        return SegmentWindows(
+            self.curve,
+            self.a[k],
+            self.b[k],
+            self.lo[k],
+            self.hi[k],
+            self.big,
+            self.s_slot,
+            self.v_slot,
+            self.fkey,
+            self.bkey,
+            self._ends[:, rows],
+            self._nohit[rows],
+            self._step,
+            self._far,
+        )
 
-    def reach_pair(self, up: np.ndarray, down: np.ndarray,
-                   k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def reach_pair(
+        self, up: np.ndarray, down: np.ndarray, k: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(first_reach, last_reach) of segments k in one pass (numpy's per-call cost):
         - first_reach: per segment, the smallest s in it with vlim(s) >= up (inf if none);
         - last_reach: per segment, the largest s in it with vlim(s) >= down (-inf if none).
         A level array is (len(k),) or (len(k), n) for n levels per segment; up and down have the
         same shape; levels lie in [0, max vlim]."""
         level = np.concatenate((up, down))
-        x = self.reach_rows(level.reshape(len(level), -1), k)
-        return x[:len(k)].reshape(up.shape), x[len(k):].reshape(down.shape)
+        x = self.reach_rows(level.reshape(len(level), 1 if level.ndim == 1 else level.shape[1]), k)
+        return x[: len(k)].reshape(up.shape), x[len(k) :].reshape(down.shape)
 
     def reach_rows(self, level: np.ndarray, k: np.ndarray) -> np.ndarray:
         """reach_pair of the (2 len(k), n) levels: the first len(k) rows searched from the
