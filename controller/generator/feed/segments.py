@@ -3,18 +3,18 @@
 from __future__ import annotations
 
 import functools
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from controller.generator.feed.check import LimitCurve, PhaseArrays
+from controller.generator.feed.check import PhaseArrays
 from controller.generator.feed.profile import (
     bernstein6_weights,
     quintic_speed,
     transition_duration_s,
     transition_length_mm,
 )
+from controller.generator.feed.reach import SegmentWindows
 from controller.generator.feed.shape import QUINTIC, TransitionShape
 from controller.numeric import clamp
 
@@ -42,136 +42,6 @@ def _shape_tables(shape: TransitionShape) -> tuple[np.ndarray, np.ndarray, np.nd
         return _SHAPE_A, _SHAPE_B, _SHAPE_C
     big_g = shape.distance(_SHAPE_TAU)
     return _SHAPE_TAU - big_g, big_g, shape.speed(_SHAPE_TAU)
-
-
-KEY_STEP_MM_S = 2.0 ** -20  # speeds in search keys: on this grid, so k * big + v is exact
-
-
-def _on_key_grid(v: np.ndarray) -> np.ndarray:
-    return np.rint(v * (1.0 / KEY_STEP_MM_S)) * KEY_STEP_MM_S
-
-
-@dataclass(frozen=True, eq=False, repr=False)
-class SegmentWindows:
-    """Where vlim reaches a level inside each segment [a_k, b_k].
-
-    The running maximum of vlim from a segment's start (end) is monotone inside the segment;
-    shifted by k * big per segment it is monotone over the whole grid, so one searchsorted
-    answers all queries of all segments at once. Each segment has its own slots: its start a,
-    the grid samples inside, its end b, with keys that the searches never stop at (a from the
-    start, b from the end) or always stop at (b from the start, a from the end). The crossing
-    then always lies between a slot and its neighbour: no case for a search that did not move
-    or found nothing inside. Searches from the start (first_reach) and from the end
-    (last_reach) share one pass (reach_pair): per segment and direction, one column of _ends (near
-    end, vlim at the near and far ends, k * big, the answer when never reached) and of _nohit
-    (the slot a search ends at when no sample reaches the level), forward rows first."""
-
-    curve: LimitCurve
-    a: np.ndarray
-    b: np.ndarray
-    lo: np.ndarray  # first grid index inside each segment
-    hi: np.ndarray  # last grid index inside each segment (hi < lo: none)
-    big: float  # above twice any vlim: levels (0 <= level <= max vlim) stay in their segment
-    s_slot: np.ndarray  # per slot: position and vlim
-    v_slot: np.ndarray
-    fkey: np.ndarray  # running max from each segment's start, + k * big: non-decreasing
-    bkey: np.ndarray  # k * big - running max from each segment's end: non-decreasing
-    _ends: np.ndarray  # (5, 2 n) float, see above
-    _nohit: np.ndarray  # (2 n,) intp
-
-    @classmethod
-    def build(cls, curve: LimitCurve, nodes_s: np.ndarray) -> SegmentWindows:
-        a, b = nodes_s[:-1], nodes_s[1:]
-        s, v = curve.s_mm, curve.vlim_mm_s
-        lo = np.searchsorted(s, a, side="right")  # first grid index inside the segment
-        hi = np.searchsorted(s, b, side="left") - 1  # last one (hi < lo: none)
-        n_in = np.maximum(hi - lo + 1, 0)
-        seg = clamp(np.searchsorted(nodes_s, s, side="right") - 1, 0, len(a) - 1)
-        # Offsetting each segment by k * big makes one global accumulate restart per segment.
-        # The keys are exact sums (big a power of two, vlim on the KEY_STEP grid), so which
-        # slot a level reaches does not depend on k: a segment plans the same bits at any
-        # index (the planner's memo relies on it).
-        big = 2.0 ** math.ceil(math.log2(2.0 * float(v.max()) + 1.0))
-        off = seg * big
-        vq = _on_key_grid(v)
-        fkey = np.maximum.accumulate(vq + off)
-        bkey = -np.maximum.accumulate((vq - off)[::-1])[::-1]
-        va, vb = curve.at(a), curve.at(b)
-        # Slots of segment k: first[k] (a), the samples inside, last[k] (b). The end slots'
-        # sources (the samples either side) may lie off the grid; they are overwritten below.
-        size = n_in + 2
-        last = np.cumsum(size) - 1
-        first = last - (size - 1)
-        src = clamp(np.repeat(lo - 1 - first, size) + np.arange(int(last[-1]) + 1), 0,
-                    len(s) - 1)
-        k = np.arange(len(a), dtype=float)
-        below, above = (k - 0.5) * big, (k + 0.5) * big  # outside every level's reach
-        s_slot, v_slot, f_slot, b_slot = s[src], v[src], fkey[src], bkey[src]
-        s_slot[first], s_slot[last] = a, b
-        v_slot[first], v_slot[last] = va, vb
-        f_slot[first], f_slot[last] = below, above
-        b_slot[first], b_slot[last] = below, above
-        kbig = k * big
-        ends = np.vstack((np.concatenate((a, b)), np.concatenate((va, vb)),
-                          np.concatenate((vb, va)), np.concatenate((kbig, kbig)),
-                          np.repeat([np.inf, -np.inf], len(a))))
-        return cls(curve, a, b, lo, hi, big, s_slot, v_slot, f_slot, b_slot, ends,
-                   np.concatenate((last, first)))
-
-    def take(self, k: np.ndarray) -> SegmentWindows:
-        """Segments k alone (their searches still use the whole grid's keys)."""
-        rows = np.concatenate((k, k + len(self.a)))
-        return SegmentWindows(self.curve, self.a[k], self.b[k], self.lo[k], self.hi[k],
-                              self.big, self.s_slot, self.v_slot, self.fkey, self.bkey,
-                              self._ends[:, rows], self._nohit[rows])
-
-    def reach_pair(self, up: np.ndarray, down: np.ndarray,
-                   k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(first_reach, last_reach) of segments k in one pass (numpy's per-call cost):
-        - first_reach: per segment, the smallest s in it with vlim(s) >= up (inf if none);
-        - last_reach: per segment, the largest s in it with vlim(s) >= down (-inf if none).
-        A level array is (len(k),) or (len(k), n) for n levels per segment; up and down have the
-        same shape; levels lie in [0, max vlim]."""
-        s, v = self.s_slot, self.v_slot
-        near_s, near_v, far_v, kbig_row, never = self._ends
-        n_up = len(k)
-        rows = np.concatenate((k, k + len(self.a)))
-        level = np.concatenate((up, down))
-        per_row = level.shape[1] if level.ndim == 2 else 1
-        # Only levels above vlim at the near end are searched (elsewhere the answer is the near
-        # end itself): 4 in 10 on a G1 walk. Each searched level takes the operations it took
-        # among all of them, so the same bits.
-        v_near = near_v[rows]
-        below = (v_near[:, None] < level) if level.ndim == 2 else v_near < level
-        x = np.repeat(near_s[rows], per_row).reshape(level.shape)
-        sel = np.flatnonzero(below)
-        n_sel_up = int(np.searchsorted(sel, n_up * per_row))  # searches from the start first
-        r = rows[sel // per_row]  # the row (segment and direction) of each searched level
-        lev = level.ravel()[sel]
-        kbig = kbig_row[r]
-        # g: the first (last) slot where the running max reaches level, b (a) when no sample
-        # inside does; p: the slot before it (toward near).
-        g = np.empty(len(sel), np.intp)
-        p = np.empty(len(sel), np.intp)
-        lq = _on_key_grid(lev)
-        lq[:n_sel_up] += kbig[:n_sel_up]
-        np.subtract(kbig[n_sel_up:], lq[n_sel_up:], out=lq[n_sel_up:])
-        g[:n_sel_up] = np.searchsorted(self.fkey, lq[:n_sel_up], side="left")
-        g[n_sel_up:] = np.searchsorted(self.bkey, lq[n_sel_up:], side="right")
-        g[n_sel_up:] -= 1
-        np.subtract(g[:n_sel_up], 1, out=p[:n_sel_up])
-        np.add(g[n_sel_up:], 1, out=p[n_sel_up:])
-        p_v = v[p]
-        dv = v[g] - p_v
-        frac = np.minimum(np.maximum((lev - p_v) / np.where(dv != 0.0, dv, 1.0), 0.0), 1.0)
-        p_s = s[p]
-        found = p_s + frac * (s[g] - p_s)
-        # Where the search ended at the far end with vlim there below the level: never reached.
-        end = np.flatnonzero(g == self._nohit[r])
-        never_hit = end[far_v[r[end]] < lev[end]]
-        found[never_hit] = never[r[never_hit]]
-        x.ravel()[sel] = found
-        return x[:n_up], x[n_up:]
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -292,7 +162,10 @@ def _prefer_no_wait(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, safe: n
     """Where the highest cruise makes the profile wait at a node speed, a lower cruise may be
     faster overall: try levels between the safe one and the highest, keep the quickest (in place).
     The windows at the two ends are known (at_safe, and e0, d0 at vp) and not shaped again; the
-    top level is vp itself only where safe + (vp - safe) rounds back to it."""
+    top level is vp itself only where safe + (vp - safe) rounds back to it. A level whose
+    time floor (_time_floor_s) is above the quickest time found so far cannot be the quickest
+    and is not shaped: first each segment's level with the lowest floor, then the others still
+    under the quickest (a G1 walk: 6 levels in 10)."""
     sa = transition_length_mm(vi, vp, accel, shape)
     sd = transition_length_mm(vp, vj, accel, shape)
     waits = (e0 - sa > win.a * (1.0 + 1e-12) + 1e-12) | (d0 + sd < win.b - 1e-12)
@@ -305,25 +178,61 @@ def _prefer_no_wait(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, safe: n
     c0[:, 0], c1[:, 0] = at_safe[0][k], at_safe[1][k]  # frac 0: safe + 0 is safe
     top_known = levels[:, -1] == vp[k]
     c0[top_known, -1], c1[top_known, -1] = e0[k[top_known]], d0[k[top_known]]
-    to_shape = np.ones(levels.shape, bool)
-    to_shape[:, 0] = False
-    to_shape[top_known, -1] = False
-    rows, cols = np.nonzero(to_shape)
-    kk = k[rows]
-    c0[rows, cols], c1[rows, cols] = _window(win, vi[kk], vj[kk], levels[rows, cols], kk, accel,
-                                             reach, shape)
-    levels, c0, c1 = levels.ravel(), c0.ravel(), c1.ravel()
-    kk = np.repeat(k, CRUISE_LEVELS)
-    dur = _segment_time_s(win.a[kk], win.b[kk], vi[kk], vj[kk], levels, c0, c1, accel, shape)
-    dur = np.where(c0 <= c1, dur, np.inf).reshape(len(k), CRUISE_LEVELS)
+    known = np.zeros(levels.shape, bool)
+    known[:, 0] = True
+    known[top_known, -1] = True
+    kk = np.repeat(k, CRUISE_LEVELS).reshape(levels.shape)
+    # The one rounding threshold the times of all these levels share (as one call had it).
+    eps = 1e-12 * max(1.0, float(np.abs(win.b[k]).max(initial=0.0)))
+    dur = np.full(levels.shape, np.inf)
+    _timed(win, vi, vj, levels, c0, c1, kk, known, dur, accel, shape, eps)
+    floor = _time_floor_s(win.a[kk], win.b[kk], vi[kk], vj[kk], levels, accel, shape, eps)
+    with np.errstate(invalid="ignore"):
+        first = np.where(known | (floor > dur.min(axis=1)[:, None]), np.inf, floor)
+    one = np.zeros(levels.shape, bool)
+    has = np.isfinite(first.min(axis=1))
+    one[np.flatnonzero(has), first[has].argmin(axis=1)] = True
+    for todo in (one, None):
+        if todo is None:  # the others whose floor the quickest so far does not exceed
+            todo = ~known & ~(floor > dur.min(axis=1)[:, None])
+        rows, cols = np.nonzero(todo)
+        kr = kk[rows, cols]
+        c0[rows, cols], c1[rows, cols] = _window(win, vi[kr], vj[kr], levels[rows, cols], kr,
+                                                 accel, reach, shape)
+        _timed(win, vi, vj, levels, c0, c1, kk, todo, dur, accel, shape, eps)
+        known |= todo
+    # The first quickest, as among all levels: a level not shaped is slower than it.
     best = np.argmin(dur, axis=1)
-    pick = np.arange(len(k)) * CRUISE_LEVELS + best
+    pick = np.arange(len(k)), best
     vp[k], e0[k], d0[k] = levels[pick], c0[pick], c1[pick]
+
+
+def _timed(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, levels: np.ndarray,
+           c0: np.ndarray, c1: np.ndarray, kk: np.ndarray, mask: np.ndarray, dur: np.ndarray,
+           accel: float, shape: TransitionShape, eps: float) -> None:
+    """dur[mask] = the segment's time at those levels and windows (inf where none fits)."""
+    k, lv, w0, w1 = kk[mask], levels[mask], c0[mask], c1[mask]
+    t = _segment_time_s(win.a[k], win.b[k], vi[k], vj[k], lv, w0, w1, accel, shape, eps)
+    dur[mask] = np.where(w0 <= w1, t, np.inf)
+
+
+def _time_floor_s(a: np.ndarray, b: np.ndarray, vi: np.ndarray, vj: np.ndarray,
+                  vp: np.ndarray, accel: float, shape: TransitionShape,
+                  eps: float) -> np.ndarray:
+    """At most _segment_time_s at cruise vp for any window: a wait at vi or vj (both at most
+    vp) takes no less time than cruising the same stretch at vp, except a wait under eps,
+    which counts as none; the relative margin covers the rounding of both sums."""
+    sa = transition_length_mm(vi, vp, accel, shape)
+    sd = transition_length_mm(vp, vj, accel, shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        move = np.maximum(b - a - sa - sd - 2.0 * eps, 0.0) / vp
+    return (move + transition_duration_s(vi, vp, accel, shape)
+            + transition_duration_s(vp, vj, accel, shape)) * (1.0 - 1e-9)
 
 
 def _segment_time_s(a: np.ndarray, b: np.ndarray, vi: np.ndarray, vj: np.ndarray,
                     vp: np.ndarray, e0: np.ndarray, d0: np.ndarray, accel: float,
-                    shape: TransitionShape = QUINTIC) -> np.ndarray:
+                    shape: TransitionShape = QUINTIC, eps: float | None = None) -> np.ndarray:
     """Time of: wait at vi, accelerate, cruise at vp from e0 to d0, brake, wait at vj."""
     sa = transition_length_mm(vi, vp, accel, shape)
     sd = transition_length_mm(vp, vj, accel, shape)
@@ -332,7 +241,8 @@ def _segment_time_s(a: np.ndarray, b: np.ndarray, vi: np.ndarray, vj: np.ndarray
     # a cruise: at a node speed of zero it took forever, and a braking to rest that ended 1e-15
     # mm early made every cruise level but the lowest "infinitely slow" (a 10 mm stretch after
     # a near-stop then crawled at a fifth of the feed).
-    eps = 1e-12 * max(1.0, float(np.abs(b).max(initial=0.0)))
+    if eps is None:
+        eps = 1e-12 * max(1.0, float(np.abs(b).max(initial=0.0)))
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         t0 = np.where(w0 > eps, w0 / vi, 0.0)
         t1 = np.where(w1 > eps, w1 / vj, 0.0)
@@ -358,30 +268,37 @@ def _window(win: SegmentWindows, vi: np.ndarray, vj: np.ndarray, vp: np.ndarray,
     a, b = win.a[k], win.b[k]
     v0, v1 = np.concatenate((vi, vp)), np.concatenate((vp, vj))
     length = transition_length_mm(v0, v1, accel, shape)
-    x, c = _shape(v0, v1, accel, shape)
-    first, last = win.reach_pair(c[:n, 1:], c[n:, :-1], k)
+    x, c = _corners(v0, v1, n, accel, shape)
+    reached = win.reach_rows(c, k)
     rest = REST_FRACTION * win.big
     # Acceleration: earliest start with every box corner past where vlim reaches its speed;
     # never a wait at (near) rest, nor one past where vlim stays above vi.
-    start = np.maximum(a, (first - x[:n, :-1]).max(axis=1))
+    start = np.maximum(a, (reached[:n] - x[:n]).max(axis=1))
     start[((vi <= rest) & (start > a)) | (start > reach[0][k])] = np.inf
     # Braking: latest end with every box corner before where vlim falls below its speed.
     sd = length[n:]
-    end = np.minimum(b, (last + (sd[:, None] - x[n:, 1:])).min(axis=1))
+    end = np.minimum(b, (reached[n:] + (sd[:, None] - x[n:])).min(axis=1))
     end[((vj <= rest) & (end < b)) | (end < reach[1][k])] = -np.inf
     return start + length[:n], end - sd
 
 
-def _shape(vs: np.ndarray, ve: np.ndarray, accel: float,
-           shape: TransitionShape = QUINTIC) -> tuple[np.ndarray, np.ndarray]:
-    """Samples (distance from start, speed) of the transitions vs -> ve, one row each."""
+def _corners(vs: np.ndarray, ve: np.ndarray, n: int, accel: float,
+             shape: TransitionShape = QUINTIC) -> tuple[np.ndarray, np.ndarray]:
+    """Box corners (distance from start, speed) of the transitions vs -> ve, one row each: the
+    first n accelerations (sample j's distance, sample j + 1's speed), then brakings (sample
+    j + 1's distance, sample j's speed), j = 0 .. SHAPE_SAMPLES - 2: the samples' numbers, made
+    only where a corner takes them."""
     dur = transition_duration_s(vs, ve, accel, shape)
     table_a, table_b, table_c = _shape_tables(shape)
-    x = (dur * vs)[:, None] * table_a
-    x += (dur * ve)[:, None] * table_b
-    v = (ve - vs)[:, None] * table_c
-    v += vs[:, None]
-    return x, v
+    x = np.empty((len(vs), SHAPE_SAMPLES - 1))
+    c = np.empty(x.shape)
+    for rows, near, far in ((slice(None, n), slice(None, -1), slice(1, None)),
+                            (slice(n, None), slice(1, None), slice(None, -1))):
+        np.multiply((dur[rows] * vs[rows])[:, None], table_a[near], out=x[rows])
+        x[rows] += (dur[rows] * ve[rows])[:, None] * table_b[near]
+        np.multiply((ve[rows] - vs[rows])[:, None], table_c[far], out=c[rows])
+    c += vs[:, None]
+    return x, c
 
 
 def segment_phases(sp: SegmentPlan, accel: float,
