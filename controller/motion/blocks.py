@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from controller.motion.checked_ahead import AheadPlan
 from controller.motion.checks import FerrorCheck, RefHistory
 from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.recall import Sent
@@ -66,10 +67,13 @@ class CheckedAhead:
     as they stand after them instead of running both on them again. The card, halted or not
     after the block, changes neither result: a halt only widens the steps believed."""
 
-    def __init__(self, checks: Any, hist: RefHistory, own: Callable[[Feedback], Feedback]) -> None:
+    def __init__(self, checks: Any, hist: RefHistory, own: Callable[[Feedback], Feedback],
+                 drive: Any = None) -> None:
         self.checks, self.hist, self.own = checks, hist, own  # the loop's (own: its numbers)
         self._rows: np.ndarray | None = None
         self._after: tuple[FeedbackCheck, FerrorCheck] | None = None
+        # Real time: the card's blocks stepped ahead, checked once (motion/checked_ahead.py).
+        self.plan = AheadPlan(checks, hist, own, drive, fault_rows)
 
     def cut(self, raw: Feedback) -> int | None:
         """fault_rows on a block as the card numbers it (the wait_block cut)."""
@@ -80,12 +84,14 @@ class CheckedAhead:
 
     def believed(self, raw: Feedback, settling: bool) -> tuple[Feedback, Any, bool]:
         """FeedbackCheck.believed on a cycle's rows, and whether they were the block checked
-        ahead (then both checks already stand after them: the cycle checks nothing again)."""
+        ahead, or rows of a real-time block checked ahead (then both checks stand as after
+        them: the cycle checks nothing again). A halt (settling) only widens the steps
+        believed: rows that passed without it pass with it."""
         done = self._after is not None and raw.encoder_counts is self._rows
         if done:
             self.checks.fbcheck, self.checks.ferr = self._after
         self._rows = self._after = None
-        if done:
+        if done or self.plan.take(raw):
             return self.own(raw), None, True
         return (*self.checks.fbcheck.believed(self.own(raw), settling=settling), False)
 
