@@ -211,6 +211,10 @@ class Runtime:
         try:
             # Built before the fork so that backend imports (scipy) are paid once, not per child.
             drive = self.options.drive or _build_drive(self.config, self.options.virtual_time)
+            # Built (cached) before the fork: the generator plans with them and inherits them,
+            # and the pacer's clock has not started (~4 ms pre-compensated: model inverse and
+            # residual, which made the first cycle late).
+            axis_servos(self.config)
             self._start(ring, messages)
             if self.options.rt_priority is not None and not self.options.virtual_time:
                 rt = try_realtime(self.options.rt_priority)
@@ -293,8 +297,6 @@ class Runtime:
     def _motion(self, drive: Drive, ring: RefRing, messages: _Messages) -> MotionResult:
         source = RingSource(ring, self.procs["generator"], messages)
         period_s = self.config.sample_period_s
-        axis_servos(self.config)  # built (cached) before the pacer's clock starts: ~10 ms when
-        # pre-compensated (model inverse and residual), which made the first cycle late
         watch = self._watch(messages)
         if self.options.probe_watch is not None:
             watch = self.options.probe_watch.wrap(watch, lambda: self.controller)
