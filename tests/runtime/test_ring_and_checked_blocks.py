@@ -12,9 +12,11 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from runtime_helpers import xy_config
 
 from controller.interpreter.program import read_program
+from controller.motion.ring import RefRing
 from controller.motion.types import Outcome
 from controller.operator.kept_blocks import KeptBlocks
 from controller.runtime.processes import Runtime, RuntimeOptions
@@ -99,3 +101,23 @@ def test_the_children_start_with_the_parents_objects_frozen(tmp_path: Path) -> N
     assert Runtime(str(program), CFG, options).run().outcome is Outcome.DONE
     assert int(seen.read_text()) > 1000
     assert gc.get_freeze_count() == 0
+
+
+def test_rows_written_and_read_across_the_rings_end_come_back_in_order() -> None:
+    """Writes and reads of any size, wrapping round a 7-row ring many times (copied as two
+    slices where they cross its end)."""
+    ring = RefRing.create(7, 3)
+    rng = np.random.default_rng(0)
+    rows = rng.normal(size=(500, 3))
+    out, written = [], 0
+    try:
+        while written < len(rows) or ring.available():
+            room = min(7 - ring.available(), len(rows) - written)
+            if room:
+                n = int(rng.integers(1, room + 1))
+                assert ring.write(rows[written : written + n])
+                written += n
+            out.append(ring.read(int(rng.integers(0, 9))))
+    finally:
+        ring.close()
+    assert np.array_equal(np.concatenate(out), rows)
