@@ -75,8 +75,9 @@ class CheckedAhead:
     as they stand after them instead of running both on them again. The card, halted or not
     after the block, changes neither result: a halt only widens the steps believed."""
 
-    def __init__(self, checks: Any, hist: RefHistory, own: Callable[[Feedback], Feedback],
-                 drive: Any = None) -> None:
+    def __init__(
+        self, checks: Any, hist: RefHistory, own: Callable[[Feedback], Feedback], drive: Any = None
+    ) -> None:
         self.checks, self.hist, self.own = checks, hist, own  # the loop's (own: its numbers)
         self._rows: np.ndarray | None = None
         self._after: tuple[FeedbackCheck, FerrorCheck] | None = None
