@@ -1,4 +1,4 @@
-"""The three-process runtime: interpreter -> NC FIFO -> generator -> shm ring -> motion -> drive."""
+"""The runtime: [interpreter -> NC FIFO ->] generator -> shm ring -> motion -> drive."""
 
 from __future__ import annotations
 
