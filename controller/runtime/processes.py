@@ -236,8 +236,9 @@ class Runtime:
         result.extra["realtime"] = rt
         if rt != "off":
             producers = messages.sched.get("generator", "unknown")
-            result.extra["scheduling"] = {**Scheduling(rt, producers).as_dict(),
-                                          "interpreter": messages.sched.get("interpreter")}
+            result.extra["scheduling"] = Scheduling(rt, producers).as_dict()
+            if "interpreter" in self.procs:  # (none when the generator read kept blocks)
+                result.extra["scheduling"]["interpreter"] = messages.sched.get("interpreter")
         return self._finish(result, messages, t0_s)
 
     def _start(self, ring: RefRing, messages: _Messages) -> None:
