@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from controller.motion.checked_ahead import AheadPlan
 from controller.motion.checks import FerrorCheck, RefHistory
 from controller.motion.feedback_check import FeedbackCheck
 from controller.motion.recall import Sent
@@ -45,7 +46,7 @@ def fault_rows(
     are run on copies: the loop takes these copies in place of checking the block again."""
     if not len(fb):
         return None, None
-    fb_copy, ferr_copy = copy.copy(fbcheck), copy.copy(ferr)
+    fb_copy, ferr_copy = _shallow(fbcheck), _shallow(ferr)
     bad = None if fbcheck.corrupt else fb_copy.check(fb)
     believed = len(fb) if bad is None else int(np.searchsorted(fb.seq, bad.seq))
     trip = ferr_copy.check(
@@ -59,6 +60,14 @@ def fault_rows(
     return None, None if fbcheck.corrupt else (fb_copy, ferr_copy)
 
 
+def _shallow(obj: Any) -> Any:
+    """copy.copy of a check (a quarter of the cost: no __reduce_ex__ round): its arrays are
+    replaced, never written in place, by checking, so the copy's checks leave obj's alone."""
+    new = object.__new__(type(obj))
+    new.__dict__.update(obj.__dict__)
+    return new
+
+
 class CheckedAhead:
     """The feedback and following-error checks of a virtual-time block, run once: the block's
     cut (fault_rows) checks its rows; if none failed, the cycle that then reads the same rows
@@ -66,10 +75,14 @@ class CheckedAhead:
     as they stand after them instead of running both on them again. The card, halted or not
     after the block, changes neither result: a halt only widens the steps believed."""
 
-    def __init__(self, checks: Any, hist: RefHistory, own: Callable[[Feedback], Feedback]) -> None:
+    def __init__(
+        self, checks: Any, hist: RefHistory, own: Callable[[Feedback], Feedback], drive: Any = None
+    ) -> None:
         self.checks, self.hist, self.own = checks, hist, own  # the loop's (own: its numbers)
         self._rows: np.ndarray | None = None
         self._after: tuple[FeedbackCheck, FerrorCheck] | None = None
+        # Real time: the card's blocks stepped ahead, checked once (motion/checked_ahead.py).
+        self.plan = AheadPlan(checks, hist, own, drive, fault_rows)
 
     def cut(self, raw: Feedback) -> int | None:
         """fault_rows on a block as the card numbers it (the wait_block cut)."""
@@ -80,12 +93,14 @@ class CheckedAhead:
 
     def believed(self, raw: Feedback, settling: bool) -> tuple[Feedback, Any, bool]:
         """FeedbackCheck.believed on a cycle's rows, and whether they were the block checked
-        ahead (then both checks already stand after them: the cycle checks nothing again)."""
+        ahead, or rows of a real-time block checked ahead (then both checks stand as after
+        them: the cycle checks nothing again). A halt (settling) only widens the steps
+        believed: rows that passed without it pass with it."""
         done = self._after is not None and raw.encoder_counts is self._rows
         if done:
             self.checks.fbcheck, self.checks.ferr = self._after
         self._rows = self._after = None
-        if done:
+        if done or self.plan.take(raw):
             return self.own(raw), None, True
         return (*self.checks.fbcheck.believed(self.own(raw), settling=settling), False)
 

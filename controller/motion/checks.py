@@ -29,11 +29,14 @@ class RefHistory:
 
     def append(self, pos_mm: np.ndarray, feed_mm_s: np.ndarray, line: np.ndarray,
                prev_mm: np.ndarray, cmd_counts: np.ndarray | None = None) -> None:
-        d = np.diff(np.vstack([prev_mm[None, :], pos_mm]), axis=0)
+        d = pos_mm - np.concatenate((prev_mm[None, :], pos_mm[:-1]))  # (np.diff of a vstack)
         # Below the rest speed the tangent is undefined: no contour error is measured there.
         moving = np.hypot(d[:, 0], d[:, 1]) / self.period_s >= REST_SPEED_MM_S
         phi = np.where(moving, np.arctan2(d[:, 1], d[:, 0]), np.nan)
-        idx = np.arange(self.count, self.count + len(pos_mm)) % self.capacity
+        start = self.count % self.capacity
+        idx: slice | np.ndarray = slice(start, start + len(pos_mm))  # as a slice unless it
+        if start + len(pos_mm) > self.capacity:  # wraps round the ring's end
+            idx = np.arange(self.count, self.count + len(pos_mm)) % self.capacity
         self.pos_mm[idx], self.feed_mm_s[idx], self.line[idx], self.phi_rad[idx] = (
             pos_mm, feed_mm_s, line, phi)
         if cmd_counts is not None:

@@ -118,7 +118,8 @@ class MotionController:
             retimer=self.retimer, pulses=PulseCounter(self.pulse_mm, start_cmd),
             hist=RefHistory(2 * self.drive.fifo_capacity() + 1024, self.n, self.period_s),
             precomp=precomp)
-        self.ahead = CheckedAhead(self.checks, self.stream.hist, self._own_numbers)
+        self.ahead = CheckedAhead(self.checks, self.stream.hist, self._own_numbers,
+                                  self.drive if isinstance(self.pacer, WallPacer) else None)
         self.pending_stop = np.zeros((0, self.n))
         self.state = MotionState.WAITING
         self.outcome: Outcome | None = None
@@ -247,6 +248,7 @@ class MotionController:
             self._begin_stop(Outcome.FAULT, problem)
         if self.requests.abort_message is not None:
             self._begin_stop(Outcome.ABORTED, self.requests.abort_message)
+        self.ahead.plan.plan_next()  # real time: the card's next block, checked once
 
     def _operator_requests(self, level: int) -> int:
         """Hold and override become the re-timer's target rate (resume: see _pause_step); a
@@ -632,6 +634,7 @@ class MotionController:
         self.on_progress(self._progress(level, now_s))
 
     def _result(self) -> MotionResult:
+        self.ahead.plan.catch_up()  # the checks' figures to the last row read
         result = build_result(self.config, self.figures, self.checks, self.outcome,
                               self.message, self.stream.pulses.commanded_counts,
                               self.stream.sent, self.pacer.late_cycles, self.drive)
@@ -645,6 +648,7 @@ class MotionController:
         """Where the run is: state, line, feed, following error, card FIFO (level frames),
         time."""
         f, hist = self.figures, self.stream.hist
+        self.ahead.plan.catch_up()  # its following error is the last row's
         total = self.source.total_rows()
         idx = (f.executed - 1) % hist.capacity
         return MotionProgress(

@@ -56,8 +56,10 @@ class RefRing:
                 continue
             n = min(free, len(rows) - done)
             w = int(self.header[WRITE])
-            idx = np.arange(w, w + n) % self.capacity
-            self.rows[idx] = rows[done: done + n]
+            start = w % self.capacity
+            first = min(n, self.capacity - start)  # up to the ring's end, the rest from 0
+            self.rows[start : start + first] = rows[done : done + first]
+            self.rows[: n - first] = rows[done + first : done + n]
             self.header[WRITE] = w + n  # publish after the copy
             done += n
         return True
@@ -66,8 +68,11 @@ class RefRing:
     def read(self, max_rows: int) -> np.ndarray:
         r = int(self.header[READ])
         n = max(0, min(max_rows, int(self.header[WRITE]) - r))
-        idx = np.arange(r, r + n) % self.capacity
-        out = self.rows[idx].copy()
+        start = r % self.capacity
+        first = min(n, self.capacity - start)  # up to the ring's end, the rest from 0
+        out = self.rows[start : start + first].copy()
+        if first < n:
+            out = np.concatenate((out, self.rows[: n - first]))
         self.header[READ] = r + n
         return out
 

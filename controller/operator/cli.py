@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import os
 import sys
@@ -81,6 +82,10 @@ def main(argv: list[str] | None = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return 1
+    finally:
+        if argv is None:  # the process exits next (cncctl itself, not a caller in-process):
+            gc.freeze()  # its objects are freed by the exit, not all scanned by a last
+            # collection first (some 40 ms of CPU, with numpy and the planner imported)
 
 
 if __name__ == "__main__":

@@ -1,8 +1,9 @@
-"""The three-process runtime: interpreter -> NC FIFO -> generator -> shm ring -> motion -> drive."""
+"""The runtime: [interpreter -> NC FIFO ->] generator -> shm ring -> motion -> drive."""
 
 from __future__ import annotations
 
 import functools
+import gc
 import multiprocessing as mp
 import os
 import queue
@@ -24,6 +25,7 @@ from controller.offsets import OffsetTable, work_origin
 from controller.runtime.stages import (
     BlocksFn,
     GenerateFn,
+    KeptSource,
     blocks_source,
     generator_main,
     interpreter_main,
@@ -209,6 +211,10 @@ class Runtime:
         try:
             # Built before the fork so that backend imports (scipy) are paid once, not per child.
             drive = self.options.drive or _build_drive(self.config, self.options.virtual_time)
+            # Built (cached) before the fork: the generator plans with them and inherits them,
+            # and the pacer's clock has not started (~4 ms pre-compensated: model inverse and
+            # residual, which made the first cycle late).
+            axis_servos(self.config)
             self._start(ring, messages)
             if self.options.rt_priority is not None and not self.options.virtual_time:
                 rt = try_realtime(self.options.rt_priority)
@@ -230,8 +236,9 @@ class Runtime:
         result.extra["realtime"] = rt
         if rt != "off":
             producers = messages.sched.get("generator", "unknown")
-            result.extra["scheduling"] = {**Scheduling(rt, producers).as_dict(),
-                                          "interpreter": messages.sched.get("interpreter")}
+            result.extra["scheduling"] = Scheduling(rt, producers).as_dict()
+            if "interpreter" in self.procs:  # (none when the generator read kept blocks)
+                result.extra["scheduling"]["interpreter"] = messages.sched.get("interpreter")
         return self._finish(result, messages, t0_s)
 
     def _start(self, ring: RefRing, messages: _Messages) -> None:
@@ -243,23 +250,34 @@ class Runtime:
                                            o.probes) != (None,) * 4:
             blocks_fn = functools.partial(blocks_source, start_mm=o.start_mm, offsets=o.offsets,
                                           from_line=o.from_line, probes=o.probes)
-        nc_fifo = _CTX.Queue(maxsize=self.config.runtime.nc_fifo_blocks)
+        # The blocks a check kept go to the generator at its fork: no interpreter process.
+        kept = isinstance(blocks_fn, KeptSource)
+        nc_fifo = blocks_fn if kept else _CTX.Queue(maxsize=self.config.runtime.nc_fifo_blocks)
         # Generator first, so that it is waiting on the NC FIFO when the first block lands.
         self.procs["generator"] = _CTX.Process(
             target=generator_main, name="cnc-generator", daemon=True,
             args=(self.config, self._generate_fn(), nc_fifo, ring, messages.info,
                   os.getpid()))
-        self.procs["interpreter"] = _CTX.Process(
-            target=interpreter_main, name="cnc-interpreter", daemon=True,
-            args=(self.path, self.config, blocks_fn, nc_fifo, ring, messages.info,
-                  os.getpid()))
-        self.procs["generator"].start()
-        self.procs["interpreter"].start()
+        if not kept:
+            self.procs["interpreter"] = _CTX.Process(
+                target=interpreter_main, name="cnc-interpreter", daemon=True,
+                args=(self.path, self.config, blocks_fn, nc_fifo, ring, messages.info,
+                      os.getpid()))
+        # Frozen, the objects held now are skipped by the children's collections, which then
+        # neither scan them nor write to (so copy) their pages; the parent's own are unfrozen.
+        gc.freeze()
+        try:
+            for proc in self.procs.values():
+                proc.start()
+        finally:
+            gc.unfreeze()
         self._t_started_s = time.monotonic()
 
     def _watch(self, messages: _Messages) -> Callable[[], str | None]:
-        interp = self.procs["interpreter"]
+        interp = self.procs.get("interpreter")
         found: list[str] = []
+        if interp is None:  # the generator reads the kept blocks: RingSource watches it
+            return lambda: None
 
         def watch() -> str | None:
             # Called every motion cycle: a dead process is seen within one cycle (~2 ms). Its
@@ -280,8 +298,6 @@ class Runtime:
     def _motion(self, drive: Drive, ring: RefRing, messages: _Messages) -> MotionResult:
         source = RingSource(ring, self.procs["generator"], messages)
         period_s = self.config.sample_period_s
-        axis_servos(self.config)  # built (cached) before the pacer's clock starts: ~10 ms when
-        # pre-compensated (model inverse and residual), which made the first cycle late
         watch = self._watch(messages)
         if self.options.probe_watch is not None:
             watch = self.options.probe_watch.wrap(watch, lambda: self.controller)

@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from drivers.base import Feedback
+
 AHEAD_FRAMES = 32  # frames stepped through the axes in one call (the host reads every 2)
 
 
@@ -34,6 +36,17 @@ class AheadClock:
     and only the rows handed out are stepped again."""
 
     _ahead: _Ahead | None = None
+    ahead_takebacks = 0  # blocks taken back so far: rows checked ahead of one are void
+
+    def rows_ahead(self) -> tuple[int, Feedback] | None:
+        """The block stepped ahead, all its rows (handed out or not) as the card numbers them,
+        and ahead_takebacks now: the motion loop checks them once (motion/checked_ahead.py)."""
+        card: Any = self
+        with card._lock:
+            ahead = self._ahead
+            if ahead is None:
+                return None
+            return self.ahead_takebacks, Feedback(ahead.seq, ahead.cmd, ahead.enc)
 
     def queued_frames(self) -> int:
         """Frames whose periods have not come: the FIFO's and the block's left."""
@@ -81,6 +94,7 @@ class AheadClock:
             return
         card: Any = self
         self._ahead = None
+        self.ahead_takebacks += 1
         card._axes.restore(ahead.snap)
         card._fifo.unpop(len(ahead.seq))
         if ahead.released:
