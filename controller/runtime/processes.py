@@ -1,4 +1,4 @@
-"""The runtime: [interpreter -> NC FIFO ->] generator -> shm ring -> motion -> drive."""
+"""The three-process runtime: interpreter -> NC FIFO -> generator -> shm ring -> motion -> drive."""
 
 from __future__ import annotations
 
@@ -25,7 +25,6 @@ from controller.offsets import OffsetTable, work_origin
 from controller.runtime.stages import (
     BlocksFn,
     GenerateFn,
-    KeptSource,
     blocks_source,
     generator_main,
     interpreter_main,
@@ -236,9 +235,8 @@ class Runtime:
         result.extra["realtime"] = rt
         if rt != "off":
             producers = messages.sched.get("generator", "unknown")
-            result.extra["scheduling"] = Scheduling(rt, producers).as_dict()
-            if "interpreter" in self.procs:  # (none when the generator read kept blocks)
-                result.extra["scheduling"]["interpreter"] = messages.sched.get("interpreter")
+            result.extra["scheduling"] = {**Scheduling(rt, producers).as_dict(),
+                                          "interpreter": messages.sched.get("interpreter")}
         return self._finish(result, messages, t0_s)
 
     def _start(self, ring: RefRing, messages: _Messages) -> None:
@@ -250,19 +248,16 @@ class Runtime:
                                            o.probes) != (None,) * 4:
             blocks_fn = functools.partial(blocks_source, start_mm=o.start_mm, offsets=o.offsets,
                                           from_line=o.from_line, probes=o.probes)
-        # The blocks a check kept go to the generator at its fork: no interpreter process.
-        kept = isinstance(blocks_fn, KeptSource)
-        nc_fifo = blocks_fn if kept else _CTX.Queue(maxsize=self.config.runtime.nc_fifo_blocks)
+        nc_fifo = _CTX.Queue(maxsize=self.config.runtime.nc_fifo_blocks)
         # Generator first, so that it is waiting on the NC FIFO when the first block lands.
         self.procs["generator"] = _CTX.Process(
             target=generator_main, name="cnc-generator", daemon=True,
             args=(self.config, self._generate_fn(), nc_fifo, ring, messages.info,
                   os.getpid()))
-        if not kept:
-            self.procs["interpreter"] = _CTX.Process(
-                target=interpreter_main, name="cnc-interpreter", daemon=True,
-                args=(self.path, self.config, blocks_fn, nc_fifo, ring, messages.info,
-                      os.getpid()))
+        self.procs["interpreter"] = _CTX.Process(
+            target=interpreter_main, name="cnc-interpreter", daemon=True,
+            args=(self.path, self.config, blocks_fn, nc_fifo, ring, messages.info,
+                  os.getpid()))
         # Frozen, the objects held now are skipped by the children's collections, which then
         # neither scan them nor write to (so copy) their pages; the parent's own are unfrozen.
         gc.freeze()
@@ -274,10 +269,8 @@ class Runtime:
         self._t_started_s = time.monotonic()
 
     def _watch(self, messages: _Messages) -> Callable[[], str | None]:
-        interp = self.procs.get("interpreter")
+        interp = self.procs["interpreter"]
         found: list[str] = []
-        if interp is None:  # the generator reads the kept blocks: RingSource watches it
-            return lambda: None
 
         def watch() -> str | None:
             # Called every motion cycle: a dead process is seen within one cycle (~2 ms). Its

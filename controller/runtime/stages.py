@@ -44,24 +44,17 @@ class BlockBatch(list):
 BATCH_BLOCKS = 256
 
 
-class KeptSource:
+def checked_blocks(blocks: Iterable[Any]) -> BlocksFn:
     """The interpreter stage over the blocks the check before the run kept (the same path,
-    config and offsets, read from the start). The runtime hands them to the generator process,
-    which inherits them at its fork: no interpreter process, no NC FIFO, nothing pickled.
-    Called as a BlocksFn (an interpreter process of its own), it passes them on in batches."""
+    config and offsets, read from the start): the forked interpreter inherits them instead of
+    reading the program a second time, and passes them on in batches (all are in memory)."""
 
-    def __init__(self, blocks: Iterable[Any]) -> None:
-        self.blocks = blocks
-
-    def __call__(self, path: str, config: MachineConfig) -> Iterator[Any]:
-        it = iter(self.blocks)
+    def source(path: str, config: MachineConfig) -> Iterator[Any]:
+        it = iter(blocks)
         while batch := list(itertools.islice(it, BATCH_BLOCKS)):
             yield BlockBatch(batch)
 
-
-def checked_blocks(blocks: Iterable[Any]) -> KeptSource:
-    """The stage over blocks the check kept: see KeptSource."""
-    return KeptSource(blocks)
+    return source
 
 
 def _unbatched(items: Iterable[Any]) -> Iterator[Any]:
@@ -187,17 +180,13 @@ def _iter_safe(items: Iterable[Any], info: Queue, stage: str) -> Iterator[Any]:
         yield FAILED
 
 
-def generator_main(config: MachineConfig, generate_fn: GenerateFn,
-                   nc_fifo: Queue | KeptSource, ring: RefRing, info: Queue,
-                   parent_pid: int) -> None:
-    """Process 2: NC blocks -> reference points into the shared-memory ring. The blocks come
-    through the NC FIFO from the interpreter process, or are those a check kept (KeptSource),
-    inherited at the fork."""
+def generator_main(config: MachineConfig, generate_fn: GenerateFn, nc_fifo: Queue,
+                   ring: RefRing, info: Queue, parent_pid: int) -> None:
+    """Process 2: NC blocks -> reference points into the shared-memory ring."""
     parent = _child_setup(parent_pid, info, "generator")
     try:
         marks = SyncMarks()
-        blocks = iter(nc_fifo.blocks) if isinstance(nc_fifo, KeptSource) else \
-            _unbatched(drain_fifo(nc_fifo, lambda: _should_stop(ring, parent)))
+        blocks = _unbatched(drain_fifo(nc_fifo, lambda: _should_stop(ring, parent)))
         for chunk in generate_fn(blocks, config):
             if chunk.outputs:  # before its rows: in the motion process when they are
                 info.put(("outputs", "generator", chunk.outputs))

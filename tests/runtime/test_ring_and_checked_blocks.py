@@ -1,6 +1,6 @@
 """The reference ring as an anonymous shared mapping (no resource tracker process), a run's
-generator reading the blocks its check kept instead of an interpreter process reading the
-program again, and the children forked with the parent's objects frozen."""
+interpreter stage reading the blocks its check kept instead of the program again, and the
+children forked with the parent's objects frozen."""
 
 from __future__ import annotations
 
@@ -78,9 +78,9 @@ def test_the_interpreter_stage_runs_the_blocks_the_check_kept(tmp_path: Path) ->
     assert whole.outcome is checked.outcome is Outcome.DONE
     assert checked.motion_time_s == whole.motion_time_s > 0.0
     assert checked.final_position_mm == whole.final_position_mm
-    # The generator read the kept blocks it inherited: no interpreter process ran.
+    # Both ran the three processes: the interpreter passed on the blocks it inherited.
     assert set(whole.extra["peak_rss_mb"]) == {"interpreter", "generator", "motion"}
-    assert set(checked.extra["peak_rss_mb"]) == {"generator", "motion"}
+    assert set(checked.extra["peak_rss_mb"]) == {"interpreter", "generator", "motion"}
 
 
 def _frozen_in_child(out: Path) -> GenerateFn:
