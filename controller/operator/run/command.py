@@ -158,7 +158,10 @@ def run(args: argparse.Namespace) -> int:
         offsets = load_offsets(args.offsets, missing_ok=False) \
             if args.offsets is not None else None
         track = ProgramOffsets()
-        kept = _kept_blocks()  # the blocks, for the interpreter stage (see _checked_blocks)
+        # The blocks, for the interpreter stage (see _checked_blocks), kept only for a run
+        # that can take them: from the start, on the sim card (a probe found only by the
+        # check still reads the program again).
+        kept = _kept_blocks() if _from_start_on_sim(args, config) else None
         check_program(args.program, config, offsets=offsets, from_line=args.from_line,
                       track=track, summary=False, keep=kept)
     except (NcError, ConfigError, OffsetsError, ToolTableError) as exc:
@@ -179,8 +182,7 @@ def run(args: argparse.Namespace) -> int:
     # faulted the second run ("reference starts at 0 but the machine is at 5") or, for a
     # G0 X0 Y0, reported done with nothing moved. The simulated card starts at 0 when opened.
     probing = track.probes.seen  # G38 lines: a stretch per probe (run/probing.py)
-    shared_drive = args.from_line is not None or args.home or config.drive.backend != "sim" \
-        or bool(probing)
+    shared_drive = not _from_start_on_sim(args, config) or bool(probing)
     if shared_drive:
         runtime = Sequence()
     keys = KeyControl(runtime, lambda text: print(f"cncctl: {text}", file=sys.stderr,
@@ -188,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
     tools = ToolChanges(track.io_events, _event_to(view))
     options = replace(options, on_progress=_Announcer(view.progress, keys, tools).progress,
                       on_event=lambda e: view.event(**e))  # an output changed: a line each
-    if not shared_drive:
+    if not shared_drive and kept is not None:
         runtime.options = _checked_blocks(options, kept)
     fd = stdin_fd()
     restore_terminal: list[Any] = [lambda: None]
@@ -247,6 +249,10 @@ def run(args: argparse.Namespace) -> int:
     view.close()
     view.final(result)
     return EXIT_CODES[result.outcome]
+
+
+def _from_start_on_sim(args: argparse.Namespace, config: Any) -> bool:
+    return args.from_line is None and not args.home and config.drive.backend == "sim"
 
 
 def _kept_blocks() -> Any:
