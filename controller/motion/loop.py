@@ -81,7 +81,7 @@ class MotionController:
         self.work_origin_mm: tuple[float, ...] = ()  # for the progress reports' work position
         self.keep_outputs_at_abort = False  # a probe's trip: its abort ends a stretch, not the job
 
-    def _frames(self, ms: float) -> int:
+    def frames_for_ms(self, ms: float) -> int:
         return max(1, math.ceil(ms * 1e-3 / self.period_s - 1e-9))
 
     # -- main loop ------------------------------------------------------------------------
@@ -140,7 +140,8 @@ class MotionController:
         self.limits = LimitWatch(self.drive, self.config.axis_names, start_mm)
         self.at_speed = AtSpeedWait(self.config.io.spindle, self.drive, self.pacer.elapsed_s)
         s = self.settings
-        span = self._frames(s.high_water_ms) - self._frames(s.low_water_ms) - s.cycle_frames
+        span = (self.frames_for_ms(s.high_water_ms) - self.frames_for_ms(s.low_water_ms)
+                - s.cycle_frames)
         self.block = block_frames(s.block_ms, self.period_s, s.cycle_frames, span)
         self.refill = self.block if virtual else block_frames(s.refill_ms, self.period_s,
                                                               s.cycle_frames, span // 2)
@@ -153,7 +154,7 @@ class MotionController:
             self.pacer.wait()
             return
         try:
-            room = self.drive.fifo_level() - self._frames(self.settings.low_water_ms)
+            room = self.drive.fifo_level() - self.frames_for_ms(self.settings.low_water_ms)
         except DriveError:  # the cycle reads it again and stops on it
             room = 0
         cycle = self.settings.cycle_frames
@@ -267,8 +268,8 @@ class MotionController:
         if rate < before and self.state is MotionState.RUNNING and not self.pausing \
                 and self.outcome is None:
             level = take_back_planned(self.stream, self.drive, level, rate,
-                                      self._frames(HOLD_KEEP_MS), self._frames(PLAN_BUDGET_MS),
-                                      self._read_ahead)
+                                      self.frames_for_ms(HOLD_KEEP_MS),
+                                      self.frames_for_ms(PLAN_BUDGET_MS), self._read_ahead)
         self.retimer.set_target(rate)
         return level
 
@@ -278,8 +279,8 @@ class MotionController:
                 and not getattr(self.source, "primed", lambda: True)():
             return  # first motion once the reference buffer is full or planned to its end
         s = self.settings
-        want = self._frames(s.high_water_ms) - level
-        hold, low = self._frames(s.holdback_ms), self._frames(s.low_water_ms)
+        want = self.frames_for_ms(s.high_water_ms) - level
+        hold, low = self.frames_for_ms(s.holdback_ms), self.frames_for_ms(s.low_water_ms)
         if self.state is MotionState.RUNNING and not self.restarting:
             low_fifo = self.figures.min_fifo_frames
             self.figures.min_fifo_frames = level if low_fifo is None else min(level, low_fifo)
@@ -393,7 +394,7 @@ class MotionController:
 
     def _tail_room(self) -> int:  # the high-water mark, as refills; a stop fills the card
         cap = self.drive.fifo_capacity() - 1
-        return cap if self.outcome else min(self._frames(self.settings.high_water_ms), cap)
+        return cap if self.outcome else min(self.frames_for_ms(self.settings.high_water_ms), cap)
 
     def _write(self, rows: np.ndarray, cmd: np.ndarray, end: bool, pause: bool) -> None:
         pos = rows[:, : self.n]
@@ -546,7 +547,7 @@ class MotionController:
             # The frames queued beyond ESTOP_KEEP_MS are taken back (where the drive can): the
             # stop starts 6 ms out, not behind the whole FIFO (2 ms ran a loaded card dry).
             # From the level now: the cycle's was read before its checks ran.
-            st.take_back_now(self.drive, self._frames(ESTOP_KEEP_MS))
+            st.take_back_now(self.drive, self.frames_for_ms(ESTOP_KEEP_MS))
             self.pending_stop = stop_along_path(st.prev_mm, st.last_mm, st.held[:, : self.n],
                                                 accel, self.period_s, amax_stop_distances_mm)
             st.held = st.held[:0]

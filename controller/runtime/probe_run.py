@@ -12,7 +12,6 @@ one run: a probe line in a loop (or a subprogram called again) runs once per pas
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -129,8 +128,7 @@ def _take_back(ctrl: Any) -> None:
     at_rest = ctrl.sent_eos or ctrl.pausing or ctrl.pending_tail is not None
     if ctrl.state not in (MotionState.WAITING, MotionState.RUNNING) or at_rest:
         return
-    keep_frames = max(1, math.ceil(PROBE_KEEP_MS * 1e-3 / ctrl.period_s - 1e-9))
-    ctrl.stream.take_back_now(ctrl.drive, keep_frames)
+    ctrl.stream.take_back_now(ctrl.drive, ctrl.frames_for_ms(PROBE_KEEP_MS))
 
 
 class ProbeRun(CurrentRun):

@@ -17,7 +17,12 @@ from controller.runtime.probe_run import PROBE_KEEP_MS, _take_back
 def _ctrl(log: list[tuple[Any, int]], **state: Any) -> Any:
     stream = SimpleNamespace(take_back_now=lambda drive, keep: log.append((drive, keep)))
     base = {"state": MotionState.RUNNING, "sent_eos": False, "pausing": False, "pending_tail": None}
-    return SimpleNamespace(**{**base, **state}, stream=stream, drive="card", period_s=1e-3)
+    return SimpleNamespace(
+        **{**base, **state},
+        stream=stream,
+        drive="card",
+        frames_for_ms=lambda ms: math.ceil(ms - 1e-9),
+    )  # T = 1 ms
 
 
 def test_a_trip_keeps_what_the_estop_keeps_in_the_card() -> None:
