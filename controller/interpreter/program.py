@@ -229,7 +229,12 @@ class Interpreter:
             if code is not None and _VALUE_LETTERS.issuperset(vals):
                 state = self.state
                 try:
-                    if state.moves.nurbs is not None or not state.fast(code, vals, lineno):
+                    if state.moves.nurbs is None:
+                        done = state.fast(code, vals, lineno)
+                    else:  # a NURBS block open: its points, as execute would take them
+                        done = (code < 0 or code == 62) and state.mark_pending is None \
+                            and state.moves.g6_line(vals, lineno)
+                    if not done:
                         state.execute([] if code < 0 else [code], [], vals, lineno)
                 except WordError as exc:
                     raise self._error(Line(words, text), lineno, exc.word, exc.message) from None
