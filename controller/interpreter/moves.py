@@ -294,15 +294,18 @@ class Moves:
             self.nurbs.add_knot(vals["K"], lineno, knot_only=True)
         return True
 
-    def g6_line(self, vals: dict[str, float], lineno: int) -> bool:
-        """A line of X Y R K words only (and no other G code than G6.2, no M) while a block is
-        open: most lines of a NURBS program, taken as nurbs_line takes them, without its checks
-        of other words. False (nothing done) if the block is not a G6.2 or the line has another
-        word or no K."""
-        if self.nurbs.kind != "G6.2" or "K" not in vals or not _G6_POINT.issuperset(vals):  # type: ignore[union-attr]
+    def g6_line(self, code: int, vals: dict[str, float], lineno: int) -> bool:
+        """A line of X Y R K words only (`code`: its one G code, -1 for none, or G6.2's 62; no
+        M) while a block is open: most lines of a NURBS program, taken as nurbs_line takes
+        them, without its checks of other words. False (nothing done) if the block is not a
+        G6.2 or the line has another code or word or no K."""
+        nurbs = self.nurbs
+        if code not in (-1, 62) or nurbs.kind != "G6.2" or "K" not in vals:  # type: ignore[union-attr]
+            return False
+        if not _G6_POINT.issuperset(vals):
             return False
         if len(vals) == 1:
-            self.nurbs.add_knot(vals["K"], lineno, knot_only=True)  # type: ignore[union-attr]
+            nurbs.add_knot(vals["K"], lineno, knot_only=True)  # type: ignore[union-attr]
         else:
             self._g6_point(vals, lineno)
         return True
