@@ -40,13 +40,23 @@ def is_in_sorted(values: ArrayLike, sorted_set: ArrayLike) -> np.ndarray:
 
 def segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance of each point from the segment [a, b] beside it (arrays broadcast: points
-    (..., 2) against segments (..., 2)), the segment's ends included."""
+    (..., D) against segments (..., D)), the segment's ends included."""
     ab, ap = b - a, points - a
-    len2 = np.sum(ab * ab, axis=-1)
-    t = np.sum(ap * ab, axis=-1) / np.where(len2 > 0.0, len2, 1.0)
+    len2 = _dot_last(ab, ab)
+    t = _dot_last(ap, ab) / np.where(len2 > 0.0, len2, 1.0)
     t = np.minimum(np.maximum(t, 0.0), 1.0)
     gap = ap - t[..., None] * ab
-    return np.sqrt(np.sum(gap * gap, axis=-1))
+    return np.sqrt(_dot_last(gap, gap))
+
+
+def _dot_last(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """np.sum(x * y, axis=-1) to the bit (a short axis is summed in order), column by column:
+    numpy reduces a last axis of 2 or 3 a few elements at a time, 2-5 times slower on the
+    true contour error's thousands of points."""
+    acc = x[..., 0] * y[..., 0]
+    for i in range(1, x.shape[-1]):
+        acc = acc + x[..., i] * y[..., i]
+    return acc
 
 
 def polyline_distance(
