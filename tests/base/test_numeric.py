@@ -20,6 +20,15 @@ def test_sorted_unique_is_np_unique(v: list[int]) -> None:
 
 
 @settings(max_examples=100, deadline=None)
+@given(values, st.booleans())
+def test_sorted_unique_of_integers_is_np_unique(v: list[int], ordered: bool) -> None:
+    a = np.array(sorted(v) if ordered else v, dtype=np.intp)
+    got = sorted_unique(a)
+    np.testing.assert_array_equal(got, np.unique(a))
+    assert got.dtype == a.dtype
+
+
+@settings(max_examples=100, deadline=None)
 @given(values, values)
 def test_is_in_sorted_is_np_isin(v: list[int], s: list[int]) -> None:
     a, members = np.array(v), np.sort(np.array(s, dtype=int))
