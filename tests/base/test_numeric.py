@@ -20,10 +20,47 @@ def test_sorted_unique_is_np_unique(v: list[int]) -> None:
 
 
 @settings(max_examples=100, deadline=None)
+@given(values, st.booleans())
+def test_sorted_unique_of_integers_is_np_unique(v: list[int], ordered: bool) -> None:
+    a = np.array(sorted(v) if ordered else v, dtype=np.intp)
+    got = sorted_unique(a)
+    np.testing.assert_array_equal(got, np.unique(a))
+    assert got.dtype == a.dtype
+
+
+@settings(max_examples=100, deadline=None)
 @given(values, values)
 def test_is_in_sorted_is_np_isin(v: list[int], s: list[int]) -> None:
     a, members = np.array(v), np.sort(np.array(s, dtype=int))
     np.testing.assert_array_equal(is_in_sorted(a, members), np.isin(a, members))
+
+
+def _plain_segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """segment_distance as it was written with np.sum over the last axis."""
+    ab, ap = b - a, points - a
+    len2 = np.sum(ab * ab, axis=-1)
+    t = np.sum(ap * ab, axis=-1) / np.where(len2 > 0.0, len2, 1.0)
+    t = np.minimum(np.maximum(t, 0.0), 1.0)
+    gap = ap - t[..., None] * ab
+    return np.sqrt(np.sum(gap * gap, axis=-1))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(1, 300), st.sampled_from([2, 3]), st.integers(0, 2**31 - 1),
+       st.floats(1e-9, 1e3))
+def test_segment_distance_is_the_plain_form_to_the_bit(n: int, dims: int, seed: int,
+                                                        scale: float) -> None:
+    rng = np.random.default_rng(seed)
+    points, a, b = (scale * rng.normal(size=(n, dims)) for _ in range(3))
+    b[::5] = a[::5]  # zero-length segments
+    points[::7] = a[::7]  # points on an end
+    np.testing.assert_array_equal(segment_distance(points, a, b),
+                                  _plain_segment_distance(points, a, b))
+    # broadcast as polyline_distance's brute form uses it: points (R, 1, D), segments (R, W, D)
+    poly = scale * rng.normal(size=(n, 4, dims))
+    np.testing.assert_array_equal(
+        segment_distance(points[:, None, :], poly[:, :-1], poly[:, 1:]),
+        _plain_segment_distance(points[:, None, :], poly[:, :-1], poly[:, 1:]))
 
 
 def _brute(points: np.ndarray, poly: np.ndarray) -> np.ndarray:

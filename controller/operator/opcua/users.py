@@ -7,12 +7,11 @@ from __future__ import annotations
 import getpass
 import hashlib
 import hmac
-import os
 import secrets
-import stat
 import sys
 
 from controller.errors import CncError
+from controller.private_file import read_private
 
 ROUNDS = 200_000
 MAX_FILE_BYTES = 64 * 1024
@@ -43,22 +42,7 @@ def check_password(password: str, stored: str) -> bool:
 def read_users(path: str) -> dict[str, str]:
     """name -> stored hash. Refused: not a regular file of ours, readable or writable by
     anyone else, a link, too large, or a line that is not `name:hash`."""
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
-    except OSError as exc:
-        raise UsersFileError(f"{path}: cannot open: {exc.strerror}") from None
-    with os.fdopen(fd, "rb") as fh:
-        info = os.fstat(fh.fileno())
-        if not stat.S_ISREG(info.st_mode):
-            raise UsersFileError(f"{path}: not a regular file")
-        if info.st_uid != os.geteuid():
-            raise UsersFileError(f"{path}: owned by uid {info.st_uid}, not cncd's user")
-        if info.st_mode & 0o077:
-            raise UsersFileError(f"{path}: mode {stat.S_IMODE(info.st_mode):o}: others may "
-                                 "read it (chmod 600)")
-        raw = fh.read(MAX_FILE_BYTES + 1)
-    if len(raw) > MAX_FILE_BYTES:
-        raise UsersFileError(f"{path}: larger than {MAX_FILE_BYTES} bytes")
+    raw = read_private(path, MAX_FILE_BYTES, UsersFileError)
     users: dict[str, str] = {}
     for number, line in enumerate(raw.decode("utf-8", "replace").splitlines(), 1):
         line = line.strip()

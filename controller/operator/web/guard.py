@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import hmac
 import ipaddress
-import os
-import stat
 from urllib.parse import urlsplit
 
+from controller.private_file import read_private
+
 MIN_TOKEN_CHARS = 16
+MAX_TOKEN_FILE_BYTES = 4096
 
 
 class TokenError(ValueError):
@@ -18,19 +19,8 @@ class TokenError(ValueError):
 
 
 def read_token(path: str) -> str:
-    """The token in a file readable by its owner only (as ssh wants of a key)."""
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
-    except OSError as exc:
-        raise TokenError(f"{path}: {exc.strerror}") from None
-    with os.fdopen(fd, "rb") as handle:
-        st = os.fstat(handle.fileno())
-        if not stat.S_ISREG(st.st_mode):
-            raise TokenError(f"{path}: not a regular file")
-        if st.st_mode & 0o077:
-            raise TokenError(f"{path}: readable by others (mode {st.st_mode & 0o777:o}): "
-                             "chmod 600 it")
-        token = handle.read(4096).decode("utf-8", "replace").strip()
+    """The token in a file of this user's that no one else may read (as ssh wants of a key)."""
+    token = read_private(path, MAX_TOKEN_FILE_BYTES, TokenError).decode("utf-8", "replace").strip()
     if len(token) < MIN_TOKEN_CHARS or not token.isprintable() or " " in token:
         raise TokenError(f"{path}: the token must be at least {MIN_TOKEN_CHARS} printable "
                          "characters without spaces (e.g. `openssl rand -hex 24`)")
