@@ -17,10 +17,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.numeric import segment_distance
 from controller.servo.model import BLOCK, contour_error_mm, filter_block
 from controller.servo.prediction import SETTLE_S, axis_servos
-from controller.servo.true_distance import NEAR_SAMPLES, window_distance_mm
+from controller.servo.true_distance import (
+    NEAR_SAMPLES,
+    own_bound_mm,
+    padded_columns,
+    padded_window_distance_mm,
+    segment_columns,
+)
 
 MOVING_MM = 1e-9  # a central difference shorter than this: the tangent is held
 
@@ -173,30 +178,33 @@ class ServoStream:
     def _true(self, held: np.ndarray, act: np.ndarray, lo: int, hi: int,
               total: int) -> np.ndarray:
         """distance_from_reference_mm (exact everywhere) of samples lo..hi-1 of the kept rows:
-        the bound by their own two segments, then the windows where it is not zero."""
+        the bound by their own two segments, then the windows where it is not zero. The terms
+        of the segments both read are formed once (segments s0..s1, relative to base)."""
         i = np.arange(lo, hi)
         if total < 2:
             return np.hypot(*(act - held[lo:hi]).T)
         first, last = -self.base, total - 2 - self.base  # global segments 0 and total - 2
-        before, at = np.clip(i - 1, first, last), np.clip(i, first, last)
-        bound = np.minimum(segment_distance(act, held[before], held[before + 1]),
-                           segment_distance(act, held[at], held[at + 1]))
+        s0, s1 = max(lo - NEAR_SAMPLES, first), min(hi + NEAR_SAMPLES - 2, last)
+        cols = segment_columns(held[s0:s1 + 2])
+        before, at = np.clip(i - 1, first, last) - s0, np.clip(i, first, last) - s0
+        bound = own_bound_mm(cols, act, before, at)
         pos = np.flatnonzero(bound > 0.0)
         if pos.size == 0:
             return bound
         out = bound.copy()
-        out[pos] = _windows(held, act, i, pos, self.base, total, bound[pos])
+        out[pos] = _windows(cols, s0, act, i, pos, self.base, total, bound[pos])
         return out
 
 
-def _windows(held: np.ndarray, act: np.ndarray, i: np.ndarray, pos: np.ndarray, base: int,
-             total: int, upper_mm: np.ndarray | None = None) -> np.ndarray:
+def _windows(cols: tuple[np.ndarray, ...], s0: int, act: np.ndarray, i: np.ndarray,
+             pos: np.ndarray, base: int, total: int, upper_mm: np.ndarray) -> np.ndarray:
     """window_distance_mm for the samples i[pos] (rows relative to base) on the kept part of the
-    polyline: its segments from the first window's start to the last one's end. A window is
-    clipped only at the polyline's true ends (global 0 and total - 2), which are then the ends
-    of that part too."""
+    polyline: its segments from the first window's start to the last one's end (cols holds
+    the segments from s0 on). A window is clipped only at the polyline's true ends (global 0
+    and total - 2), which are then the ends of that part too."""
     near = NEAR_SAMPLES
     lo_seg = max(int(i[pos[0]]) - near, -base)
     hi_seg = min(int(i[pos[-1]]) + near - 1, total - 2 - base)
-    return window_distance_mm(held[lo_seg:hi_seg + 2], act[pos], i[pos] - lo_seg,
-                              near, upper_mm)
+    part = tuple(c[lo_seg - s0:hi_seg - s0 + 1] for c in cols)
+    return padded_window_distance_mm(padded_columns(part, near), act[pos], i[pos] - lo_seg,
+                                     near, upper_mm)

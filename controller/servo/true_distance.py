@@ -59,6 +59,31 @@ def distance_from_reference_mm(ref: np.ndarray, act: np.ndarray, exact_above_mm:
     return out
 
 
+def segment_columns(ref: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(a_x, a_y, ab_x, ab_y, |ab|^2 or 1) of each segment of the polyline ref: the terms
+    numeric.segment_distance forms per point, here once per segment."""
+    a = ref[:-1]
+    ab = ref[1:] - a
+    len2 = ab[:, 0] * ab[:, 0] + ab[:, 1] * ab[:, 1]
+    return (a[:, 0], a[:, 1], ab[:, 0], ab[:, 1], np.where(len2 > 0.0, len2, 1.0))
+
+
+def own_bound_mm(columns: tuple[np.ndarray, ...], points: np.ndarray, before: np.ndarray,
+                 at: np.ndarray) -> np.ndarray:
+    """Per point, the lesser of its distances from segments before and at of columns:
+    numeric.segment_distance's numbers (the same operations on the same terms; the square root
+    of the lesser square is the lesser root), without its (n, 2) temporaries and sums."""
+    ax, ay, abx, aby, den = columns
+    px, py = points[:, 0], points[:, 1]
+    gaps = [squared_gap(px - ax[j], py - ay[j], abx[j], aby[j], den[j]) for j in (before, at)]
+    return np.sqrt(np.minimum(gaps[0], gaps[1]))
+
+
+def padded_columns(columns: tuple[np.ndarray, ...], near: int) -> list[np.ndarray]:
+    """The columns with near copies of the first segment before and of the last after."""
+    return [np.concatenate((np.full(near, c[0]), c, np.full(near, c[-1]))) for c in columns]
+
+
 def window_distance_mm(ref: np.ndarray, points: np.ndarray, k: np.ndarray,
                        near: int = NEAR_SAMPLES,
                        upper_mm: np.ndarray | None = None) -> np.ndarray:
@@ -72,16 +97,18 @@ def window_distance_mm(ref: np.ndarray, points: np.ndarray, k: np.ndarray,
 
     upper_mm (per point, at least its distance: that from its own segments) lets the search
     skip the segments that cannot come that close (window_search.py): the same numbers."""
-    a = ref[:-1]
-    ab = ref[1:] - a
-    len2 = ab[:, 0] * ab[:, 0] + ab[:, 1] * ab[:, 1]
-    cols = (a[:, 0], a[:, 1], ab[:, 0], ab[:, 1], np.where(len2 > 0.0, len2, 1.0))
-    pad = [np.concatenate((np.full(near, c[0]), c, np.full(near, c[-1]))) for c in cols]
+    pad = padded_columns(segment_columns(ref), near)
+    return padded_window_distance_mm(pad, points, k, near, upper_mm)
+
+
+def padded_window_distance_mm(pad: list[np.ndarray], points: np.ndarray, k: np.ndarray,
+                              near: int, upper_mm: np.ndarray | None = None) -> np.ndarray:
+    """window_distance_mm on the padded columns of the polyline's segments."""
     if upper_mm is not None:
         found = pruned_window_distance_mm(pad, points, k, near, upper_mm)
         lost = np.flatnonzero(~np.isfinite(found))  # a bound that was not one (NaN): search all
         if lost.size:
-            found[lost] = window_distance_mm(ref, points[lost], k[lost], near)
+            found[lost] = padded_window_distance_mm(pad, points[lost], k[lost], near)
         return found
     # Padded index k + m (m < 2 near) holds segment clip(k - near + m, 0, n - 2).
     views = [np.lib.stride_tricks.sliding_window_view(c, 2 * near) for c in pad]

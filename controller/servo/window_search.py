@@ -33,54 +33,73 @@ def pruned_window_distance_mm(columns: list[np.ndarray], points: np.ndarray, k: 
                               near: int, upper_mm: np.ndarray) -> np.ndarray:
     """Per point: the least distance over its window, padded segments k .. k + 2 near - 1 of
     columns (a_x, a_y, ab_x, ab_y, |ab|^2 or 1), given upper_mm >= that distance."""
-    boxes = _group_boxes(columns)
+    span = 2 * near
+    groups = (span + GROUP_SEGMENTS - 2) // GROUP_SEGMENTS + 1  # the most a window touches
+    boxes = _box_windows(_group_boxes(columns), groups)
     out = np.empty(len(points))
     for lo in range(0, len(points), BLOCK_SAMPLES):
         sel = slice(lo, lo + BLOCK_SAMPLES)
-        out[sel] = _block(columns, boxes, points[sel], k[sel], near, upper_mm[sel])
+        out[sel] = _block(columns, boxes, points[sel], k[sel], span, upper_mm[sel])
     return out
 
 
 def _group_boxes(columns: list[np.ndarray]) -> tuple[np.ndarray, ...]:
-    """(x min, x max, y min, y max) of the segments of each group of GROUP_SEGMENTS."""
+    """(x min, x max, y min, y max) of the segments of each group of GROUP_SEGMENTS. The least
+    and the greatest of a group are taken one column at a time (a reduction along rows of 8 is
+    numpy's slowest): the same numbers, as min and max do not round."""
     ax, ay, abx, aby, _ = columns
     n_groups = -(-len(ax) // GROUP_SEGMENTS)
     out = []
     for start, step in ((ax, abx), (ay, aby)):
         end = start + step
-        for reduce, fill, pick in ((np.min, np.inf, np.minimum), (np.max, -np.inf, np.maximum)):
+        for fill, pick in ((np.inf, np.minimum), (-np.inf, np.maximum)):
             padded = np.full(n_groups * GROUP_SEGMENTS, fill)
             padded[:len(start)] = pick(start, end)
-            out.append(reduce(padded.reshape(n_groups, GROUP_SEGMENTS), axis=1))
+            rows = padded.reshape(n_groups, GROUP_SEGMENTS)
+            least = pick(rows[:, 0], rows[:, 1])
+            for j in range(2, GROUP_SEGMENTS):
+                pick(least, rows[:, j], out=least)
+            out.append(least)
+    return tuple(out)
+
+
+def _box_windows(boxes: tuple[np.ndarray, ...], groups: int) -> tuple[np.ndarray, ...]:
+    """Per box column, the rows of `groups` boxes from each box on: boxes past the last are
+    empty (+inf low, -inf high: never within reach)."""
+    out = []
+    for i, b in enumerate(boxes):
+        empty = np.inf if i % 2 == 0 else -np.inf
+        padded = np.concatenate((b, np.full(groups, empty)))
+        out.append(np.lib.stride_tricks.sliding_window_view(padded, groups))
     return tuple(out)
 
 
 def _block(columns: list[np.ndarray], boxes: tuple[np.ndarray, ...], points: np.ndarray,
-           k: np.ndarray, near: int, upper_mm: np.ndarray) -> np.ndarray:
-    """pruned_window_distance_mm of a block of points; arrays are (group or segment, point),
-    so that every operation and the least over a box run along contiguous rows."""
+           k: np.ndarray, span: int, upper_mm: np.ndarray) -> np.ndarray:
+    """pruned_window_distance_mm of a block of points. The box tests are (point, group) rows of
+    the boxes each window touches (whole rows copied, not box by box); the segments are
+    (segment, point) arrays, so that the least over a box runs along contiguous rows."""
     ax, ay, abx, aby, den = columns
-    x_lo, x_hi, y_lo, y_hi = boxes
     g = GROUP_SEGMENTS
-    span = 2 * near
-    groups = (span + g - 2) // g + 1  # the most groups a window of `span` segments touches
-    q = k // g + np.arange(groups)[:, None]
-    valid = (q * g < k + span) & (q < len(x_lo))
-    q = np.minimum(q, len(x_lo) - 1)
-    px, py = points[:, 0], points[:, 1]
-    dx = np.maximum(np.maximum(x_lo[q] - px, px - x_hi[q]), 0.0)
-    dy = np.maximum(np.maximum(y_lo[q] - py, py - y_hi[q]), 0.0)
+    first = k // g
+    x_lo, x_hi, y_lo, y_hi = (b[first] for b in boxes)  # (point, group)
+    px, py = points[:, 0:1], points[:, 1:2]
+    dx = np.maximum(np.maximum(x_lo - px, px - x_hi), 0.0)
+    dy = np.maximum(np.maximum(y_lo - py, py - y_hi), 0.0)
     reach = upper_mm * (1.0 + BOUND_SLACK_REL) + BOUND_SLACK_MM
-    searched = valid & (dx * dx + dy * dy <= reach * reach)
-    point, box = np.nonzero(searched.T)  # by point, then by box
-    m = q[box, point] * g + np.arange(g)[:, None]  # the boxes' segments, padded indices
+    searched = dx * dx + dy * dy <= (reach * reach)[:, None]
+    # The last group touches the window only when the window does not start a group.
+    searched[:, -1] &= (first + searched.shape[1] - 1) * g < k + span
+    point, box = np.nonzero(searched)  # by point, then by box
+    m = (first[point] + box) * g + np.arange(g)[:, None]  # the boxes' segments, padded indices
     kr = k[point]
     inside = (m >= kr) & (m < kr + span)
     m = np.minimum(m, len(ax) - 1)
-    gap2 = squared_gap(px[point] - ax[m], py[point] - ay[m], abx[m], aby[m], den[m])
+    gap2 = squared_gap(points[point, 0] - ax[m], points[point, 1] - ay[m], abx[m], aby[m],
+                       den[m])
     least = np.where(inside, gap2, np.inf).min(axis=0)
     out = np.full(len(points), np.inf)
     if point.size:
-        first = np.flatnonzero(np.r_[True, point[1:] != point[:-1]])
-        out[point[first]] = np.minimum.reduceat(least, first)
+        first_of = np.flatnonzero(np.r_[True, point[1:] != point[:-1]])
+        out[point[first_of]] = np.minimum.reduceat(least, first_of)
     return np.sqrt(out)
