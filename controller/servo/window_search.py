@@ -64,42 +64,35 @@ def _group_boxes(columns: list[np.ndarray]) -> tuple[np.ndarray, ...]:
 
 
 def _box_windows(boxes: tuple[np.ndarray, ...], groups: int) -> tuple[np.ndarray, ...]:
-    """Per box column, the rows of `groups` boxes from each box on: boxes past the last are
-    empty (+inf low, -inf high: never within reach)."""
-    out = []
-    for i, b in enumerate(boxes):
-        empty = np.inf if i % 2 == 0 else -np.inf
-        padded = np.concatenate((b, np.full(groups, empty)))
-        out.append(np.lib.stride_tricks.sliding_window_view(padded, groups))
-    return tuple(out)
+    """Each box column with `groups` empty boxes after the last (+inf low, -inf high: never
+    within reach), so that every group a window may touch can be read without clipping."""
+    return tuple(np.concatenate((b, np.full(groups, np.inf if i % 2 == 0 else -np.inf)))
+                 for i, b in enumerate(boxes))
 
 
 def _block(columns: list[np.ndarray], boxes: tuple[np.ndarray, ...], points: np.ndarray,
            k: np.ndarray, span: int, upper_mm: np.ndarray) -> np.ndarray:
-    """pruned_window_distance_mm of a block of points. The box tests are (point, group) rows of
-    the boxes each window touches (whole rows copied, not box by box); the segments are
-    (segment, point) arrays, so that the least over a box runs along contiguous rows."""
+    """pruned_window_distance_mm of a block of points; arrays are (group or segment, point),
+    so that every operation and the least over a box run along contiguous rows. Each box
+    searched gives its least to a (group, point) table whose least per point is the answer."""
     ax, ay, abx, aby, den = columns
+    x_lo, x_hi, y_lo, y_hi = boxes
     g = GROUP_SEGMENTS
-    first = k // g
-    x_lo, x_hi, y_lo, y_hi = (b[first] for b in boxes)  # (point, group)
-    px, py = points[:, 0:1], points[:, 1:2]
-    dx = np.maximum(np.maximum(x_lo - px, px - x_hi), 0.0)
-    dy = np.maximum(np.maximum(y_lo - py, py - y_hi), 0.0)
+    groups = (span + g - 2) // g + 1  # the most groups a window of `span` segments touches
+    q = k // g + np.arange(groups)[:, None]
+    px, py = points[:, 0], points[:, 1]
+    dx = np.maximum(np.maximum(x_lo[q] - px, px - x_hi[q]), 0.0)
+    dy = np.maximum(np.maximum(y_lo[q] - py, py - y_hi[q]), 0.0)
     reach = upper_mm * (1.0 + BOUND_SLACK_REL) + BOUND_SLACK_MM
-    searched = dx * dx + dy * dy <= (reach * reach)[:, None]
+    searched = dx * dx + dy * dy <= reach * reach
     # The last group touches the window only when the window does not start a group.
-    searched[:, -1] &= (first + searched.shape[1] - 1) * g < k + span
-    point, box = np.nonzero(searched)  # by point, then by box
-    m = (first[point] + box) * g + np.arange(g)[:, None]  # the boxes' segments, padded indices
+    searched[-1] &= q[-1] * g < k + span
+    box, point = np.nonzero(searched)
+    m = q[box, point] * g + np.arange(g)[:, None]  # the boxes' segments, padded indices
     kr = k[point]
     inside = (m >= kr) & (m < kr + span)
     m = np.minimum(m, len(ax) - 1)
-    gap2 = squared_gap(points[point, 0] - ax[m], points[point, 1] - ay[m], abx[m], aby[m],
-                       den[m])
-    least = np.where(inside, gap2, np.inf).min(axis=0)
-    out = np.full(len(points), np.inf)
-    if point.size:
-        first_of = np.flatnonzero(np.r_[True, point[1:] != point[:-1]])
-        out[point[first_of]] = np.minimum.reduceat(least, first_of)
-    return np.sqrt(out)
+    gap2 = squared_gap(px[point] - ax[m], py[point] - ay[m], abx[m], aby[m], den[m])
+    table = np.full(searched.shape, np.inf)
+    table[box, point] = np.where(inside, gap2, np.inf).min(axis=0)
+    return np.sqrt(table.min(axis=0))
