@@ -186,7 +186,7 @@ class ServoStream:
         first, last = -self.base, total - 2 - self.base  # global segments 0 and total - 2
         s0, s1 = max(lo - NEAR_SAMPLES, first), min(hi + NEAR_SAMPLES - 2, last)
         cols = segment_columns(held[s0:s1 + 2])
-        before, at = np.clip(i - 1, first, last) - s0, np.clip(i, first, last) - s0
+        before, at = _own_segments(lo - s0, hi - s0, first - s0, last - s0)
         bound = own_bound_mm(cols, act, before, at)
         pos = np.flatnonzero(bound > 0.0)
         if pos.size == 0:
@@ -208,3 +208,12 @@ def _windows(cols: tuple[np.ndarray, ...], s0: int, act: np.ndarray, i: np.ndarr
     part = tuple(c[lo_seg - s0:hi_seg - s0 + 1] for c in cols)
     return padded_window_distance_mm(padded_columns(part, near), act[pos], i[pos] - lo_seg,
                                      near, upper_mm)
+
+
+def _own_segments(lo: int, hi: int, first: int, last: int) -> tuple[np.ndarray | slice, ...]:
+    """The segments before and at samples lo..hi-1, clipped to first..last: slices where no
+    sample needs clipping (a view, not a gather), else indices."""
+    if first <= lo - 1 and hi - 1 <= last:
+        return slice(lo - 1, hi - 1), slice(lo, hi)
+    i = np.arange(lo, hi)
+    return np.clip(i - 1, first, last), np.clip(i, first, last)

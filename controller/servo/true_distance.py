@@ -68,8 +68,8 @@ def segment_columns(ref: np.ndarray) -> tuple[np.ndarray, ...]:
     return (a[:, 0], a[:, 1], ab[:, 0], ab[:, 1], np.where(len2 > 0.0, len2, 1.0))
 
 
-def own_bound_mm(columns: tuple[np.ndarray, ...], points: np.ndarray, before: np.ndarray,
-                 at: np.ndarray) -> np.ndarray:
+def own_bound_mm(columns: tuple[np.ndarray, ...], points: np.ndarray, before: np.ndarray | slice,
+                 at: np.ndarray | slice) -> np.ndarray:
     """Per point, the lesser of its distances from segments before and at of columns:
     numeric.segment_distance's numbers (the same operations on the same terms; the square root
     of the lesser square is the lesser root), without its (n, 2) temporaries and sums."""
