@@ -81,18 +81,22 @@ def _block(columns: list[np.ndarray], boxes: tuple[np.ndarray, ...], points: np.
     groups = (span + g - 2) // g + 1  # the most groups a window of `span` segments touches
     q = k // g + np.arange(groups)[:, None]
     px, py = points[:, 0], points[:, 1]
-    dx = np.maximum(np.maximum(x_lo[q] - px, px - x_hi[q]), 0.0)
-    dy = np.maximum(np.maximum(y_lo[q] - py, py - y_hi[q]), 0.0)
     reach = upper_mm * (1.0 + BOUND_SLACK_REL) + BOUND_SLACK_MM
-    searched = dx * dx + dy * dy <= reach * reach
+    # A box is searched when it meets the square of half-side `reach` around the point (all
+    # boxes within `reach` of it, and a few more at the square's corners).
+    searched = x_lo.take(q) <= px + reach
+    searched &= x_hi.take(q) >= px - reach
+    searched &= y_lo.take(q) <= py + reach
+    searched &= y_hi.take(q) >= py - reach
     # The last group touches the window only when the window does not start a group.
     searched[-1] &= q[-1] * g < k + span
     box, point = np.nonzero(searched)
     m = q[box, point] * g + np.arange(g)[:, None]  # the boxes' segments, padded indices
-    kr = k[point]
+    kr = k.take(point)
     inside = (m >= kr) & (m < kr + span)
-    m = np.minimum(m, len(ax) - 1)
-    gap2 = squared_gap(px[point] - ax[m], py[point] - ay[m], abx[m], aby[m], den[m])
+    np.minimum(m, len(ax) - 1, out=m)
+    gap2 = squared_gap(px.take(point) - ax.take(m), py.take(point) - ay.take(m), abx.take(m),
+                       aby.take(m), den.take(m))
     table = np.full(searched.shape, np.inf)
     table[box, point] = np.where(inside, gap2, np.inf).min(axis=0)
     return np.sqrt(table.min(axis=0))
