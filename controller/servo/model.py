@@ -141,6 +141,18 @@ def filter_block(servo: DiscreteServo, u: np.ndarray, state: np.ndarray) -> tupl
     return out, x
 
 
+def filter_state(servo: DiscreteServo, u: np.ndarray, state: np.ndarray) -> np.ndarray:
+    """filter_block's state after u, the same numbers (the same products, block by block),
+    without the outputs: their (BLOCK, BLOCK) product is most of a block's work."""
+    _, _, reach, powers = servo._blocks
+    x = state.copy()
+    for k0 in range(0, len(u), BLOCK):
+        chunk = u[k0:k0 + BLOCK]
+        m = len(chunk)
+        x = powers[m] @ x + reach[:, BLOCK - m:] @ chunk
+    return x
+
+
 def small_s_gains(servo: DiscreteServo) -> tuple[float, float]:
     """(c1, c2) of the filter's small-s expansion e ~ c1 v + c2 dv/dt (z^-1 = exp(-sT))."""
     b, a = servo.b, servo.a

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller.numeric import segment_distance
 from controller.servo.prediction import ServoPrediction
 from controller.servo.window_search import pruned_window_distance_mm, squared_gap
 
@@ -47,16 +46,24 @@ def distance_from_reference_mm(ref: np.ndarray, act: np.ndarray, exact_above_mm:
     n = len(ref)
     if n < 2:
         return np.hypot(*(act - ref).T)
-    own = np.arange(n)
-    before, at = np.clip(own - 1, 0, n - 2), np.clip(own, 0, n - 2)
-    bound = np.minimum(segment_distance(act, ref[before], ref[before + 1]),
-                       segment_distance(act, ref[at], ref[at + 1]))
+    pad, bound = _padded_bound(ref, act, near)
     k = np.flatnonzero(bound > exact_above_mm)
     if k.size == 0:
         return bound
     out = bound.copy()
-    out[k] = window_distance_mm(ref, act[k], k, near, bound[k])
+    out[k] = padded_window_distance_mm(pad, act[k], k, near, bound[k])
     return out
+
+
+def _padded_bound(ref: np.ndarray, act: np.ndarray,
+                  near: int) -> tuple[list[np.ndarray], np.ndarray]:
+    """The padded columns of ref's segments (window_distance_mm's), and each actual point's
+    distance from the segments before and at its own sample (clipped to the polyline):
+    padded index near + j holds segment clip(j, 0, n - 2), so those are two slices."""
+    n = len(ref)
+    pad = padded_columns(segment_columns(ref), near)
+    before, at = slice(near - 1, near - 1 + n), slice(near, near + n)
+    return pad, own_bound_mm(pad, act, before, at)
 
 
 def segment_columns(ref: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -74,7 +81,7 @@ def own_bound_mm(columns: tuple[np.ndarray, ...], points: np.ndarray, before: np
     numeric.segment_distance's numbers (the same operations on the same terms; the square root
     of the lesser square is the lesser root), without its (n, 2) temporaries and sums."""
     ax, ay, abx, aby, den = columns
-    px, py = points[:, 0], points[:, 1]
+    px, py = points[..., 0], points[..., 1]
     gaps = [squared_gap(px - ax[j], py - ay[j], abx[j], aby[j], den[j]) for j in (before, at)]
     return np.sqrt(np.minimum(gaps[0], gaps[1]))
 
@@ -140,11 +147,9 @@ def worst_true_error_mm(xy_mm: np.ndarray, preds: tuple[ServoPrediction, ...],
     n = len(ref)
     if n < 2:
         return np.hypot(*(acts - ref).transpose(2, 0, 1)).max(axis=0)[k0:]
-    own = np.arange(n)
-    before, at = np.clip(own - 1, 0, n - 2), np.clip(own, 0, n - 2)
-    bound = np.minimum(segment_distance(acts, ref[before], ref[before + 1]),
-                       segment_distance(acts, ref[at], ref[at + 1]))  # (plant, sample)
+    pad, bound = _padded_bound(ref, acts, near)  # (plant, sample)
     k, plant = np.nonzero((bound > exact_above_mm).T)  # sorted by sample: the search's order
     if k.size:
-        bound[plant, k] = window_distance_mm(ref, acts[plant, k], k, near, bound[plant, k])
+        bound[plant, k] = padded_window_distance_mm(pad, acts[plant, k], k, near,
+                                                    bound[plant, k])
     return bound.max(axis=0)[k0:]
