@@ -17,7 +17,7 @@ GROUP_SEGMENTS = 8  # segments per bounding box
 # the box come from other operations than the exact distance, so both may round the other way.
 BOUND_SLACK_REL = 1e-6
 BOUND_SLACK_MM = 1e-12
-BLOCK_SAMPLES = 512  # samples searched at once: their temporaries stay in the cache
+BLOCK_SAMPLES = 1024  # samples searched at once: their temporaries stay in the cache
 
 
 def squared_gap(apx: np.ndarray, apy: np.ndarray, abx: np.ndarray, aby: np.ndarray,
