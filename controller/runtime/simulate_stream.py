@@ -141,22 +141,36 @@ class ServoStream:
     def _tangents(self, lo: int, hi: int, total: int, final: bool) -> np.ndarray:
         """Samples lo..hi-1 (relative to base): central differences, held where the path stops,
         then the generator's exact tangent where it has one (tangent_angles and the exact
-        overrides of the whole-array form)."""
-        xy = self.rows[:, :2]
-        i = np.arange(lo, hi)
-        prev = xy[np.maximum(i - 1, -self.base)]  # before the first sample: the first one
-        nxt = xy[np.minimum(i + 1, total - 1 - self.base)] if final else xy[i + 1]
-        d = nxt - prev
+        overrides of the whole-array form). The angle of a difference is taken only where it
+        is read: at the samples without an exact tangent and for the one held."""
+        d = self._differences(lo, hi, total, final)
         moving = np.hypot(d[:, 0], d[:, 1]) > MOVING_MM
-        raw = np.arctan2(d[:, 1], d[:, 0])
         if self.held_phi is None:  # the very first sample: held until something moves
-            self.held_phi = float(raw[0])
-        idx = np.where(moving, np.arange(len(i)), -1)
-        np.maximum.accumulate(idx, out=idx)
-        phi = np.where(idx >= 0, raw[np.maximum(idx, 0)], self.held_phi)
+            self.held_phi = _angle(d, 0)
+        phi = self.phi[lo:hi].copy()
+        need = np.flatnonzero(~self.exact[lo:hi])
+        if need.size:
+            idx = np.where(moving, np.arange(len(d)), -1)
+            np.maximum.accumulate(idx, out=idx)
+            last = idx[need]
+            at = np.maximum(last, 0)
+            raw = np.arctan2(d[at, 1], d[at, 0])
+            phi[need] = np.where(last >= 0, raw, self.held_phi)
         if moving.any():
-            self.held_phi = float(raw[np.flatnonzero(moving)[-1]])
-        return np.where(self.exact[lo:hi], self.phi[lo:hi], phi)
+            self.held_phi = _angle(d, int(np.flatnonzero(moving)[-1]))
+        return phi
+
+    def _differences(self, lo: int, hi: int, total: int, final: bool) -> np.ndarray:
+        """Next minus previous reference point of samples lo..hi-1: the first sample's previous
+        is itself, and at the end the last one's next is itself."""
+        xy = self.rows[:, :2]
+        end = total - 1 - self.base  # the last sample (at the end)
+        if lo - 1 >= -self.base and (not final or hi <= end):
+            return xy[lo + 1:hi + 1] - xy[lo - 1:hi - 1]
+        i = np.arange(lo, hi)
+        prev = xy[np.maximum(i - 1, -self.base)]
+        nxt = xy[np.minimum(i + 1, end)] if final else xy[i + 1]
+        return nxt - prev
 
     def _finish_samples(self, g0: int, g1: int, total: int, final: bool) -> SampleBlock:
         lo, hi = g0 - self.base, g1 - self.base
@@ -217,3 +231,8 @@ def _own_segments(lo: int, hi: int, first: int, last: int) -> tuple[np.ndarray |
         return slice(lo - 1, hi - 1), slice(lo, hi)
     i = np.arange(lo, hi)
     return np.clip(i - 1, first, last), np.clip(i, first, last)
+
+
+def _angle(d: np.ndarray, j: int) -> float:
+    """arctan2 of row j of the differences d (on an array, as for all rows at once)."""
+    return float(np.arctan2(d[j:j + 1, 1], d[j:j + 1, 0])[0])
