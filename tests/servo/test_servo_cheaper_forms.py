@@ -6,9 +6,18 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controller.config import ServoParams
+from controller.config import ServoParams, load_config
 from controller.numeric import segment_distance
-from controller.servo.model import BLOCK, DiscreteServo, discretise, filter_block, filter_state
+from controller.runtime.simulate_stream import ServoStream
+from controller.runtime.simulation import tangent_angles
+from controller.servo.model import (
+    BLOCK,
+    DiscreteServo,
+    contour_error_mm,
+    discretise,
+    filter_block,
+    filter_state,
+)
 from controller.servo.true_distance import (
     distance_from_reference_mm,
     own_bound_mm,
@@ -150,3 +159,37 @@ def test_group_boxes_are_the_old_reduction(case: tuple) -> None:
     cols = list(segment_columns(ref))
     new, old = _group_boxes(cols), old_group_boxes(cols)
     assert [bits(b) for b in new] == [bits(b) for b in old]
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.lists(st.integers(1, 400), min_size=1, max_size=8))
+def test_the_streams_tangents_are_the_whole_arrays(seed: int, sizes: list[int]) -> None:
+    """Chunks with and without the generator's exact tangent, the path stopping now and then
+    (repeated points): the stream's contour error is eq. 28 on tangent_angles of the whole
+    reference with the exact tangents over it, the settling holding the last one."""
+    config = load_config(None)
+    rng = np.random.default_rng(seed)
+    n = sum(sizes)
+    steps = rng.standard_normal((n, 2)) * 0.01 * (rng.random((n, 1)) < 0.8)
+    ref = np.cumsum(steps, axis=0)
+    exact = [rng.random() < 0.5 for _ in sizes]
+    phis = [rng.uniform(-np.pi, np.pi, m) for m in sizes]
+    stream, blocks, k = ServoStream(config), [], 0
+    for m, has, phi in zip(sizes, exact, phis, strict=True):
+        chunk = slice(k, k + m)
+        blocks += stream.push(
+            ref[chunk], np.zeros(m), np.zeros(m, int), False, phi if has else None
+        )
+        k += m
+    blocks += stream.finish()
+    contour = np.concatenate([b.contour_mm for b in blocks])
+    ex, ey = (np.concatenate([getattr(b, f) for b in blocks]) for f in ("ex_mm", "ey_mm"))
+    held = np.vstack([ref, np.repeat(ref[-1:], len(ex) - n, axis=0)])
+    phi = tangent_angles(held)
+    k = 0
+    for m, has, p in zip(sizes, exact, phis, strict=True):
+        if has:
+            phi[k : k + m] = p
+        k += m
+    phi[n:] = phi[n - 1]
+    assert bits(contour) == bits(contour_error_mm(ex, ey, phi))
