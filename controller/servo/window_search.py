@@ -36,11 +36,36 @@ def pruned_window_distance_mm(columns: list[np.ndarray], points: np.ndarray, k: 
     span = 2 * near
     groups = (span + GROUP_SEGMENTS - 2) // GROUP_SEGMENTS + 1  # the most a window touches
     boxes = _box_windows(_group_boxes(columns), groups)
+    rows = _group_rows(columns)
+    inside = _inside_table(span)
     out = np.empty(len(points))
     for lo in range(0, len(points), BLOCK_SAMPLES):
         sel = slice(lo, lo + BLOCK_SAMPLES)
-        out[sel] = _block(columns, boxes, points[sel], k[sel], span, upper_mm[sel])
+        out[sel] = _block(rows, boxes, inside, points[sel], k[sel], span, upper_mm[sel])
     return out
+
+
+def _group_rows(columns: list[np.ndarray]) -> list[np.ndarray]:
+    """Each column as (group, GROUP_SEGMENTS) rows, the last group filled up with the last
+    segment (never inside a window: read only to be masked)."""
+    g = GROUP_SEGMENTS
+    n_groups = -(-len(columns[0]) // g)
+    out = []
+    for c in columns:
+        padded = np.empty(n_groups * g)
+        padded[:len(c)] = c
+        padded[len(c):] = c[-1]
+        out.append(padded.reshape(n_groups, g))
+    return out
+
+
+def _inside_table(span: int) -> np.ndarray:
+    """Row 9 a + b: which of a group's segments j lie in a window that starts a segments
+    after the group's first and ends b after it (a, b clipped to 0..GROUP_SEGMENTS)."""
+    g = GROUP_SEGMENTS
+    j = np.arange(g)
+    a, b = np.divmod(np.arange((g + 1) ** 2), g + 1)
+    return (j >= a[:, None]) & (j < b[:, None])
 
 
 def _group_boxes(columns: list[np.ndarray]) -> tuple[np.ndarray, ...]:
@@ -70,12 +95,13 @@ def _box_windows(boxes: tuple[np.ndarray, ...], groups: int) -> tuple[np.ndarray
                  for i, b in enumerate(boxes))
 
 
-def _block(columns: list[np.ndarray], boxes: tuple[np.ndarray, ...], points: np.ndarray,
-           k: np.ndarray, span: int, upper_mm: np.ndarray) -> np.ndarray:
-    """pruned_window_distance_mm of a block of points; arrays are (group or segment, point),
-    so that every operation and the least over a box run along contiguous rows. Each box
-    searched gives its least to a (group, point) table whose least per point is the answer."""
-    ax, ay, abx, aby, den = columns
+def _block(rows: list[np.ndarray], boxes: tuple[np.ndarray, ...], inside_table: np.ndarray,
+           points: np.ndarray, k: np.ndarray, span: int, upper_mm: np.ndarray) -> np.ndarray:
+    """pruned_window_distance_mm of a block of points. The box tests are (group, point)
+    arrays, so that every operation runs along contiguous rows; a box searched reads its
+    segments as whole rows, each point repeated along them. Each box searched gives its
+    least to a (group, point) table whose least per point is the answer."""
+    ax, ay, abx, aby, den = rows
     x_lo, x_hi, y_lo, y_hi = boxes
     g = GROUP_SEGMENTS
     groups = (span + g - 2) // g + 1  # the most groups a window of `span` segments touches
@@ -91,12 +117,18 @@ def _block(columns: list[np.ndarray], boxes: tuple[np.ndarray, ...], points: np.
     # The last group touches the window only when the window does not start a group.
     searched[-1] &= q[-1] * g < k + span
     box, point = np.nonzero(searched)
-    m = q[box, point] * g + np.arange(g)[:, None]  # the boxes' segments, padded indices
-    kr = k.take(point)
-    inside = (m >= kr) & (m < kr + span)
-    np.minimum(m, len(ax) - 1, out=m)
-    gap2 = squared_gap(px.take(point) - ax.take(m), py.take(point) - ay.take(m), abx.take(m),
-                       aby.take(m), den.take(m))
+    group = q[box, point]
+    start = k.take(point) - group * g  # the window's first segment from the group's first
+    cut = np.clip(start, 0, g) * (g + 1) + np.clip(start + span, 0, g)
+    inside = inside_table.take(cut, axis=0)
+    gap2 = squared_gap(np.repeat(px.take(point), g).reshape(-1, g) - ax.take(group, axis=0),
+                       np.repeat(py.take(point), g).reshape(-1, g) - ay.take(group, axis=0),
+                       abx.take(group, axis=0), aby.take(group, axis=0),
+                       den.take(group, axis=0))
+    gap2[~inside] = np.inf
+    least = gap2[:, 0].copy()
+    for j in range(1, g):
+        np.minimum(least, gap2[:, j], out=least)
     table = np.full(searched.shape, np.inf)
-    table[box, point] = np.where(inside, gap2, np.inf).min(axis=0)
+    table[box, point] = least
     return np.sqrt(table.min(axis=0))
