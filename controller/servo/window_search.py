@@ -89,10 +89,14 @@ def _group_boxes(columns: list[np.ndarray]) -> tuple[np.ndarray, ...]:
 
 
 def _box_windows(boxes: tuple[np.ndarray, ...], groups: int) -> tuple[np.ndarray, ...]:
-    """Each box column with `groups` empty boxes after the last (+inf low, -inf high: never
-    within reach), so that every group a window may touch can be read without clipping."""
-    return tuple(np.concatenate((b, np.full(groups, np.inf if i % 2 == 0 else -np.inf)))
-                 for i, b in enumerate(boxes))
+    """Per box column, `groups` rows: row j holds the box j groups after each group (+inf
+    low, -inf high past the last: never within reach), so that the boxes a window may touch
+    are read without clipping: those of a window starting in group f are column f."""
+    out = []
+    for i, b in enumerate(boxes):
+        padded = np.concatenate((b, np.full(groups, np.inf if i % 2 == 0 else -np.inf)))
+        out.append(np.stack([padded[j:j + len(b)] for j in range(groups)]))
+    return tuple(out)
 
 
 def _block(rows: list[np.ndarray], boxes: tuple[np.ndarray, ...], inside_table: np.ndarray,
@@ -102,22 +106,21 @@ def _block(rows: list[np.ndarray], boxes: tuple[np.ndarray, ...], inside_table: 
     segments as whole rows, each point repeated along them. Each box searched gives its
     least to a (group, point) table whose least per point is the answer."""
     ax, ay, abx, aby, den = rows
-    x_lo, x_hi, y_lo, y_hi = boxes
+    x_lo, x_hi, y_lo, y_hi = (_window_boxes(b, k) for b in boxes)  # (group, point)
     g = GROUP_SEGMENTS
-    groups = (span + g - 2) // g + 1  # the most groups a window of `span` segments touches
-    q = k // g + np.arange(groups)[:, None]
+    first = k // g
     px, py = points[:, 0], points[:, 1]
     reach = upper_mm * (1.0 + BOUND_SLACK_REL) + BOUND_SLACK_MM
     # A box is searched when it meets the square of half-side `reach` around the point (all
     # boxes within `reach` of it, and a few more at the square's corners).
-    searched = x_lo.take(q) <= px + reach
-    searched &= x_hi.take(q) >= px - reach
-    searched &= y_lo.take(q) <= py + reach
-    searched &= y_hi.take(q) >= py - reach
+    searched = x_lo <= px + reach
+    searched &= x_hi >= px - reach
+    searched &= y_lo <= py + reach
+    searched &= y_hi >= py - reach
     # The last group touches the window only when the window does not start a group.
-    searched[-1] &= q[-1] * g < k + span
+    searched[-1] &= (first + len(searched) - 1) * g < k + span
     box, point = np.nonzero(searched)
-    group = q[box, point]
+    group = first.take(point) + box
     start = k.take(point) - group * g  # the window's first segment from the group's first
     cut = np.clip(start, 0, g) * (g + 1) + np.clip(start + span, 0, g)
     inside = inside_table.take(cut, axis=0)
@@ -132,3 +135,15 @@ def _block(rows: list[np.ndarray], boxes: tuple[np.ndarray, ...], inside_table: 
     table = np.full(searched.shape, np.inf)
     table[box, point] = least
     return np.sqrt(table.min(axis=0))
+
+
+def _window_boxes(rows: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """(group, point): the boxes of the windows k, from _box_windows' rows. Consecutive
+    windows start GROUP_SEGMENTS at a time in the same group: their columns are repeated, not
+    gathered one by one (the same numbers)."""
+    g = GROUP_SEGMENTS
+    if not len(k) or int(k[-1]) - int(k[0]) != len(k) - 1:
+        return rows.take(k // g, axis=1)
+    f0, lead = divmod(int(k[0]), g)
+    f1 = (int(k[-1])) // g
+    return np.repeat(rows[:, f0:f1 + 1], g, axis=1)[:, lead:lead + len(k)]
