@@ -13,8 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 GROUP_SEGMENTS = 8  # segments per bounding box
-# A box is searched when its distance is within the bound and this margin of it: the bound and
-# the box come from other operations than the exact distance, so both may round the other way.
+# A box is searched when it meets the square of half-side the bound and this margin of it around
+# the point: the bound and the box come from other operations than the exact distance, so both
+# may round the other way.
 BOUND_SLACK_REL = 1e-6
 BOUND_SLACK_MM = 1e-12
 BLOCK_SAMPLES = 1024  # samples searched at once: their temporaries stay in the cache
@@ -145,5 +146,5 @@ def _window_boxes(rows: np.ndarray, k: np.ndarray) -> np.ndarray:
     if not len(k) or int(k[-1]) - int(k[0]) != len(k) - 1:
         return rows.take(k // g, axis=1)
     f0, lead = divmod(int(k[0]), g)
-    f1 = (int(k[-1])) // g
+    f1 = int(k[-1]) // g
     return np.repeat(rows[:, f0:f1 + 1], g, axis=1)[:, lead:lead + len(k)]
