@@ -7,7 +7,11 @@ from __future__ import annotations
 import numpy as np
 
 from controller.servo.prediction import ServoPrediction
-from controller.servo.window_search import pruned_window_distance_mm, squared_gap
+from controller.servo.window_search import (
+    consecutive,
+    pruned_window_distance_mm,
+    squared_gap,
+)
 
 # Reference segments searched each side of a sample's own: the modelled tool is never further
 # along the path than this from its reference (at 1 ms, 40 samples hold 50 um even at 1.25 mm/s).
@@ -120,7 +124,7 @@ def padded_window_distance_mm(pad: list[np.ndarray], points: np.ndarray, k: np.n
     # Padded index k + m (m < 2 near) holds segment clip(k - near + m, 0, n - 2).
     views = [np.lib.stride_tricks.sliding_window_view(c, 2 * near) for c in pad]
     out = np.empty(k.size)
-    contiguous = k.size > 0 and int(k[-1]) - int(k[0]) == k.size - 1
+    contiguous = consecutive(k)
     for lo in range(0, k.size, WINDOW_BLOCK):
         kb = k[lo:lo + WINDOW_BLOCK]
         sel = slice(int(kb[0]), int(kb[-1]) + 1) if contiguous else kb

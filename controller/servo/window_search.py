@@ -30,6 +30,11 @@ def squared_gap(apx: np.ndarray, apy: np.ndarray, abx: np.ndarray, aby: np.ndarr
     return gx * gx + gy * gy
 
 
+def consecutive(k: np.ndarray) -> bool:
+    """Whether k is k[0], k[0] + 1, ... (not only its ends: a band's samples repeat)."""
+    return len(k) > 0 and bool((np.diff(k) == 1).all())
+
+
 def pruned_window_distance_mm(columns: list[np.ndarray], points: np.ndarray, k: np.ndarray,
                               near: int, upper_mm: np.ndarray) -> np.ndarray:
     """Per point: the least distance over its window, padded segments k .. k + 2 near - 1 of
@@ -143,7 +148,7 @@ def _window_boxes(rows: np.ndarray, k: np.ndarray) -> np.ndarray:
     windows start GROUP_SEGMENTS at a time in the same group: their columns are repeated, not
     gathered one by one (the same numbers)."""
     g = GROUP_SEGMENTS
-    if not len(k) or int(k[-1]) - int(k[0]) != len(k) - 1:
+    if not consecutive(k):
         return rows.take(k // g, axis=1)
     f0, lead = divmod(int(k[0]), g)
     f1 = int(k[-1]) // g

@@ -193,3 +193,26 @@ def test_the_streams_tangents_are_the_whole_arrays(seed: int, sizes: list[int]) 
         k += m
     phi[n:] = phi[n - 1]
     assert bits(contour) == bits(contour_error_mm(ex, ey, phi))
+
+
+@settings(max_examples=40, deadline=None)
+@given(_polyline_and_points(), st.integers(0, 2**32 - 1), st.integers(1, 50))
+def test_repeated_samples_as_a_band_gives_them_are_searched_each_on_its_own(
+    case: tuple, seed: int, near: int
+) -> None:
+    """Sorted samples with repeats and gaps (a servo band's plants share samples; [5, 5, 7] has
+    the ends of three consecutive ones): both searches give each point's own window's least."""
+    ref, act = case
+    rng = np.random.default_rng(seed)
+    n = len(ref)
+    k = np.sort(rng.integers(0, n, rng.integers(1, 2 * n + 1)))
+    if len(k) >= 3:
+        k[:3] = [k[0], k[0], min(k[0] + 2, n - 1)]
+        k.sort()
+    points = act[k] + rng.standard_normal((len(k), 2)) * 1e-6
+    one_by_one = np.array(
+        [window_distance_mm(ref, points[i : i + 1], k[i : i + 1], near)[0] for i in range(len(k))]
+    )
+    bound = np.full(len(k), np.inf)  # no pruning by distance: every box meets the square
+    assert bits(window_distance_mm(ref, points, k, near)) == bits(one_by_one)
+    assert bits(window_distance_mm(ref, points, k, near, bound)) == bits(one_by_one)
