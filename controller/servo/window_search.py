@@ -112,7 +112,8 @@ def _block(rows: list[np.ndarray], boxes: tuple[np.ndarray, ...], inside_table: 
     segments as whole rows, each point repeated along them. Each box searched gives its
     least to a (group, point) table whose least per point is the answer."""
     ax, ay, abx, aby, den = rows
-    x_lo, x_hi, y_lo, y_hi = (_window_boxes(b, k) for b in boxes)  # (group, point)
+    run = consecutive(k)
+    x_lo, x_hi, y_lo, y_hi = (_window_boxes(b, k, run) for b in boxes)  # (group, point)
     g = GROUP_SEGMENTS
     first = k // g
     px, py = points[:, 0], points[:, 1]
@@ -143,12 +144,12 @@ def _block(rows: list[np.ndarray], boxes: tuple[np.ndarray, ...], inside_table: 
     return np.sqrt(table.min(axis=0))
 
 
-def _window_boxes(rows: np.ndarray, k: np.ndarray) -> np.ndarray:
+def _window_boxes(rows: np.ndarray, k: np.ndarray, run: bool) -> np.ndarray:
     """(group, point): the boxes of the windows k, from _box_windows' rows. Consecutive
-    windows start GROUP_SEGMENTS at a time in the same group: their columns are repeated, not
-    gathered one by one (the same numbers)."""
+    windows (run) start GROUP_SEGMENTS at a time in the same group: their columns are
+    repeated, not gathered one by one (the same numbers)."""
     g = GROUP_SEGMENTS
-    if not consecutive(k):
+    if not run:
         return rows.take(k // g, axis=1)
     f0, lead = divmod(int(k[0]), g)
     f1 = int(k[-1]) // g
