@@ -17,10 +17,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from controller.config import MachineConfig
-from controller.numeric import segment_distance
 from controller.servo.model import BLOCK, contour_error_mm, filter_block
 from controller.servo.prediction import SETTLE_S, axis_servos
-from controller.servo.true_distance import NEAR_SAMPLES, window_distance_mm
+from controller.servo.true_distance import (
+    NEAR_SAMPLES,
+    own_bound_mm,
+    padded_columns,
+    padded_window_distance_mm,
+    segment_columns,
+)
 
 MOVING_MM = 1e-9  # a central difference shorter than this: the tangent is held
 
@@ -136,22 +141,36 @@ class ServoStream:
     def _tangents(self, lo: int, hi: int, total: int, final: bool) -> np.ndarray:
         """Samples lo..hi-1 (relative to base): central differences, held where the path stops,
         then the generator's exact tangent where it has one (tangent_angles and the exact
-        overrides of the whole-array form)."""
-        xy = self.rows[:, :2]
-        i = np.arange(lo, hi)
-        prev = xy[np.maximum(i - 1, -self.base)]  # before the first sample: the first one
-        nxt = xy[np.minimum(i + 1, total - 1 - self.base)] if final else xy[i + 1]
-        d = nxt - prev
+        overrides of the whole-array form). The angle of a difference is taken only where it
+        is read: at the samples without an exact tangent and for the one held."""
+        d = self._differences(lo, hi, total, final)
         moving = np.hypot(d[:, 0], d[:, 1]) > MOVING_MM
-        raw = np.arctan2(d[:, 1], d[:, 0])
         if self.held_phi is None:  # the very first sample: held until something moves
-            self.held_phi = float(raw[0])
-        idx = np.where(moving, np.arange(len(i)), -1)
-        np.maximum.accumulate(idx, out=idx)
-        phi = np.where(idx >= 0, raw[np.maximum(idx, 0)], self.held_phi)
+            self.held_phi = _angle(d, 0)
+        phi = self.phi[lo:hi].copy()
+        need = np.flatnonzero(~self.exact[lo:hi])
+        if need.size:
+            idx = np.where(moving, np.arange(len(d)), -1)
+            np.maximum.accumulate(idx, out=idx)
+            last = idx[need]
+            at = np.maximum(last, 0)
+            raw = np.arctan2(d[at, 1], d[at, 0])
+            phi[need] = np.where(last >= 0, raw, self.held_phi)
         if moving.any():
-            self.held_phi = float(raw[np.flatnonzero(moving)[-1]])
-        return np.where(self.exact[lo:hi], self.phi[lo:hi], phi)
+            self.held_phi = _angle(d, int(np.flatnonzero(moving)[-1]))
+        return phi
+
+    def _differences(self, lo: int, hi: int, total: int, final: bool) -> np.ndarray:
+        """Next minus previous reference point of samples lo..hi-1: the first sample's previous
+        is itself, and at the end the last one's next is itself."""
+        xy = self.rows[:, :2]
+        end = total - 1 - self.base  # the last sample (at the end)
+        if lo - 1 >= -self.base and (not final or hi <= end):
+            return xy[lo + 1:hi + 1] - xy[lo - 1:hi - 1]
+        i = np.arange(lo, hi)
+        prev = xy[np.maximum(i - 1, -self.base)]
+        nxt = xy[np.minimum(i + 1, end)] if final else xy[i + 1]
+        return nxt - prev
 
     def _finish_samples(self, g0: int, g1: int, total: int, final: bool) -> SampleBlock:
         lo, hi = g0 - self.base, g1 - self.base
@@ -173,30 +192,47 @@ class ServoStream:
     def _true(self, held: np.ndarray, act: np.ndarray, lo: int, hi: int,
               total: int) -> np.ndarray:
         """distance_from_reference_mm (exact everywhere) of samples lo..hi-1 of the kept rows:
-        the bound by their own two segments, then the windows where it is not zero."""
+        the bound by their own two segments, then the windows where it is not zero. The terms
+        of the segments both read are formed once (segments s0..s1, relative to base)."""
         i = np.arange(lo, hi)
         if total < 2:
             return np.hypot(*(act - held[lo:hi]).T)
         first, last = -self.base, total - 2 - self.base  # global segments 0 and total - 2
-        before, at = np.clip(i - 1, first, last), np.clip(i, first, last)
-        bound = np.minimum(segment_distance(act, held[before], held[before + 1]),
-                           segment_distance(act, held[at], held[at + 1]))
+        s0, s1 = max(lo - NEAR_SAMPLES, first), min(hi + NEAR_SAMPLES - 2, last)
+        cols = segment_columns(held[s0:s1 + 2])
+        before, at = _own_segments(lo - s0, hi - s0, first - s0, last - s0)
+        bound = own_bound_mm(cols, act, before, at)
         pos = np.flatnonzero(bound > 0.0)
         if pos.size == 0:
             return bound
         out = bound.copy()
-        out[pos] = _windows(held, act, i, pos, self.base, total, bound[pos])
+        out[pos] = _windows(cols, s0, act, i, pos, self.base, total, bound[pos])
         return out
 
 
-def _windows(held: np.ndarray, act: np.ndarray, i: np.ndarray, pos: np.ndarray, base: int,
-             total: int, upper_mm: np.ndarray | None = None) -> np.ndarray:
+def _windows(cols: tuple[np.ndarray, ...], s0: int, act: np.ndarray, i: np.ndarray,
+             pos: np.ndarray, base: int, total: int, upper_mm: np.ndarray) -> np.ndarray:
     """window_distance_mm for the samples i[pos] (rows relative to base) on the kept part of the
-    polyline: its segments from the first window's start to the last one's end. A window is
-    clipped only at the polyline's true ends (global 0 and total - 2), which are then the ends
-    of that part too."""
+    polyline: its segments from the first window's start to the last one's end (cols holds
+    the segments from s0 on). A window is clipped only at the polyline's true ends (global 0
+    and total - 2), which are then the ends of that part too."""
     near = NEAR_SAMPLES
     lo_seg = max(int(i[pos[0]]) - near, -base)
     hi_seg = min(int(i[pos[-1]]) + near - 1, total - 2 - base)
-    return window_distance_mm(held[lo_seg:hi_seg + 2], act[pos], i[pos] - lo_seg,
-                              near, upper_mm)
+    part = tuple(c[lo_seg - s0:hi_seg - s0 + 1] for c in cols)
+    return padded_window_distance_mm(padded_columns(part, near), act[pos], i[pos] - lo_seg,
+                                     near, upper_mm)
+
+
+def _own_segments(lo: int, hi: int, first: int, last: int) -> tuple[np.ndarray | slice, ...]:
+    """The segments before and at samples lo..hi-1, clipped to first..last: slices where no
+    sample needs clipping (a view, not a gather), else indices."""
+    if first <= lo - 1 and hi - 1 <= last:
+        return slice(lo - 1, hi - 1), slice(lo, hi)
+    i = np.arange(lo, hi)
+    return np.clip(i - 1, first, last), np.clip(i, first, last)
+
+
+def _angle(d: np.ndarray, j: int) -> float:
+    """arctan2 of row j of the differences d (on an array, as for all rows at once)."""
+    return float(np.arctan2(d[j:j + 1, 1], d[j:j + 1, 0])[0])

@@ -28,6 +28,7 @@ from controller.servo.model import (
     DiscreteServo,
     discretise,
     filter_block,
+    filter_state,
     mismatched,
     small_s_gains,
 )
@@ -133,6 +134,6 @@ def band_states_after(xy_mm: np.ndarray, start_xy_mm: np.ndarray, servos: tuple[
     v = np.diff(np.vstack([start_xy_mm[None, :], xy_mm]), axis=0) / sample_period_s
     out = []
     for i, pair in enumerate(servos):
-        out.append(tuple(filter_block(s, v[:, axis], np.zeros(s.order) if not states
-                                      else states[i][axis])[1] for axis, s in enumerate(pair)))
+        out.append(tuple(filter_state(s, v[:, axis], np.zeros(s.order) if not states
+                                      else states[i][axis]) for axis, s in enumerate(pair)))
     return tuple(out)  # type: ignore[arg-type]

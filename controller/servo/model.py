@@ -128,17 +128,39 @@ def _block_matrices(b: np.ndarray, a: np.ndarray, n_block: int) -> tuple[np.ndar
 
 def filter_block(servo: DiscreteServo, u: np.ndarray, state: np.ndarray) -> tuple[np.ndarray,
                                                                                  np.ndarray]:
-    """Run the filter over u from state; vectorised in blocks of BLOCK samples."""
-    obs, toeplitz, reach, powers = servo._blocks
+    """Run the filter over u from state; vectorised in blocks of BLOCK samples. A block's
+    Toeplitz product is written straight into the output and the free response added to it
+    (the same sum); a whole block reads the whole matrices, not views cut to it."""
     out = np.empty(len(u))
     x = state.copy()
     for k0 in range(0, len(u), BLOCK):
         chunk = u[k0:k0 + BLOCK]
-        m = len(chunk)
-        out[k0:k0 + m] = obs[:m] @ x + toeplitz[:m, :m] @ chunk
+        obs, toeplitz, power, reach = _cut(servo, len(chunk))
+        seg = out[k0:k0 + len(chunk)]
+        np.matmul(toeplitz, chunk, out=seg)
+        seg += obs @ x
         # After m samples: F^m x + sum_k F^(m-1-k) g u_k, the last m columns of the reach.
-        x = powers[m] @ x + reach[:, BLOCK - m:] @ chunk
+        x = power @ x + reach @ chunk
     return out, x
+
+
+def _cut(servo: DiscreteServo, m: int) -> tuple[np.ndarray, ...]:
+    """The block matrices for a block of m samples: (h F^k rows, Toeplitz, F^m, reach)."""
+    obs, toeplitz, reach, powers = servo._blocks
+    if m == BLOCK:
+        return obs, toeplitz, powers[BLOCK], reach
+    return obs[:m], toeplitz[:m, :m], powers[m], reach[:, BLOCK - m:]
+
+
+def filter_state(servo: DiscreteServo, u: np.ndarray, state: np.ndarray) -> np.ndarray:
+    """filter_block's state after u, the same numbers (the same products, block by block),
+    without the outputs: their (BLOCK, BLOCK) product is most of a block's work."""
+    x = state.copy()
+    for k0 in range(0, len(u), BLOCK):
+        chunk = u[k0:k0 + BLOCK]
+        _, _, power, reach = _cut(servo, len(chunk))
+        x = power @ x + reach @ chunk
+    return x
 
 
 def small_s_gains(servo: DiscreteServo) -> tuple[float, float]:

@@ -13,6 +13,7 @@ from controller.servo.model import (
     contour_error_mm,
     discretise,
     filter_block,
+    filter_state,
     small_s_gains,
 )
 from controller.servo.precompensation import residual_servo
@@ -103,4 +104,4 @@ def state_after(xy_mm: np.ndarray, start_xy_mm: np.ndarray,
     """The servo filter states after following xy_mm from start_xy_mm (and state)."""
     v = _velocities(xy_mm, start_xy_mm, sample_period_s)
     sx, sy = rest_state(servos) if state is None else state
-    return filter_block(servos[0], v[:, 0], sx)[1], filter_block(servos[1], v[:, 1], sy)[1]
+    return filter_state(servos[0], v[:, 0], sx), filter_state(servos[1], v[:, 1], sy)

@@ -6,9 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller.numeric import segment_distance
 from controller.servo.prediction import ServoPrediction
-from controller.servo.window_search import pruned_window_distance_mm, squared_gap
+from controller.servo.window_search import (
+    consecutive,
+    pruned_window_distance_mm,
+    squared_gap,
+)
 
 # Reference segments searched each side of a sample's own: the modelled tool is never further
 # along the path than this from its reference (at 1 ms, 40 samples hold 50 um even at 1.25 mm/s).
@@ -47,16 +50,49 @@ def distance_from_reference_mm(ref: np.ndarray, act: np.ndarray, exact_above_mm:
     n = len(ref)
     if n < 2:
         return np.hypot(*(act - ref).T)
-    own = np.arange(n)
-    before, at = np.clip(own - 1, 0, n - 2), np.clip(own, 0, n - 2)
-    bound = np.minimum(segment_distance(act, ref[before], ref[before + 1]),
-                       segment_distance(act, ref[at], ref[at + 1]))
+    pad, bound = _padded_bound(ref, act, near)
     k = np.flatnonzero(bound > exact_above_mm)
     if k.size == 0:
         return bound
     out = bound.copy()
-    out[k] = window_distance_mm(ref, act[k], k, near, bound[k])
+    out[k] = padded_window_distance_mm(pad, act[k], k, near, bound[k])
     return out
+
+
+def _padded_bound(ref: np.ndarray, act: np.ndarray,
+                  near: int) -> tuple[list[np.ndarray], np.ndarray]:
+    """The padded columns of ref's segments (window_distance_mm's), and each actual point's
+    distance from the segments before and at its own sample (clipped to the polyline):
+    padded index near + j holds segment clip(j, 0, n - 2), so those are two slices."""
+    n = len(ref)
+    pad = padded_columns(segment_columns(ref), near)
+    before, at = slice(near - 1, near - 1 + n), slice(near, near + n)
+    return pad, own_bound_mm(pad, act, before, at)
+
+
+def segment_columns(ref: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(a_x, a_y, ab_x, ab_y, |ab|^2 or 1) of each segment of the polyline ref: the terms
+    numeric.segment_distance forms per point, here once per segment."""
+    a = ref[:-1]
+    ab = ref[1:] - a
+    len2 = ab[:, 0] * ab[:, 0] + ab[:, 1] * ab[:, 1]
+    return (a[:, 0], a[:, 1], ab[:, 0], ab[:, 1], np.where(len2 > 0.0, len2, 1.0))
+
+
+def own_bound_mm(columns: tuple[np.ndarray, ...], points: np.ndarray, before: np.ndarray | slice,
+                 at: np.ndarray | slice) -> np.ndarray:
+    """Per point, the lesser of its distances from segments before and at of columns:
+    numeric.segment_distance's numbers (the same operations on the same terms; the square root
+    of the lesser square is the lesser root), without its (n, 2) temporaries and sums."""
+    ax, ay, abx, aby, den = columns
+    px, py = points[..., 0], points[..., 1]
+    gaps = [squared_gap(px - ax[j], py - ay[j], abx[j], aby[j], den[j]) for j in (before, at)]
+    return np.sqrt(np.minimum(gaps[0], gaps[1]))
+
+
+def padded_columns(columns: tuple[np.ndarray, ...], near: int) -> list[np.ndarray]:
+    """The columns with near copies of the first segment before and of the last after."""
+    return [np.concatenate((np.full(near, c[0]), c, np.full(near, c[-1]))) for c in columns]
 
 
 def window_distance_mm(ref: np.ndarray, points: np.ndarray, k: np.ndarray,
@@ -72,21 +108,23 @@ def window_distance_mm(ref: np.ndarray, points: np.ndarray, k: np.ndarray,
 
     upper_mm (per point, at least its distance: that from its own segments) lets the search
     skip the segments that cannot come that close (window_search.py): the same numbers."""
-    a = ref[:-1]
-    ab = ref[1:] - a
-    len2 = ab[:, 0] * ab[:, 0] + ab[:, 1] * ab[:, 1]
-    cols = (a[:, 0], a[:, 1], ab[:, 0], ab[:, 1], np.where(len2 > 0.0, len2, 1.0))
-    pad = [np.concatenate((np.full(near, c[0]), c, np.full(near, c[-1]))) for c in cols]
+    pad = padded_columns(segment_columns(ref), near)
+    return padded_window_distance_mm(pad, points, k, near, upper_mm)
+
+
+def padded_window_distance_mm(pad: list[np.ndarray], points: np.ndarray, k: np.ndarray,
+                              near: int, upper_mm: np.ndarray | None = None) -> np.ndarray:
+    """window_distance_mm on the padded columns of the polyline's segments."""
     if upper_mm is not None:
         found = pruned_window_distance_mm(pad, points, k, near, upper_mm)
         lost = np.flatnonzero(~np.isfinite(found))  # a bound that was not one (NaN): search all
         if lost.size:
-            found[lost] = window_distance_mm(ref, points[lost], k[lost], near)
+            found[lost] = padded_window_distance_mm(pad, points[lost], k[lost], near)
         return found
     # Padded index k + m (m < 2 near) holds segment clip(k - near + m, 0, n - 2).
     views = [np.lib.stride_tricks.sliding_window_view(c, 2 * near) for c in pad]
     out = np.empty(k.size)
-    contiguous = k.size > 0 and int(k[-1]) - int(k[0]) == k.size - 1
+    contiguous = consecutive(k)
     for lo in range(0, k.size, WINDOW_BLOCK):
         kb = k[lo:lo + WINDOW_BLOCK]
         sel = slice(int(kb[0]), int(kb[-1]) + 1) if contiguous else kb
@@ -113,11 +151,9 @@ def worst_true_error_mm(xy_mm: np.ndarray, preds: tuple[ServoPrediction, ...],
     n = len(ref)
     if n < 2:
         return np.hypot(*(acts - ref).transpose(2, 0, 1)).max(axis=0)[k0:]
-    own = np.arange(n)
-    before, at = np.clip(own - 1, 0, n - 2), np.clip(own, 0, n - 2)
-    bound = np.minimum(segment_distance(acts, ref[before], ref[before + 1]),
-                       segment_distance(acts, ref[at], ref[at + 1]))  # (plant, sample)
+    pad, bound = _padded_bound(ref, acts, near)  # (plant, sample)
     k, plant = np.nonzero((bound > exact_above_mm).T)  # sorted by sample: the search's order
     if k.size:
-        bound[plant, k] = window_distance_mm(ref, acts[plant, k], k, near, bound[plant, k])
+        bound[plant, k] = padded_window_distance_mm(pad, acts[plant, k], k, near,
+                                                    bound[plant, k])
     return bound.max(axis=0)[k0:]
