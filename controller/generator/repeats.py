@@ -49,7 +49,7 @@ class Bounded(OrderedDict):
             self.popitem(last=False)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, repr=False)
 class _Blend:
     """A blend by its geometry: the trimmed parameters and lengths, and the PH quintic."""
 

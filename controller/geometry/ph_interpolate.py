@@ -35,7 +35,7 @@ def _power(bernstein: np.ndarray) -> np.ndarray:
     return np.stack([rows @ row for row in m], axis=1)[:len(bernstein)]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, repr=False)
 class PowerForms:
     """What the Newton iteration needs of each quintic, computed for all of them at once with
     PhQuintic's own operations (its cached properties, one object at a time, were most of the

@@ -36,7 +36,7 @@ def taylor_interpolate(curve: Curve, u0: float, v_mm_s: ArrayLike, a_mm_s2: Arra
     return np.array(out)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, repr=False)
 class FeedFluctuation:
     """Per-step |actual step - V T| / (V T): maximum, RMS and the whole series."""
 

@@ -71,10 +71,12 @@ def nurbs_hull_box(block: NurbsBlock) -> Box:
 
 
 def line_length_and_box(block: LineBlock) -> tuple[float, Box]:
-    s, e = block.start, block.end
-    length = math.dist(s, e)
-    return length, ((min(s[0], e[0]), min(s[1], e[1]), min(s[2], e[2])),
-                    (max(s[0], e[0]), max(s[1], e[1]), max(s[2], e[2])))
+    (sx, sy, sz), (ex, ey, ez) = block.start, block.end
+    length = math.dist(block.start, block.end)
+    # min(s, e) and max(s, e) as min() and max() give them (s on a tie), without their calls:
+    # this runs for every G0/G1 line of a program
+    return length, ((ex if ex < sx else sx, ey if ey < sy else sy, ez if ez < sz else sz),
+                    (ex if ex > sx else sx, ey if ey > sy else sy, ez if ez > sz else sz))
 
 
 def arc_sweep_rad(block: ArcBlock) -> float:

@@ -113,7 +113,7 @@ class LineCursor:
         return self.files[k - 1][0], i
 
 
-@dataclass(slots=True)
+@dataclass(slots=True, eq=False)
 class _Loop:
     kind: str  # WHILE, DO or REPEAT
     start: int  # the line of its while, do or repeat
@@ -121,7 +121,7 @@ class _Loop:
     left: int = 0  # REPEAT: passes still to run
 
 
-@dataclass(slots=True)
+@dataclass(slots=True, eq=False)
 class Frame:
     label: str | None  # the subroutine's label; None for the main program
     return_line: int

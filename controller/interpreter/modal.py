@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from controller.blocks import PathControl
 
 
-@dataclass(slots=True)
+@dataclass(slots=True, eq=False)
 class Modal:
     """What a line's motion and offset codes read and the next lines inherit.
 

@@ -13,7 +13,7 @@ SAVE, INVALIDATE, RESTORE, SAVE_AUTO = 70, 71, 72, 73
 MODAL_SAVE_CODES = frozenset((SAVE, INVALIDATE, RESTORE, SAVE_AUTO))
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, eq=False)
 class Snapshot:
     """What M70 keeps: LinuxCNC's list, less the modes phcnc does not have (cutter
     compensation, feed mode, lathe modes, overrides): units, plane, distance modes, work

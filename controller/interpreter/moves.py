@@ -19,6 +19,7 @@ from controller.interpreter.work_offsets import WorkOffsets
 # pulses (1 um), so a program that ended at Y0.00059 stands at Y0.001 when run again.
 SAME_POINT_MM = 2e-3
 _G6_LETTERS = frozenset("XYZRK")
+_G6_POINT = frozenset("XYRK")  # the words of a G6.2 control point or knot line
 _AXES = frozenset("XYZ@^")  # the words that name an end point (@ ^: polar.py)
 
 
@@ -38,6 +39,7 @@ class Moves:
         self.out = out
         self.has_z = config.has_axis("z")
         self.rapid_mm_s = config.interpolator.rapid_feed_mm_s
+        self.max_feed_mm_s = config.interpolator.max_feed_mm_s  # (config is frozen)
         self.nurbs: NurbsCollector | None = None  # the block of an open G5.2 or G6.2
         gcode = config.gcode
         self.default_feed_mm_min = gcode.default_feed_mm_min
@@ -163,7 +165,8 @@ class Moves:
         feed = self.rapid_mm_s if rapid else modal.feed_mm_s
         block = LineBlock(modal.pos, end, feed, rapid, modal.path_control,
                           Source(self.path, lineno, lineno))
-        cap = self._capped(feed)
+        cap = self.max_feed_mm_s
+        cap = cap if cap < feed else feed  # _capped(feed) inline: this runs for every G1 line
         # math.dist is within a few ulps of the length (a numpy norm): only a move near the
         # limit needs that, and a G1 line of a long program costs no numpy call.
         if math.dist(modal.pos, end) > cap * MAX_BLOCK_S * (1.0 - 1e-9):
@@ -191,7 +194,8 @@ class Moves:
         return min(a.pulse_mm for a in self.config.axes)
 
     def _capped(self, feed_mm_s: float) -> float:
-        return min(feed_mm_s, self.config.interpolator.max_feed_mm_s)
+        cap = self.max_feed_mm_s
+        return cap if cap < feed_mm_s else feed_mm_s  # min(feed_mm_s, cap), without its call
 
     def _machine(self, axis: int, value: float) -> float:
         """An absolute program coordinate (program units) in machine mm."""
@@ -285,14 +289,35 @@ class Moves:
             if "K" not in vals:
                 raise WordError("X" if "X" in vals else "Y" if "Y" in vals else "R",
                                 "G6.2 control point needs its knot K")
-            last_x, last_y = self.nurbs.points[-1]
-            x = self._machine(0, vals["X"]) if "X" in vals else last_x
-            y = self._machine(1, vals["Y"]) if "Y" in vals else last_y
-            self.nurbs.add_point(x, y, vals.get("R", 1.0), lineno)
-            self.nurbs.add_knot(vals["K"], lineno, knot_only=False)
+            self._g6_point(vals, lineno)
         elif "K" in vals:
             self.nurbs.add_knot(vals["K"], lineno, knot_only=True)
         return True
+
+    def g6_line(self, code: int, vals: dict[str, float], lineno: int) -> bool:
+        """A line of X Y R K words only (`code`: its one G code, -1 for none, or G6.2's 62; no
+        M) while a block is open: most lines of a NURBS program, taken as nurbs_line takes
+        them, without its checks of other words. False (nothing done) if the block is not a
+        G6.2 or the line has another code or word or no K."""
+        nurbs = self.nurbs
+        if code not in (-1, 62) or nurbs.kind != "G6.2" or "K" not in vals:  # type: ignore[union-attr]
+            return False
+        if not _G6_POINT.issuperset(vals):
+            return False
+        if len(vals) == 1:
+            nurbs.add_knot(vals["K"], lineno, knot_only=True)  # type: ignore[union-attr]
+        else:
+            self._g6_point(vals, lineno)
+        return True
+
+    def _g6_point(self, vals: dict[str, float], lineno: int) -> None:
+        """A G6.2 control point (X Y R, any of them) and its knot K."""
+        nurbs = self.nurbs
+        last_x, last_y = nurbs.points[-1]  # type: ignore[union-attr]
+        x = self._machine(0, vals["X"]) if "X" in vals else last_x
+        y = self._machine(1, vals["Y"]) if "Y" in vals else last_y
+        nurbs.add_point(x, y, vals.get("R", 1.0), lineno)  # type: ignore[union-attr]
+        nurbs.add_knot(vals["K"], lineno, knot_only=False)  # type: ignore[union-attr]
 
     def _g5_line(self, gs: list[int], ms: list[int], vals: dict[str, float],
                  lineno: int) -> None:

@@ -85,18 +85,22 @@ class NurbsCollector:
     def add_point(self, x: float, y: float, weight: float, line: int) -> None:
         if self.knot_only:
             raise WordError("X", "NURBS control point after the knot-only lines")
-        if len(self.points) >= MAX_CONTROL_POINTS:
+        points = self.points
+        if len(points) >= MAX_CONTROL_POINTS:
             raise WordError("X", f"NURBS with more than {MAX_CONTROL_POINTS} control points")
-        gap_mm = math.hypot(x - self.points[-1][0], y - self.points[-1][1])
+        last_x, last_y = points[-1]
+        gap_mm = math.hypot(x - last_x, y - last_y)
         if 0.0 < gap_mm < self.min_gap_mm:
             raise WordError("X", f"NURBS control point {gap_mm:.3g} mm from the one before: "
                                  f"nearer than the {self.min_gap_mm:g} mm pulse but not the same "
                                  "point, a hook no machine can follow (repeat the point exactly "
                                  "for a corner, or move it apart)")
-        self.weights.append(_check_weight(weight, "R" if self.kind == "G6.2" else "P",
-                                          self.weight_range))
-        self.weight_range = (min(self.weight_range[0], weight), max(self.weight_range[1], weight))
-        self.points.append((x, y))
+        lo, hi = self.weight_range
+        if not lo <= weight <= hi:  # (a weight within the block's so far passes the checks)
+            _check_weight(weight, "R" if self.kind == "G6.2" else "P", self.weight_range)
+            self.weight_range = (min(lo, weight), max(hi, weight))
+        self.weights.append(weight)
+        points.append((x, y))
         self.last_line = line
 
     def add_knot(self, knot: float, line: int, knot_only: bool) -> None:
@@ -122,7 +126,8 @@ class NurbsCollector:
         if n < order:
             raise self._fail(last, self.kind, f"NURBS of order {order} needs at least {order} "
                                               f"control points, got {n}")
-        polygon_mm = polygon_length_mm(np.array(self.points, dtype=float))
+        points = np.array(self.points, dtype=float)
+        polygon_mm = polygon_length_mm(points)
         feed = min(self.feed_mm_s, max_feed_mm_s)
         if polygon_mm > feed * MAX_NURBS_NOMINAL_S:
             raise self._fail(last, self.kind,
@@ -132,7 +137,7 @@ class NurbsCollector:
         knots = self._knot_vector(last)
         return NurbsBlock(
             degree=order - 1,
-            control_points=np.array(self.points, dtype=float),
+            control_points=points,
             weights=np.array(self.weights, dtype=float),
             knots=knots,
             z_mm=self.z_mm,
@@ -195,6 +200,8 @@ def split_at_corners(block: NurbsBlock) -> list[NurbsBlock]:
     a cusp) and around any stretch where it stands still (repeated control points): each such
     corner then is a joint between blocks, blended within the tolerance under G64 or stopped
     at, as a corner between two G1 lines is; a part of zero length is no motion."""
+    if _smooth(block):
+        return [block]
     still = still_spans(block.degree, block.knots, block.control_points)
     u0, u1 = float(block.knots[block.degree]), float(block.knots[-block.degree - 1])
     cuts = sorted({*kink_knots(Nurbs.from_block(block)), *(u for span in still for u in span)}
@@ -208,3 +215,23 @@ def split_at_corners(block: NurbsBlock) -> list[NurbsBlock]:
         return [block]
     parts.append(replace(block, knots=knots, control_points=points, weights=weights))
     return parts
+
+
+def _smooth(block: NurbsBlock) -> bool:
+    """Neither two neighbouring control points the same nor an inner knot repeated `degree`
+    times: then kink_knots and still_spans find nothing (their own first tests), so most
+    blocks are not split, without building a curve or a numpy call per test."""
+    points = block.control_points.tolist()
+    if any(a == b for a, b in zip(points, points[1:], strict=False)):
+        return False
+    p = block.degree
+    knots = block.knots.tolist()
+    u_start, u_end = knots[p], knots[-p - 1]
+    run, last = 0, None
+    for u in knots:  # non-decreasing: equal knots are neighbours
+        if u_start < u < u_end:
+            run = run + 1 if u == last else 1
+            if run >= p:
+                return False
+        last = u
+    return True

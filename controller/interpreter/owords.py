@@ -21,7 +21,7 @@ PROGRAM = "PROGRAM"  # the keyword of a bare `O100` line: a numbered program sta
 ASCII_UPPER = str.maketrans("abcdefghijklmnopqrstuvwxyz", "ABCDEFGHIJKLMNOPQRSTUVWXYZ")
 
 
-@dataclass(slots=True)
+@dataclass(slots=True, eq=False)
 class OWord:
     """One O-word line: `O100 while [#1 LT 3]` has label "100", keyword "WHILE" and the
     argument text from `arg_pos` on (read when the line runs, against the parameters then)."""

@@ -132,9 +132,8 @@ class Interpreter:
         self.state.locate = lambda n: cursor.locate(self.path, n)
         flow = self.flow = Flow(self.path, cursor, self.params,
                                 self.state.config.gcode.subroutine_path)
-        centroid = self.centroid
-        self.subprograms = Subprograms(flow, self.state.warn_word,
-                                       centroid.end_job if centroid.ends_job else None)
+        end_job = self.centroid.end_job if self.centroid.ends_job else None
+        self.subprograms = Subprograms(flow, self.state.warn_word, end_job)
         for raw in cursor:
             lineno = cursor.next_line - 1
             if not emitting and from_line and first <= lineno < EXTERNAL_LINE_BASE:
@@ -159,8 +158,7 @@ class Interpreter:
                     self._oword(line, lineno, raw)
                     continue
                 self._execute(line, lineno)  # type: ignore[arg-type]
-            if not emitting:
-                emitting = self.state.at_line is not None
+            emitting = emitting or self.state.at_line is not None
             if out:
                 if emitting:
                     yield from (out if lineno < EXTERNAL_LINE_BASE else self._located(out))
@@ -229,7 +227,9 @@ class Interpreter:
             if code is not None and _VALUE_LETTERS.issuperset(vals):
                 state = self.state
                 try:
-                    if state.moves.nurbs is not None or not state.fast(code, vals, lineno):
+                    moves = state.moves  # with a NURBS block open: its point lines
+                    if not (state.fast(code, vals, lineno) if moves.nurbs is None else
+                            state.mark_pending is None and moves.g6_line(code, vals, lineno)):
                         state.execute([] if code < 0 else [code], [], vals, lineno)
                 except WordError as exc:
                     raise self._error(Line(words, text), lineno, exc.word, exc.message) from None

@@ -68,7 +68,7 @@ class Moments:
                 "mean": total / self.count}
 
 
-@dataclass
+@dataclass(eq=False)
 class RunSummary:
     """What the report needs from the runs' plans (the plans themselves are not kept)."""
 

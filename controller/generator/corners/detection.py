@@ -24,7 +24,7 @@ _XTOL = 1e-13
 PEAK_PREFILTER = 0.5
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CornerZone:
     """Parameter interval [u_start, u_end] around the curvature peak u_peak (Figure 1's AB, CD)."""
 

@@ -13,7 +13,7 @@ LOOKBACK_S = 0.03  # a violation is caused by what the path did up to this long 
 BEFORE_S = 0.05  # a stop's window starts this long before it ...
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Violation:
     """A stretch of samples [k_lo, k_hi] whose |contour error| exceeds the limit."""
 
@@ -23,7 +23,7 @@ class Violation:
     peak_mm: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class StopError:
     s_mm: float  # where the stop is on the run's path
     k: int  # its sample

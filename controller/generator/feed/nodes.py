@@ -25,7 +25,7 @@ STAIR_STEP = 0.03  # relative speed step of the staircase where vlim binds
 STAIR_CAP = 0.25  # stair node speed: this many steps below vlim there
 
 
-@dataclass
+@dataclass(eq=False, repr=False)
 class Nodes:
     """Planning nodes: the profile passes node k at s[k] with zero acceleration."""
 

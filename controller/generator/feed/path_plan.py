@@ -28,7 +28,7 @@ class LimitPolicy(StrEnum):
     CORNER_PLATEAU = "corner-plateau"  # Tsai 2008: V_sp = min(V_af, V_cf) held over each zone
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Reduction:
     """Dynamics module's verdict: scale the centripetal budget by factor over [s_lo, s_hi]."""
 
@@ -37,7 +37,7 @@ class Reduction:
     factor: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class FeedInput:
     """Everything module 3 needs besides the path (mm, s)."""
 

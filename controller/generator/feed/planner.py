@@ -53,7 +53,7 @@ class PlanResult(Enum):
     LIMIT_VIOLATED = "no profile under the feed limit was found"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class FeedPlan:
     """A planned feed profile (empty unless result is OK) and the planning rounds it took."""
 

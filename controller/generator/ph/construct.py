@@ -44,7 +44,7 @@ class BlockCurve:
     blend_tolerance_mm: float | None = None  # how far a G1 corner at its end may be rounded
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CornerInfo:
     """A sharp corner found on block `block` (eq. 13-15) and how it was replaced."""
 

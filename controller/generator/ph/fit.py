@@ -19,7 +19,7 @@ FOOT_SETTLED = 1e-6
 DEFAULT_MAX_DEPTH = 8
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PhSegment:
     """A PH quintic standing in for the curve on [u_start, u_end], with its fit error (mm)."""
 
@@ -132,7 +132,7 @@ def fit_zones(curve: Curve, zones: list[tuple[float, float]], error_limit_mm: fl
     return [sorted(d, key=lambda seg: seg.u_start) for d in done]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ZoneFitReport:
     """Table I analogue for one zone: error of one PH and of the subdivided PH chain (mm)."""
 

@@ -23,7 +23,7 @@ from controller.geometry.ph_quintic import PhQuintic
 _SAFETY = 1.0 - 1e-9  # c D rounds: stay a hair inside the tolerance
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, repr=False)
 class LineJoints:
     """The joints between consecutive line blocks of a window, by the index of the block after
     the joint: turn angle, deviation of the unit blend (mm per mm of cut), its w coefficients
