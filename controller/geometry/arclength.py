@@ -11,12 +11,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from controller.geometry.arclength_inverse import INVERSE_TOL_MM, DerivsFn, InverseTable, SpeedFn
+from controller.geometry.gauss_legendre import W10, X10
 from controller.numeric import clamp, sorted_unique
 
 __all__ = ["INVERSE_TOL_MM", "ArcLengthTable"]
 
-_GL_ORDER = 10
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(_GL_ORDER)
+_GL_X, _GL_W = X10, W10  # 10-point Gauss-Legendre on each interval
+_GL_ORDER = len(_GL_X)
 _NEWTON_SWEEPS = 60  # safeguarded: usually 1-2 sweeps, bisection at worst
 _NEWTON_TOL_MM = 1e-11
 

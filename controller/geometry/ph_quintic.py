@@ -12,10 +12,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from controller.geometry.curves import curvature_derivative_from_derivatives
+from controller.geometry.gauss_legendre import W64, X64
 from controller.numeric import cached_property
 
 _BINOM5 = np.array([1.0, 5.0, 10.0, 10.0, 5.0, 1.0])
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
+_GL_X, _GL_W = X64, W64
 _REAL_ROOT_TOL = 1e-12
 
 

@@ -21,7 +21,8 @@ with open(sys.argv[1], "w") as fh:
 """
 
 # Neither command reaches these: other drives, the panel, OPC UA, identify, plots, scipy, and
-# numpy.ma (np.unique imports it on first call; the planner uses a cheaper sorted unique).
+# numpy.ma (np.unique imports it on first call; the planner uses a cheaper sorted unique),
+# numpy.polynomial (the Gauss-Legendre tables are written out, controller/geometry).
 NEVER = (
     "scipy",
     "canopen",
@@ -40,6 +41,7 @@ NEVER = (
     "controller.servo.path_distance",
     "controller.servo.fit",
     "numpy.ma",
+    "numpy.polynomial",
     "difflib",
 )
 # Only a run through cncd or a probing program needs these.
