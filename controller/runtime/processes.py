@@ -226,6 +226,7 @@ class Runtime:
                     drive.close()
                 back_to_normal()
         finally:
+            gc.unfreeze()  # (frozen by _start) a long-lived daemon's cycles are collected again
             ring.set_flag(FLAG_ABORT)
             self._stop_children()
             # The children are joined: their last messages (peak RSS) are in the pipe.
@@ -259,13 +260,12 @@ class Runtime:
             args=(self.path, self.config, blocks_fn, nc_fifo, ring, messages.info,
                   os.getpid()))
         # Frozen, the objects held now are skipped by the children's collections, which then
-        # neither scan them nor write to (so copy) their pages; the parent's own are unfrozen.
+        # neither scan them nor write to (so copy) their pages; the parent's stay frozen while
+        # the motion runs (run() unfreezes them): its collections skip the program's blocks,
+        # the config and the modules (some 100,000 objects on a 30,000-line program).
         gc.freeze()
-        try:
-            for proc in self.procs.values():
-                proc.start()
-        finally:
-            gc.unfreeze()
+        for proc in self.procs.values():
+            proc.start()
         self._t_started_s = time.monotonic()
 
     def _watch(self, messages: _Messages) -> Callable[[], str | None]:
