@@ -39,6 +39,7 @@ from drivers.registry import make_drive
 # fork: children start in ~ms (time to first motion); they are forked before any thread
 # (card clock, UI) exists in this process.
 _CTX = mp.get_context("fork")
+ALIVE_RECHECK_S = 0.0005  # a dead generator is seen this long after it died (plus a cycle)
 MESSAGE_WAIT_S = 0.05  # a stage's last message may still be in the queue's pipe this long
 
 
@@ -120,6 +121,7 @@ class RingSource:
     def __init__(self, ring: RefRing, generator: Any, messages: _Messages) -> None:
         self.ring, self.generator, self.messages = ring, generator, messages
         self._failure: str | None = None
+        self._alive_until_s = 0.0  # the generator was alive when last asked: until then
 
     def read(self, max_rows: int) -> Any:
         return self.ring.read(max_rows)
@@ -132,9 +134,14 @@ class RingSource:
             if self._failure is None:  # asked every cycle of the stop: wait for it once
                 self._failure = self.messages.failure()
             return SourceState.FAILED, self._failure
+        if time.monotonic() < self._alive_until_s:
+            return SourceState.STREAMING, ""
         if self.generator.exitcode is not None:
             return SourceState.FAILED, ("reference generator process died "
                                         f"(exit code {self.generator.exitcode})")
+        # Its exit code (a waitpid) is asked at most every ALIVE_RECHECK_S: the loop asks
+        # three times a cycle, and in virtual time a cycle takes well under a millisecond.
+        self._alive_until_s = time.monotonic() + ALIVE_RECHECK_S
         return SourceState.STREAMING, ""
 
     def total_rows(self) -> int | None:
