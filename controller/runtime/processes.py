@@ -22,6 +22,7 @@ from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
 from controller.motion.source import SourceState
 from controller.motion.types import MotionProgress, MotionResult, MotionSettings, MotionState
 from controller.offsets import OffsetTable, work_origin
+from controller.runtime.gc_policy import collect_less
 from controller.runtime.stages import (
     BlocksFn,
     GenerateFn,
@@ -214,6 +215,7 @@ class Runtime:
         ring = RefRing.create(int(round(ring_s / self.config.sample_period_s)), n_cols)
         messages = _Messages(_CTX.Queue())
         rt = "off"
+        thresholds = gc.get_threshold()
         try:
             # Built before the fork so that backend imports (scipy) are paid once, not per child.
             drive = self.options.drive or _build_drive(self.config, self.options.virtual_time)
@@ -222,6 +224,8 @@ class Runtime:
             # residual, which made the first cycle late).
             axis_servos(self.config)
             self._start(ring, messages)
+            if self.options.virtual_time:  # no cycle waits on a collection (gc_policy.py)
+                collect_less()
             if self.options.rt_priority is not None and not self.options.virtual_time:
                 rt = try_realtime(self.options.rt_priority)
             if not self.options.keep_drive_open:
@@ -234,6 +238,7 @@ class Runtime:
                 back_to_normal()
         finally:
             gc.unfreeze()  # (frozen by _start) a long-lived daemon's cycles are collected again
+            gc.set_threshold(*thresholds)
             ring.set_flag(FLAG_ABORT)
             self._stop_children()
             # The children are joined: their last messages (peak RSS) are in the pipe.

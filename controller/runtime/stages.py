@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import ctypes
-import gc
 import itertools
 import os
 import resource
@@ -20,6 +19,7 @@ from controller.motion.realtime import producer_nice
 from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
 from controller.motion.source import SyncMarks
 from controller.refpoints import RefChunk
+from controller.runtime.gc_policy import collect_less
 
 BlocksFn = Callable[[str, MachineConfig], Iterable[Any]]
 GenerateFn = Callable[[Iterable[Any], MachineConfig], Iterable[RefChunk]]
@@ -135,7 +135,6 @@ def _die_with_parent(parent_pid: int) -> None:
 
 
 PR_SET_PDEATHSIG = 1
-PRODUCER_GC_GEN0 = 10_000  # the generator's first-generation threshold (Python's is 700)
 # Each producer's memory ceiling (RLIMIT_DATA: its heap and anonymous mappings, not the
 # shared libraries): a planning bug then ends one job with MemoryError, not the PC. Plans of
 # the longest programs take under 150 MB; the unit caps the whole service (MemoryMax).
@@ -210,11 +209,7 @@ def generator_main(config: MachineConfig, generate_fn: GenerateFn, nc_fifo: Queu
                    ring: RefRing, info: Queue, parent_pid: int) -> None:
     """Process 2: NC blocks -> reference points into the shared-memory ring."""
     parent = _child_setup(parent_pid, info, "generator")
-    # The planner makes millions of short-lived objects and next to no reference cycles (a
-    # 30,000-line walk leaves some 100 objects of cycles): collected every 700 net new
-    # containers, as by default, its collections were about 7 % of its CPU, a third of that
-    # at every PRODUCER_GC_GEN0. The cycles are still collected, later.
-    gc.set_threshold(PRODUCER_GC_GEN0, *gc.get_threshold()[1:])
+    collect_less()  # (gc_policy.py says why)
     try:
         marks = SyncMarks()
         blocks = _unbatched(drain_fifo(nc_fifo, lambda: _should_stop(ring, parent)))
