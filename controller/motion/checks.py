@@ -43,6 +43,14 @@ class RefHistory:
             self.cmd_counts[idx] = cmd_counts
         self.count += len(pos_mm)
 
+    def counts_copy(self, first: int, n: int) -> np.ndarray:
+        """A copy of the step counters of frames first.. first + n - 1 (a slice's unless they
+        wrap round the ring's end)."""
+        start = first % self.capacity
+        if start + n <= self.capacity:
+            return self.cmd_counts[start : start + n].copy()
+        return self.cmd_counts[np.arange(first, first + n) % self.capacity]
+
     def at(self, seq: np.ndarray) -> slice | np.ndarray:
         """The ring's slots of frames seq (strictly increasing, as feedback rows are): a slice
         where they are consecutive and do not wrap (a block's rows: views, not gathers), else
