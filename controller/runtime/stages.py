@@ -44,8 +44,8 @@ class BlockBatch(list):
 
     A line goes as a tuple of its fields, made a LineBlock again on the other side: pickled as
     itself, each line and its Source ran dataclasses' __getstate__ and __setstate__ in Python
-    (about 40,000 instructions a line between both ends, a tenth of the two producers' work on
-    a G1 walk); the other blocks go as they are."""
+    (some 75,000 instructions a line between both ends, a tenth of the producers' work on a G1
+    walk); the other blocks go as they are."""
 
     def __reduce__(self) -> tuple[Any, tuple[list[Any]]]:
         return _unpacked, ([_packed(b) for b in self],)
