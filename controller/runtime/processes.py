@@ -40,7 +40,7 @@ from drivers.registry import make_drive
 # fork: children start in ~ms (time to first motion); they are forked before any thread
 # (card clock, UI) exists in this process.
 _CTX = mp.get_context("fork")
-ALIVE_RECHECK_S = 0.0005  # a dead generator is seen this long after it died (plus a cycle)
+ALIVE_RECHECK_S = 0.001  # a dead producer is seen up to this long after it died (plus a cycle)
 MESSAGE_WAIT_S = 0.05  # a stage's last message may still be in the queue's pipe this long
 
 
@@ -116,13 +116,31 @@ class _Messages:
         return message.replace(provisional, self.failure(), 1)
 
 
+class ExitCode:
+    """A producer's exit code, None while it runs. Asked a few times every motion cycle, and in
+    virtual time a cycle takes well under a millisecond: a running process is asked (a
+    waitpid) at most every ALIVE_RECHECK_S."""
+
+    def __init__(self, proc: Any) -> None:
+        self.proc = proc
+        self._alive_until_s = 0.0  # it ran when last asked: taken as running until then
+
+    def code(self) -> int | None:
+        if time.monotonic() < self._alive_until_s:
+            return None
+        code = self.proc.exitcode
+        if code is None:
+            self._alive_until_s = time.monotonic() + ALIVE_RECHECK_S
+        return code  # type: ignore[no-any-return]
+
+
 class RingSource:
     """RefSource over the shared ring; FAILED when the generator raised or died."""
 
     def __init__(self, ring: RefRing, generator: Any, messages: _Messages) -> None:
         self.ring, self.generator, self.messages = ring, generator, messages
         self._failure: str | None = None
-        self._alive_until_s = 0.0  # the generator was alive when last asked: until then
+        self._exit = ExitCode(generator)
 
     def read(self, max_rows: int) -> Any:
         return self.ring.read(max_rows)
@@ -135,14 +153,9 @@ class RingSource:
             if self._failure is None:  # asked every cycle of the stop: wait for it once
                 self._failure = self.messages.failure()
             return SourceState.FAILED, self._failure
-        if time.monotonic() < self._alive_until_s:
-            return SourceState.STREAMING, ""
-        if self.generator.exitcode is not None:
-            return SourceState.FAILED, ("reference generator process died "
-                                        f"(exit code {self.generator.exitcode})")
-        # Its exit code (a waitpid) is asked at most every ALIVE_RECHECK_S: the loop asks
-        # three times a cycle, and in virtual time a cycle takes well under a millisecond.
-        self._alive_until_s = time.monotonic() + ALIVE_RECHECK_S
+        code = self._exit.code()
+        if code is not None:
+            return SourceState.FAILED, f"reference generator process died (exit code {code})"
         return SourceState.STREAMING, ""
 
     def total_rows(self) -> int | None:
@@ -281,15 +294,16 @@ class Runtime:
         self._t_started_s = time.monotonic()
 
     def _watch(self, messages: _Messages) -> Callable[[], str | None]:
-        interp = self.procs["interpreter"]
+        interp = ExitCode(self.procs["interpreter"])
         found: list[str] = []
 
         def watch() -> str | None:
-            # Called every motion cycle: a dead process is seen within one cycle (~2 ms). Its
-            # message is waited for once, not on every cycle of the stop that follows.
+            # Called every motion cycle: a dead process is seen within a cycle (and
+            # ALIVE_RECHECK_S). Its message is waited for once, not on every cycle of the stop
+            # that follows.
             if found:
                 return found[0]
-            code = interp.exitcode
+            code = interp.code()
             if code is None or (code == 0 and "interpreter" not in messages.errors):
                 return None
             messages.drain(MESSAGE_WAIT_S, until=lambda: "interpreter" in messages.rss_kb)
