@@ -43,6 +43,24 @@ class RefHistory:
             self.cmd_counts[idx] = cmd_counts
         self.count += len(pos_mm)
 
+    def counts_copy(self, first: int, n: int) -> np.ndarray:
+        """A copy of the step counters of frames first.. first + n - 1 (a slice's unless they
+        wrap round the ring's end)."""
+        start = first % self.capacity
+        if start + n <= self.capacity:
+            return self.cmd_counts[start : start + n].copy()
+        return self.cmd_counts[np.arange(first, first + n) % self.capacity]
+
+    def at(self, seq: np.ndarray) -> slice | np.ndarray:
+        """The ring's slots of frames seq (strictly increasing, as feedback rows are): a slice
+        where they are consecutive and do not wrap (a block's rows: views, not gathers), else
+        the index array."""
+        n = len(seq)
+        start = int(seq[0]) % self.capacity
+        if int(seq[-1]) - int(seq[0]) == n - 1 and start + n <= self.capacity:
+            return slice(start, start + n)
+        return seq % self.capacity
+
 
 @dataclass(frozen=True)
 class FerrorTrip:
@@ -91,7 +109,7 @@ class FerrorCheck:
         self.last_cmd = cmd[-1].copy()
         ferr = (cmd - fb.encoder_counts).astype(float) * self.pulse_mm
         if hist is not None and hist.count:
-            idx = fb.seq % hist.capacity
+            idx = hist.at(fb.seq)
             ferr = ferr - (hist.cmd_counts[idx].astype(float) * self.pulse_mm - hist.pos_mm[idx])
         self.last_mm = ferr[-1].copy()
         abs_mm = np.abs(ferr)
@@ -179,10 +197,19 @@ def _windows(hist: RefHistory, seq: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     lens = np.sqrt(np.square(np.diff(verts, axis=1)).sum(axis=0))  # 0 where clipped
     width = 2 * NEAR_FRAMES + 1
     if seq[-1] - seq[0] == len(seq) - 1 == len(span) - width:  # consecutive frames
-        return (np.lib.stride_tricks.sliding_window_view(verts, width, axis=1),
-                np.lib.stride_tricks.sliding_window_view(lens, width - 1))
+        return _sliding(verts, width), _sliding(lens[None, :], width - 1)[0]
     at = (seq - (first + NEAR_FRAMES))[:, None] + np.arange(width)
     return verts[:, at], lens[at[:, :-1]]
+
+
+def _sliding(a: np.ndarray, width: int) -> np.ndarray:
+    """sliding_window_view(a, width, axis=1) of a C-contiguous 2-D array: the same read-only
+    view, made directly (numpy's checks and wrappers cost more than the batch's windows)."""
+    rows = a.shape[1] - width + 1
+    step = a.strides[1]
+    view = np.ndarray((a.shape[0], rows, width), a.dtype, a, 0, (a.strides[0], step, step))
+    view.flags.writeable = False
+    return view
 
 
 def start_gap(first_mm: np.ndarray, start_counts: np.ndarray, pulse_mm: np.ndarray,

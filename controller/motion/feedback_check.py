@@ -70,7 +70,9 @@ class FeedbackCheck:
                 and int(seq[-1]) == self.last_seq + len(seq):
             frames = _ONE  # a cycle's rows a frame each: the same allowance, fewer calls
         else:
-            frames = np.maximum(seq - np.concatenate(((self.last_seq,), seq[:-1])), 1)[:, None]
+            prev = np.empty_like(seq)  # (a tuple joined to seq[:-1] converted it first)
+            prev[0], prev[1:] = self.last_seq, seq[:-1]
+            frames = np.maximum(seq - prev, 1)[:, None]
         self.last, self.last_seq = enc[-1].copy(), int(seq[-1])
         mm = self.pulse_mm
         allowed = self.max_step_counts * frames + (self.settle_counts if settling else 0.0)

@@ -342,8 +342,7 @@ class MotionController:
         if not every or len(out) <= every:
             self.stream.journal.record(len(out), consumed, before)
             return
-        hist = self.stream.hist
-        counts = hist.cmd_counts[(before.hist_count + np.arange(len(out))) % hist.capacity]
+        counts = self.stream.hist.counts_copy(before.hist_count, len(out))
         block = BlockSend(before, consumed, counts, self.stream.precomp)  # type: ignore[arg-type]
         self.stream.journal.record_block(block, every)  # its pieces made if a take-back looks
 

@@ -23,7 +23,9 @@ class PulseCounter:
         if pos.shape[0] == 0:
             return np.zeros((0, self.counts.shape[0]), dtype=np.int64)
         absolute = np.rint(pos / self.pulse_mm).astype(np.int64)
-        frames = np.diff(absolute, axis=0, prepend=self.counts[None, :])
+        frames = np.empty_like(absolute)  # np.diff with prepend, without its joined copy
+        np.subtract(absolute[0], self.counts, out=frames[0])
+        np.subtract(absolute[1:], absolute[:-1], out=frames[1:])
         self.counts = absolute[-1].copy()
         return frames
 

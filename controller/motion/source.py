@@ -54,13 +54,22 @@ def chunk_rows(chunk: RefChunk) -> np.ndarray:
 
 def pause_index(rows: np.ndarray) -> int | None:
     """The first row after which the program pauses or sets outputs, if any."""
-    marked = np.flatnonzero((rows[:, -1] < 0.0) & ~_is_mark(rows[:, -1], SYNC_MARK))
+    negative = rows[:, -1] < 0.0
+    if not negative.any():  # no mark at all (most reads): one test, not the mark's seven calls
+        return None
+    marked = np.flatnonzero(negative & ~_is_mark(rows[:, -1], SYNC_MARK))
     return int(marked[0]) if marked.size else None
 
 
 def sync_marked(rows: np.ndarray) -> np.ndarray:
     """The indices of the rows marked to set outputs as they are clocked (M62)."""
-    return np.flatnonzero(_is_mark(rows[:, -1], SYNC_MARK)) if len(rows) else np.zeros(0, int)
+    if not len(rows) or not (rows[:, -1] < 0.0).any():  # (as pause_index: no mark)
+        return _NONE
+    return np.flatnonzero(_is_mark(rows[:, -1], SYNC_MARK))
+
+
+_NONE = np.zeros(0, int)
+_NONE.flags.writeable = False
 
 
 def _is_mark(value: np.ndarray, mark: float) -> np.ndarray:

@@ -12,12 +12,14 @@ from dataclasses import replace
 from multiprocessing.queues import Queue
 from typing import Any
 
+from controller.blocks import LineBlock, Source
 from controller.config import MachineConfig
 from controller.interpreter.fifo import FAILED, drain_fifo, feed_fifo
 from controller.motion.realtime import producer_nice
 from controller.motion.ring import FLAG_ABORT, FLAG_FAILED, FLAG_FINAL, RefRing
 from controller.motion.source import SyncMarks
 from controller.refpoints import RefChunk
+from controller.runtime.gc_policy import collect_less
 
 BlocksFn = Callable[[str, MachineConfig], Iterable[Any]]
 GenerateFn = Callable[[Iterable[Any], MachineConfig], Iterable[RefChunk]]
@@ -38,7 +40,30 @@ def blocks_source(path: str, config: MachineConfig,
 
 class BlockBatch(list):
     """Blocks that go through the NC FIFO as one item (the generator stage takes them apart):
-    one put, pickle and get for BATCH_BLOCKS blocks, not each (some 20 us a block)."""
+    one put, pickle and get for BATCH_BLOCKS blocks, not each (some 20 us a block).
+
+    A line goes as a tuple of its fields, made a LineBlock again on the other side: pickled as
+    itself, each line and its Source ran dataclasses' __getstate__ and __setstate__ in Python
+    (some 75,000 instructions a line between both ends, a tenth of the producers' work on a G1
+    walk); the other blocks go as they are."""
+
+    def __reduce__(self) -> tuple[Any, tuple[list[Any]]]:
+        return _unpacked, ([_packed(b) for b in self],)
+
+
+def _packed(block: Any) -> Any:
+    if type(block) is not LineBlock:
+        return block
+    s = block.source
+    return (block.start, block.end, block.feed_mm_s, block.rapid, block.path, s.path,
+            s.first_line, s.last_line)
+
+
+def _unpacked(items: list[Any]) -> BlockBatch:
+    """The batch again: equal blocks (a tuple is a line, see BlockBatch)."""
+    line, source = LineBlock, Source
+    return BlockBatch([line(i[0], i[1], i[2], i[3], i[4], source(i[5], i[6], i[7]))
+                       if type(i) is tuple else i for i in items])
 
 
 BATCH_BLOCKS = 256
@@ -184,6 +209,7 @@ def generator_main(config: MachineConfig, generate_fn: GenerateFn, nc_fifo: Queu
                    ring: RefRing, info: Queue, parent_pid: int) -> None:
     """Process 2: NC blocks -> reference points into the shared-memory ring."""
     parent = _child_setup(parent_pid, info, "generator")
+    collect_less()  # (gc_policy.py says why)
     try:
         marks = SyncMarks()
         blocks = _unbatched(drain_fifo(nc_fifo, lambda: _should_stop(ring, parent)))

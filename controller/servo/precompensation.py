@@ -133,6 +133,7 @@ class Precompensator:
         self.last_mm = np.asarray(start_mm, float).copy()
         # The compensated axes' filters run together: one call a push, not one per axis.
         self.axes = [i for i, f in enumerate(self.filters) if f is not None]
+        self.all_axes = self.axes == list(range(len(self.filters)))
         self.stacked = StackedFilter([f for f in self.filters if f is not None]) \
             if self.axes else None
         self.lead_mm = np.zeros(len(self.filters))
@@ -141,13 +142,23 @@ class Precompensator:
         """Frames for the next wanted rows (same shape)."""
         if not len(wanted_mm):
             return wanted_mm
-        v = np.diff(np.vstack([self.last_mm[None, :], wanted_mm]), axis=0) / self.period_s
-        out = np.array(wanted_mm, float, copy=True)
+        wanted_mm = np.asarray(wanted_mm, float)
+        # np.diff of np.vstack, as two subtractions (the same values, a third of the calls).
+        d = np.empty(wanted_mm.shape)
+        np.subtract(wanted_mm[0], self.last_mm, out=d[0])
+        np.subtract(wanted_mm[1:], wanted_mm[:-1], out=d[1:])
+        v = d / self.period_s
+        out = wanted_mm.copy()
         if self.stacked is not None:
-            lead = self.stacked.step(v[:, self.axes])
-            out[:, self.axes] += lead
-            self.lead_mm[self.axes] = lead[-1]
-        self.last_mm = np.asarray(wanted_mm[-1], float).copy()
+            if self.all_axes:  # no column picked out (a copy each) when every axis is
+                lead = self.stacked.step(v)
+                out += lead
+                self.lead_mm = lead[-1].copy()
+            else:
+                lead = self.stacked.step(v[:, self.axes])
+                out[:, self.axes] += lead
+                self.lead_mm[self.axes] = lead[-1]
+        self.last_mm = wanted_mm[-1].copy()
         return out
 
     def settling_rows(self) -> np.ndarray:

@@ -25,13 +25,22 @@ class FrameFifo:
         n = frames.shape[0]
         if len(self) + n > self.capacity:
             raise BadFrameError(f"card FIFO overflow: {len(self)} + {n} > {self.capacity} frames")
-        idx = np.arange(self._tail, self._tail + n) % self.capacity
+        idx = self._slots(self._tail, n)
         self._frames[idx] = frames
         self._seq[idx] = np.arange(first_seq, first_seq + n)
         self._eos[idx] = False
         if end_of_stream and n:
-            self._eos[idx[-1]] = True
+            self._eos[(self._tail + n - 1) % self.capacity] = True
         self._tail += n
+
+    def _slots(self, first: int, n: int) -> slice | np.ndarray:
+        """The ring's slots of n frames from frame `first`: a slice unless they wrap round its
+        end (indexing by a slice costs a fraction of an index array's arange, modulo and
+        gather; the same frames)."""
+        start = first % self.capacity
+        if start + n <= self.capacity:
+            return slice(start, start + n)
+        return np.arange(first, first + n) % self.capacity
 
     def mark_end(self) -> bool:
         """Flag the last queued frame as end of stream; False when nothing is queued."""
@@ -54,7 +63,7 @@ class FrameFifo:
     def pop(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Up to n frames from the head: (frames, seq, eos flags)."""
         n = min(n, len(self))
-        idx = np.arange(self._head, self._head + n) % self.capacity
+        idx = self._slots(self._head, n)
         self._head += n
         return self._frames[idx].copy(), self._seq[idx].copy(), self._eos[idx].copy()
 

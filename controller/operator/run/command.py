@@ -28,6 +28,7 @@ from controller.operator.run.from_line import HomingAborted, Sequence, run_from_
 from controller.operator.run.io_announce import ToolChanges
 from controller.operator.run.keys import KeyControl, read_keys, stdin_fd
 from controller.operator.run.view import JsonView, PlainView, ProgramLines, RichView
+from controller.runtime.gc_policy import fewer_collections
 from controller.runtime.processes import Runtime, RuntimeOptions
 from controller.runtime.stages import checked_blocks
 from controller.tools import ToolTableError, load_tool_table
@@ -162,8 +163,9 @@ def run(args: argparse.Namespace) -> int:
         # that can take them: from the start, on the sim card (a probe found only by the
         # check still reads the program again).
         kept = _kept_blocks() if _from_start_on_sim(args, config) else None
-        check_program(args.program, config, offsets=offsets, from_line=args.from_line,
-                      track=track, summary=False, keep=kept)
+        with fewer_collections():  # (runtime/gc_policy.py: the blocks kept are not re-scanned)
+            check_program(args.program, config, offsets=offsets, from_line=args.from_line,
+                          track=track, summary=False, keep=kept)
     except (NcError, ConfigError, OffsetsError, ToolTableError) as exc:
         print(exc.format() if isinstance(exc, NcError) else str(exc), file=sys.stderr)
         return EXIT_REJECTED
