@@ -3,7 +3,7 @@ np.unique and functools.cached_property, and point-to-polyline distances."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -76,15 +76,23 @@ def polyline_distance(
     vertex is an answer, so only the segments whose bound is below it are measured with
     segment_distance: the same least distance at a fraction of the cost. seg_len (R, W - 1),
     the segments' lengths, when the caller has them cheaper (windows that overlap)."""
-    d_v = np.sqrt(sum(np.square(poly[i] - points[:, i, None]) for i in range(len(poly))))
+    # Sums of squares started from the first axis's, not from 0 (a pass less, the same bits).
+    d_v = np.sqrt(_sum_rows(np.square(poly[i] - points[:, i, None]) for i in range(len(poly))))
     if seg_len is None:
-        seg_len = np.sqrt(sum(np.square(np.diff(axis, axis=1)) for axis in poly))
+        seg_len = np.sqrt(_sum_rows(np.square(np.diff(axis, axis=1)) for axis in poly))
     best = d_v.min(axis=1)
     row, j = np.nonzero(d_v[:, :-1] + d_v[:, 1:] - seg_len < 2.0 * best[:, None])
     if row.size:
         exact = segment_distance(points[row], poly[:, row, j].T, poly[:, row, j + 1].T)
         np.minimum.at(best, row, exact)
     return best
+
+
+def _sum_rows(rows: Iterator[np.ndarray]) -> np.ndarray:
+    total = next(rows)
+    for row in rows:
+        total = total + row
+    return total
 
 
 class cached_property:  # noqa: N801 (named as the functools one it replaces)
