@@ -84,6 +84,15 @@ class MotionController:
     def frames_for_ms(self, ms: float) -> int:
         return max(1, math.ceil(ms * 1e-3 / self.period_s - 1e-9))
 
+    def take_back_beyond_ms(self, keep_ms: float) -> bool:
+        """Streaming, and not coming to rest anyway (the stream's end, a pause, the tail): the
+        frames queued beyond keep_ms are taken back where the drive can (e-stop, probe trip)."""
+        at_rest = self.sent_eos or self.pausing or self.pending_tail is not None
+        if self.state not in (MotionState.WAITING, MotionState.RUNNING) or at_rest:
+            return False
+        self.stream.take_back_now(self.drive, self.frames_for_ms(keep_ms))
+        return True
+
     # -- main loop ------------------------------------------------------------------------
     def run(self) -> MotionResult:
         self._setup()
@@ -541,12 +550,9 @@ class MotionController:
                 self.pending_stop = stop_along_path(st.prev_mm, st.last_mm, self.pending_stop,
                                                     accel, self.period_s, amax_stop_distances_mm)
             return
-        ends_at_rest = self.sent_eos or self.pausing or self.pending_tail is not None
-        if self.state in (MotionState.WAITING, MotionState.RUNNING) and not ends_at_rest:
-            # The frames queued beyond ESTOP_KEEP_MS are taken back (where the drive can): the
-            # stop starts 6 ms out, not behind the whole FIFO (2 ms ran a loaded card dry).
-            # From the level now: the cycle's was read before its checks ran.
-            st.take_back_now(self.drive, self.frames_for_ms(ESTOP_KEEP_MS))
+        # The stop starts ESTOP_KEEP_MS out, not behind the whole FIFO (2 ms ran a loaded card
+        # dry), from the level now: the cycle's was read before its checks ran.
+        if self.take_back_beyond_ms(ESTOP_KEEP_MS):
             self.pending_stop = stop_along_path(st.prev_mm, st.last_mm, st.held[:, : self.n],
                                                 accel, self.period_s, amax_stop_distances_mm)
             st.held = st.held[:0]

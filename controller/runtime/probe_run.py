@@ -19,7 +19,7 @@ from typing import Any
 from controller.config import MachineConfig
 from controller.io_events import T_DECIMALS, io_event
 from controller.motion.loop import ESTOP_KEEP_MS
-from controller.motion.types import MotionProgress, MotionResult, MotionState, Outcome
+from controller.motion.types import MotionProgress, MotionResult, Outcome
 from controller.probe import ProbeResult, ProbeResults
 from controller.runtime.current_run import CurrentRun
 from controller.runtime.processes import Runtime, RuntimeOptions
@@ -125,10 +125,7 @@ def _take_back(ctrl: Any) -> None:
     """The frames the card has queued beyond PROBE_KEEP_MS are taken back (where the drive
     can), as the e-stop does: the abort's stop along the path at Amax then starts that long
     after the trip, not behind the whole card FIFO (100 ms of the probe's feed further on)."""
-    at_rest = ctrl.sent_eos or ctrl.pausing or ctrl.pending_tail is not None
-    if ctrl.state not in (MotionState.WAITING, MotionState.RUNNING) or at_rest:
-        return
-    ctrl.stream.take_back_now(ctrl.drive, ctrl.frames_for_ms(PROBE_KEEP_MS))
+    ctrl.take_back_beyond_ms(PROBE_KEEP_MS)
 
 
 class ProbeRun(CurrentRun):
