@@ -9,6 +9,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from runtime_helpers import xy_config
+from servo_helpers import draw_polyline
 
 from controller.generator.feed.profile import transition_duration_s
 from controller.generator.feed.stop_approach import approach_split
@@ -96,16 +97,8 @@ def test_the_braking_model_finds_the_largest_acceleration_within_the_target() ->
 def _tool_near_a_path(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """A reference polyline (a curve folding back on itself, a random walk, or one with repeated
     points), a tool lagging it by some samples and off it by up to 10 um, and which samples."""
-    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
-    n = draw(st.integers(2, 1500))
-    shape = draw(st.sampled_from(["fold", "walk", "repeats"]))
-    if shape == "fold":
-        t = np.linspace(0.0, draw(st.floats(1.0, 30.0)), n)
-        ref = np.column_stack((np.cos(t), np.sin(2.0 * t))) * draw(st.floats(0.05, 5.0))
-    elif shape == "walk":
-        ref = np.cumsum(rng.standard_normal((n, 2)) * draw(st.floats(1e-4, 0.5)), axis=0)
-    else:
-        ref = np.repeat(rng.standard_normal((n // 3 + 1, 2)), 3, axis=0)[:n]
+    rng, ref = draw_polyline(draw, 1500, 5.0)
+    n = len(ref)
     act = np.roll(ref, draw(st.integers(0, 30)), axis=0)
     act = act + rng.standard_normal(ref.shape) * draw(st.floats(0.0, 0.01))
     k = np.flatnonzero(rng.random(n) < draw(st.floats(0.05, 1.0)))

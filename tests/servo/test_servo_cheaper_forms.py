@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from servo_helpers import FIFTH, TABLE_II, draw_polyline
 
-from controller.config import ServoParams, load_config
+from controller.config import load_config
 from controller.numeric import segment_distance
 from controller.runtime.simulate_stream import ServoStream
 from controller.runtime.simulation import tangent_angles
@@ -25,15 +26,6 @@ from controller.servo.true_distance import (
     window_distance_mm,
 )
 from controller.servo.window_search import GROUP_SEGMENTS, _group_boxes
-
-TABLE_II = ServoParams(
-    a0=1.938e9, a1=3.538e7, a2=2.135e5, a3=698.4, a4=1.0, b0=1.938e9, b1=3.476e7, b2=1.471e5
-)  # config/xy_table.yaml's X
-FIFTH = DiscreteServo(
-    b=np.array([0.0, 2e-4, -1e-4, 5e-5, 0.0, 1e-5]),
-    a=np.poly([0.5, 0.6, 0.7, 0.8, 0.9]),
-    sample_period_s=0.001,
-)
 
 
 def bits(a: np.ndarray) -> list[int]:
@@ -82,16 +74,8 @@ def test_filter_block_and_filter_state_are_the_old_form_bit_for_bit(
 def _polyline_and_points(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray]:
     """A polyline (random walk, folding curve, repeated points: zero-length segments) and a
     point near each of its vertices (some exactly on them)."""
-    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
-    n = draw(st.integers(2, 700))
-    shape = draw(st.sampled_from(["fold", "walk", "repeats"]))
-    if shape == "fold":
-        t = np.linspace(0.0, draw(st.floats(1.0, 30.0)), n)
-        ref = np.column_stack((np.cos(t), np.sin(2.0 * t))) * draw(st.floats(0.05, 500.0))
-    elif shape == "walk":
-        ref = np.cumsum(rng.standard_normal((n, 2)) * draw(st.floats(1e-4, 0.5)), axis=0)
-    else:
-        ref = np.repeat(rng.standard_normal((n // 3 + 1, 2)), 3, axis=0)[:n]
+    rng, ref = draw_polyline(draw, 700, 500.0)
+    n = len(ref)
     act = np.roll(ref, draw(st.integers(0, 30)), axis=0)
     off = rng.standard_normal(ref.shape) * draw(st.floats(0.0, 0.01))
     act = act + np.where(rng.random((n, 1)) < 0.2, 0.0, off)

@@ -5,20 +5,11 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from servo_helpers import FIFTH, TABLE_II
 
-from controller.config import ServoParams
-from controller.servo.model import DiscreteServo, discretise, filter_block, mismatched
+from controller.servo.model import discretise, filter_block, mismatched
 from controller.servo.stacked import StackedFilter
 
-TABLE_II = ServoParams(
-    a0=1.938e9, a1=3.538e7, a2=2.135e5, a3=698.4, a4=1.0, b0=1.938e9, b1=3.476e7, b2=1.471e5
-)  # config/xy_table.yaml's X
-# A 5th-order filter next to the 4th-order ones: the stacked states are padded.
-FIFTH = DiscreteServo(
-    b=np.array([0.0, 2e-4, -1e-4, 5e-5, 0.0, 1e-5]),
-    a=np.poly([0.5, 0.6, 0.7, 0.8, 0.9]),
-    sample_period_s=0.001,
-)
 TOL_MM = (2e-11, 2e-11, 1e-10)  # per kind: the 5th-order filter's states are larger
 
 
