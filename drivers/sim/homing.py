@@ -28,7 +28,12 @@ from drivers.homing import HomingPlan
 from drivers.sim.axes import SimAxes
 
 SEARCH, STOP, BACKOFF, LATCH, RELEASE, INDEX, FINAL, SETTLE, DONE, FAILED = range(10)
-SETTLE_MAX_S = 0.5  # in position within half a count, or this long after the final move
+# Done once in position (within half a count) for SETTLE_HOLD_S in a row, as a drive's position
+# window has a time (CiA 402's 0x6068): the servo rings after the final move, and an axis that
+# passed through the half count in a swing read a count off 10-25 ms later. At the latest
+# SETTLE_MAX_S after the final move.
+SETTLE_HOLD_S = 0.03
+SETTLE_MAX_S = 0.5
 
 
 class AxisHoming:
@@ -47,6 +52,7 @@ class AxisHoming:
         self.mark_mm = self.target_mm = 0.0
         self.pending_shift = 0  # counts, applied once the axis stands at the point found
         self.settle_samples = 0
+        self.in_position_samples = 0  # in a row, while settling
         self.error = ""
         self.found_true_mm: float | None = None  # the point found, true frame
 
@@ -116,7 +122,9 @@ class AxisHoming:
             return self._found(self.mark_mm, true_mm, actual_mm)
         elif st == SETTLE:
             self.settle_samples += 1
-            if abs(actual_mm - self.ref_mm) < 0.5 * self.unit_mm \
+            inside = abs(actual_mm - self.ref_mm) < 0.5 * self.unit_mm
+            self.in_position_samples = self.in_position_samples + 1 if inside else 0
+            if self.in_position_samples * self.period_s >= SETTLE_HOLD_S - 1e-12 \
                     or self.settle_samples * self.period_s >= SETTLE_MAX_S:
                 self.stage = DONE
                 shift, self.pending_shift = self.pending_shift, 0

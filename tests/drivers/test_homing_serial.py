@@ -82,6 +82,14 @@ def test_homing_through_the_pty(tmp_path: Path) -> None:
         assert time.monotonic() - t0 < 5.0
         cmd, enc = card.position_counts()
         assert cmd.tolist() == counts([-145.0, 145.0]) and enc.tolist() == cmd.tolist()
+        # Settled, not swinging through the final point: the servo rings after the final move,
+        # and a homing done at the first pass within half a count read a count off 10-20 ms
+        # later. Every status of the next 0.1 s (one each 10 ms) reads the same.
+        deadline = time.monotonic() + 0.1
+        while time.monotonic() < deadline:
+            cmd, enc = card.position_counts()
+            assert enc.tolist() == cmd.tolist() == counts([-145.0, 145.0])
+            time.sleep(0.002)
         assert card.homed() == (True, True) and card.status() == CardStatus.OK
         card.write_frames(np.tile([5, -5], (100, 1)).astype(np.int64), end_of_stream=True)
         deadline = time.monotonic() + 3.0
