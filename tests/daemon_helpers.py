@@ -191,12 +191,16 @@ def start_run(daemon: Cncd, program: Path, *extra: str) -> subprocess.Popen:
 
 def wait_moving(run: subprocess.Popen, after_s: float = 0.1) -> None:
     assert run.stdout is not None
+    seen: list[dict[str, Any]] = []  # the events other than progress, shown if it ends
     while True:
         line = run.stdout.readline()
-        assert line, f"the run ended before moving: {run.stderr.read() if run.stderr else ''}"
+        assert line, (f"the run ended before moving: {run.stderr.read() if run.stderr else ''}"
+                      f" (exit {run.wait()}; events {seen[-5:]})")
         event = json.loads(line)
         if event["event"] == "progress" and event.get("executed_s", 0) > after_s:
             return
+        if event["event"] != "progress":
+            seen.append(event)
 
 
 def run_confirming_tools(args: list[str]) -> list[dict[str, Any]]:
