@@ -278,10 +278,7 @@ def test_a_long_check_keeps_the_watchdog_fed(tmp_path: Path) -> None:
         fh.write("G21 G90 F3000\n")
         for i in range(400_000):
             fh.write(f"G1 X{(i % 200) * 0.1:.1f} Y{(i % 7) * 0.1:.1f}\n")
-    # A watchdog of 1 s (pings every 0.5 s, systemd's advice): a check that held the pings
-    # back would leave a gap of its own length (seconds); the half period left over is what a
-    # loaded machine may be late by (the shipped unit's WatchdogSec is 2 s).
-    with running_cncd(tmp_path, env={"WATCHDOG_USEC": "1000000"}) as d:
+    with running_cncd(tmp_path, env={"WATCHDOG_USEC": "600000"}) as d:
         d.cncctl("reset")
         run = start_run(d, program)
         try:
@@ -295,7 +292,7 @@ def test_a_long_check_keeps_the_watchdog_fed(tmp_path: Path) -> None:
             run.kill()
         pings = d.notify.times("WATCHDOG=1")
         gaps = [b - a for a, b in zip(pings, pings[1:], strict=False)]
-        assert len(gaps) >= 3 and max(gaps) < 1.0, gaps  # within the watchdog all through
+        assert max(gaps) < 0.6, gaps  # pinged every 0.3 s all through the check
 
 
 def test_a_client_that_hangs_up_mid_run_does_not_stop_the_daemon(tmp_path: Path) -> None:
