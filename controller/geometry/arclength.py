@@ -45,23 +45,28 @@ def _refine_where_needed(speed: SpeedFn, nodes: np.ndarray, pieces: np.ndarray, 
     """Halve the sub-intervals whose integral its two halves change by more than their share of
     tol_mm (by width), until none does or more than MAX_KINK_SPLITS would: where the speed has
     a kink (a near-cusp) Gauss-Legendre converges only as the interval's square, and uniform
-    doubling stopped 3e-7 mm short on one; intervals not split keep their integrals."""
+    doubling stopped 3e-7 mm short on one; intervals not split keep their integrals, and
+    only the halves made in a round are tested in the next (the others passed already)."""
     width_mm = max(nodes[-1] - nodes[0], 1e-300)
+    fresh = np.arange(len(pieces))  # intervals not tested yet: all, then the halves just made
     for _ in range(rounds):
         lo, hi = nodes[:-1], nodes[1:]
         mid = 0.5 * (lo + hi)
-        halves = _gauss_integrals(speed, np.concatenate((lo, mid)), np.concatenate((mid, hi)))
-        left, right = halves[: len(lo)], halves[len(lo) :]
-        bad = np.abs(left + right - pieces) > tol_mm * (hi - lo) / width_mm
-        if not bad.any() or np.count_nonzero(bad) > MAX_KINK_SPLITS:
+        a, m, b = lo[fresh], mid[fresh], hi[fresh]
+        halves = _gauss_integrals(speed, np.concatenate((a, m)), np.concatenate((m, b)))
+        left, right = halves[: len(a)], halves[len(a) :]
+        bad = fresh[np.abs(left + right - pieces[fresh]) > tol_mm * (b - a) / width_mm]
+        if not bad.size or bad.size > MAX_KINK_SPLITS:
             break  # converged, or not a few kinks (rounding everywhere): left as it is
-        counts = 1 + bad
+        counts = np.ones(len(pieces), np.intp)
+        counts[bad] = 2
         first = np.cumsum(counts) - counts  # each interval's first slot in the new arrays
         starts, pieces = np.repeat(lo, counts), np.repeat(pieces, counts)
-        split = np.flatnonzero(bad)
-        pieces[first[split]], pieces[first[split] + 1] = left[split], right[split]
-        starts[first[split] + 1] = mid[split]
+        was = np.searchsorted(fresh, bad)  # bad's rows among the tested
+        pieces[first[bad]], pieces[first[bad] + 1] = left[was], right[was]
+        starts[first[bad] + 1] = mid[bad]
         nodes = np.append(starts, nodes[-1])
+        fresh = np.sort(np.concatenate((first[bad], first[bad] + 1)))
     return nodes, pieces
 
 
